@@ -1,0 +1,227 @@
+"""The time loop: one routine for the primal state and its design sensitivities.
+
+Per step (method.md §2–4): predict → Newton on F_R(z) = 0 → correct; then, when
+sensitivities are requested, predict the sensitivity matrices with the same scheme,
+form the pseudo load P at the converged state and solve S ∇z = −P with the factor of
+the converged Newton matrix → correct.  What a case does not need is decided once in
+:class:`RunPlan` and never re-tested inside the loop's numerics.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .errors import NonFiniteError
+from .integrators.newmark import Newmark, Prediction
+from .models.base import Model, StepState
+from .responses import ResponseSet, ResponseValue
+from .sensitivity import DesignPartials, initial_state_gradient, pseudo_load
+from .solver.linalg import Counters
+from .solver.newton import NewtonSettings, StepSolver
+
+HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What a run computes and stores, fixed before the first step.
+
+    Attributes
+    ----------
+    t0, t_end, dt : start, end time and step size (s).
+    newton : tolerances of the Newton iteration.
+    sensitivities : compute design sensitivities (direct differentiation).
+    partials : ``forward`` | ``central`` | ``complex`` for the design partials.
+    partials_step : relative perturbation of the design partials (None: per-method default).
+    sensitivity_matrix : ``converged`` (factor S at the converged state; exact) or
+        ``reuse`` (the last Newton factor; cheaper, error ~ the last Newton correction).
+    history : which state histories to store (subset of q, qd, qdd, lam, p, pd).
+    sensitivity_history : store the sensitivity histories of the same fields.
+    """
+
+    t0: float
+    t_end: float
+    dt: float
+    newton: NewtonSettings = field(default_factory=NewtonSettings)
+    sensitivities: bool = True
+    partials: str = "forward"
+    partials_step: float | None = None
+    sensitivity_matrix: str = "converged"
+    history: tuple[str, ...] = ("q", "qd", "qdd")
+    sensitivity_history: bool = False
+
+    @property
+    def n_steps(self) -> int:
+        """Number of steps (the last one is shortened to land on t_end)."""
+        return max(1, int(np.ceil((self.t_end - self.t0) / self.dt - 1e-9)))
+
+    def step_size(self, i: int) -> float:
+        """Size of step i (1-based), s."""
+        if i < self.n_steps:
+            return self.dt
+        return self.t_end - self.t0 - (self.n_steps - 1) * self.dt
+
+
+@dataclass
+class RunResult:
+    """Everything one run produced."""
+
+    x: np.ndarray
+    time: np.ndarray
+    history: dict[str, np.ndarray]
+    sensitivity_history: dict[str, np.ndarray]
+    monitors: dict[str, np.ndarray]
+    responses: dict[str, ResponseValue]
+    counters: dict[str, int]
+    wall_time: float
+    status: str
+    message: str
+    labels: dict[str, list[str]]
+
+
+def _split(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return z[:n_q], z[n_q:n_q + n_lam], z[n_q + n_lam:]
+
+
+def _check_finite(s: StepState, t: float, step: int, labels: list[str]) -> None:
+    for name, v in zip(HISTORY_FIELDS, s):
+        if v.size and not np.all(np.isfinite(v)):
+            k = int(np.flatnonzero(~np.isfinite(v))[0])
+            where = labels[k] if name in ("q", "qd", "qdd") and k < len(labels) else f"{name}[{k}]"
+            raise NonFiniteError(
+                f"NaN/Inf first appeared in {name} of {where} at t = {t:.6g} s (step {step}): "
+                "reduce the time step or check parameters and loads")
+
+
+def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
+              responses: ResponseSet, *, design_names: tuple[str, ...] = (),
+              design_scale: np.ndarray | None = None,
+              progress: Callable[[int, int], None] | None = None) -> RunResult:
+    """Run one simulation of ``model`` at design ``x`` (m,) and return its results.
+
+    ``x`` may be complex (complex step of the whole simulation); sensitivities must then
+    be off.  Raises ConvergenceError, NonFiniteError or ModelError with context.
+    """
+    wall0 = _time.perf_counter()
+    tr = model.traits
+    n_q, n_lam = tr.n_q, tr.n_lam
+    counters = Counters()
+    sens = plan.sensitivities and np.size(x) > 0
+    if sens and np.iscomplexobj(x):
+        raise ValueError("sensitivities cannot be computed on a complex design; switch them off")
+    partials = DesignPartials(model, np.asarray(x), plan.partials, plan.partials_step,
+                              design_scale) if sens else None
+    params = partials.params0 if partials is not None else model.parameters(np.asarray(x))
+    m = np.size(x)
+    solver = StepSolver(model, plan.newton, counters, newton=not tr.linear,
+                        refactor=not tr.constant_matrices,
+                        need_converged_factor=sens and plan.sensitivity_matrix == "converged")
+    labels = model.dof_labels()
+    n_steps = plan.n_steps
+
+    # --- initial state and consistent initial accelerations (coefficients 0: S0 = ∂F_R/∂z)
+    q0, qd0, p0 = model.initial_state(params)
+    lam_guess, pd_guess = model.initial_guess(params)
+    dtype = np.result_type(q0, qd0, p0, float)
+    z0 = np.concatenate([np.zeros(n_q, dtype), np.asarray(lam_guess, dtype), np.asarray(pd_guess, dtype)])
+    pred = Prediction(q0, qd0, p0)
+
+    def correct0(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
+        return StepState(pr.q, pr.qd, qdd, lam, pr.p, pd)
+
+    out = solver.solve_step(plan.t0, 0, pred, z0, params, (0.0, 0.0, 0.0), correct0)
+    s = out.state
+    _check_finite(s, plan.t0, 0, labels)
+    ds: StepState | None = None
+    if partials is not None:
+        dq0, dqd0, dp0 = initial_state_gradient(model, partials)
+        P = pseudo_load(model, plan.t0, s, out.lin, dq0, dqd0, dp0, partials)
+        counters.sensitivity_residual_evaluations += partials.evaluations_per_call
+        assert out.factor is not None
+        dz = solver.solve_sensitivity(out.factor, P)
+        dqdd, dlam, dpd = _split(dz, n_q, n_lam)
+        ds = StepState(dq0, dqd0, dqdd, dlam, dp0, dpd)
+
+    # --- storage, decided once
+    hist_fields = [f for f in plan.history if f in HISTORY_FIELDS]
+    store_sens = plan.sensitivity_history and ds is not None
+    times = np.empty(n_steps + 1)
+    hist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0]), dtype=getattr(s, f).dtype)
+            for f in hist_fields}
+    shist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0], m)) for f in hist_fields} if store_sens else {}
+    mon_names = list(model.monitors(plan.t0, s, params))
+    mons = {k: np.empty(n_steps + 1) for k in mon_names}
+    total = partials.total if partials is not None else None
+
+    def record(k: int, t: float, st: StepState, dst: StepState | None) -> None:
+        times[k] = t
+        for f in hist_fields:
+            hist[f][k] = getattr(st, f)
+        if store_sens and dst is not None:
+            for f in hist_fields:
+                shist[f][k] = getattr(dst, f)
+        if mon_names:
+            for name, val in model.monitors(t, st, params).items():
+                mons[name][k] = val
+
+    record(0, plan.t0, s, ds)
+    responses.observe(0, plan.t0, responses.evaluate(plan.t0, s, ds, params, total), 0.0)
+    counters.output_evaluations += 1
+    status, message = "completed", f"reached t_end = {plan.t_end:g} s"
+    last = 0
+    t = plan.t0
+    for i in range(1, n_steps + 1):
+        h = plan.step_size(i)
+        t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
+        coeffs = scheme.coefficients(h)
+        pred = scheme.predict(s, h)
+        z_guess = np.concatenate([s.qdd, s.lam, s.pd])
+
+        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray,
+                    _h: float = h) -> StepState:
+            return scheme.correct(pr, qdd, lam, pd, _h)
+
+        out = solver.solve_step(t, i, pred, z_guess, params, coeffs, correct)
+        s_new = out.state
+        _check_finite(s_new, t, i, labels)
+        model.check_state(t, s_new, params)
+        if partials is not None and ds is not None:
+            dpred = scheme.predict(ds, h)
+            P = pseudo_load(model, t, s_new, out.lin, dpred.q, dpred.qd, dpred.p, partials)
+            counters.sensitivity_residual_evaluations += partials.evaluations_per_call
+            assert out.factor is not None
+            dz = solver.solve_sensitivity(out.factor, P)
+            ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
+        s = s_new
+        counters.steps += 1
+        record(i, t, s, ds)
+        last = i
+        samples = responses.evaluate(t, s, ds, params, total)
+        counters.output_evaluations += 1
+        if responses.observe(i, t, samples, h):
+            ev = next(reversed(responses.fired))
+            status = "terminated"
+            message = f"event '{ev}' at t = {float(np.real(responses.fired[ev].t)):.6g} s"
+            break
+        if progress is not None:
+            progress(i, n_steps)
+    responses.close(t, m)
+
+    def mass() -> tuple[Any, np.ndarray | None]:
+        value = model.structural_mass(params)
+        grad = partials.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0] \
+            if partials is not None else None
+        return value, grad
+
+    design = dict(zip(design_names, np.asarray(x)))
+    values = responses.finish(design, m if sens else 0, mass)
+    n = last + 1
+    return RunResult(
+        x=np.asarray(x), time=times[:n], history={f: v[:n] for f, v in hist.items()},
+        sensitivity_history={f: v[:n] for f, v in shist.items()},
+        monitors={k: v[:n] for k, v in mons.items()}, responses=values,
+        counters=counters.as_dict(), wall_time=_time.perf_counter() - wall0,
+        status=status, message=message, labels={"q": labels})

@@ -1,0 +1,278 @@
+r"""The residual contract every model implements (building block 1: governing equation).
+
+A model is a residual :math:`F_R(z; q, \dot q, p, t, x) = 0` in the per-step unknowns
+``z = [q̈; λ; ṗ]`` (method.md §1):
+
+* ``q`` (n_q,) second-order coordinates, with velocities ``qd`` and accelerations ``qdd``;
+* ``lam`` (n_lam,) Lagrange multipliers of the constraints (``n_lam = 0`` for structures);
+* ``p`` (n_p,) first-order states (e.g. hydraulic pressures) with rates ``pd``.
+
+Implementer contract
+--------------------
+1. ``traits`` declares sizes and what the integrator may leave out (linear, constant
+   matrices, damping, sparsity).  It is read once, when the run is planned.
+2. ``parameters(x)`` evaluates every design-dependent system parameter for the design
+   ``x`` (m,).  It must be complex-safe: the integrator calls it with perturbed and with
+   complex designs to form the partial derivatives :math:`\partial_x F_R` numerically
+   ("semi-analytical").  The returned object is opaque to the integrator.
+3. ``initial_state(params)`` returns ``(q0, qd0, p0)``; its design derivative is taken
+   numerically unless the model overrides ``initial_state_gradient``.
+4. ``residual(t, s, params)`` returns F_R (n_z,) for a :class:`StepState` ``s``.
+5. ``linearize(t, s, params)`` returns the exact partial derivatives of F_R with respect
+   to z, q, q̇ and p (:class:`Linearization`); the integrator forms the iteration matrix
+   from them.  Blocks that are structurally zero are ``None``.
+6. ``output(spec, path, problems)`` resolves a quantity named in a case (a dof's
+   displacement, an element force, a joint reaction...) into an :class:`Output`.
+7. All code in 2.-6. must be complex-safe (no ``abs``, no ``np.real`` on results,
+   comparisons on real parts only) so that complex step runs end to end.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import ProblemCollector
+from ..expressions import Expression, ExpressionError, compile_expression
+
+Array = np.ndarray
+Matrix = Any  # np.ndarray or scipy.sparse matrix
+
+
+class StepState(NamedTuple):
+    """State at one time instant.  Leaves are (n,) for the primal, (n, m) for sensitivities."""
+
+    q: Array
+    qd: Array
+    qdd: Array
+    lam: Array
+    p: Array
+    pd: Array
+
+
+@dataclass(frozen=True)
+class Traits:
+    """What a model declares about itself; read once when a run is planned.
+
+    Attributes
+    ----------
+    n_q, n_lam, n_p : sizes of coordinates, multipliers and first-order states.
+    linear : F_R is affine in (z, q, q̇, p): one solve per step, no Newton loop.
+    constant_matrices : the Linearization does not depend on state or time:
+        assemble and factorize once per time-step size.
+    has_damping : False when ∂F_R/∂q̇ is identically zero.
+    sparse : the Linearization blocks are scipy.sparse matrices.
+    """
+
+    n_q: int
+    n_lam: int = 0
+    n_p: int = 0
+    linear: bool = False
+    constant_matrices: bool = False
+    has_damping: bool = True
+    sparse: bool = False
+
+    @property
+    def n_z(self) -> int:
+        """Number of per-step unknowns, len([q̈; λ; ṗ])."""
+        return self.n_q + self.n_lam + self.n_p
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """Partial derivatives of F_R at one state.  ``None`` marks a structurally zero block.
+
+    R_z (n_z, n_z) = ∂F_R/∂z, R_q (n_z, n_q) = ∂F_R/∂q, R_qd (n_z, n_q) = ∂F_R/∂q̇,
+    R_p (n_z, n_p) = ∂F_R/∂p.
+    """
+
+    R_z: Matrix
+    R_q: Matrix | None = None
+    R_qd: Matrix | None = None
+    R_p: Matrix | None = None
+
+    def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Matrix:
+        """S = dF_R/dz when q = q_pred + c_q q̈, q̇ = q̇_pred + c_qd q̈, p = p_pred + c_p ṗ (method.md §3)."""
+        n_z = self.R_z.shape[0]
+        coupled_q = None
+        if self.R_q is not None and c_q != 0.0:
+            coupled_q = c_q * self.R_q
+        if self.R_qd is not None and c_qd != 0.0:
+            coupled_q = c_qd * self.R_qd if coupled_q is None else coupled_q + c_qd * self.R_qd
+        coupled_p = c_p * self.R_p if (self.R_p is not None and c_p != 0.0) else None
+        if coupled_q is None and coupled_p is None:
+            return self.R_z
+        n_p = self.R_p.shape[1] if self.R_p is not None else 0
+        if sp.issparse(self.R_z):
+            blocks = []
+            if coupled_q is not None:
+                blocks.append(sp.hstack([sp.csr_matrix(coupled_q),
+                                         sp.csr_matrix((n_z, n_z - n_q))]))
+            if coupled_p is not None:
+                blocks.append(sp.hstack([sp.csr_matrix((n_z, n_z - n_p)),
+                                         sp.csr_matrix(coupled_p)]))
+            S = self.R_z
+            for b in blocks:
+                S = S + b
+            return sp.csc_matrix(S)
+        S = np.array(self.R_z, copy=True)
+        if coupled_q is not None:
+            S[:, :n_q] += coupled_q
+        if coupled_p is not None:
+            S[:, n_z - n_p:] += coupled_p
+        return S
+
+    def state_product(self, dq: Array, dqd: Array, dp: Array) -> Array | None:
+        """R_q dq + R_qd dqd + R_p dp for vectors or (n, m) matrices; None when all blocks are zero."""
+        out = None
+        for block, d in ((self.R_q, dq), (self.R_qd, dqd), (self.R_p, dp)):
+            if block is None or d.shape[0] == 0:
+                continue
+            term = block @ d
+            out = term if out is None else out + term
+        return out
+
+
+OutputFn = Callable[[float, StepState, Any], Array]
+
+
+@dataclass(frozen=True)
+class Output:
+    """A quantity a response or event can read at every step.
+
+    ``fn(t, state, params)`` returns a complex-safe (k,) array; ``labels`` names its
+    k components; ``unit`` is the unit shown in reports.
+    """
+
+    fn: OutputFn
+    labels: tuple[str, ...]
+    unit: str = ""
+
+
+class ParameterTable:
+    """Numeric entries of a case (numbers or design expressions), evaluated together.
+
+    Builders call :meth:`add` for each numeric entry they read and keep the returned
+    index; :meth:`evaluate` returns all values for one design (complex-safe).
+    """
+
+    def __init__(self, design_names: Sequence[str]):
+        self.design_names = tuple(design_names)
+        self._known = frozenset(design_names)
+        self._constants: list[complex | float] = []
+        self._exprs: list[tuple[int, Expression]] = []
+
+    def __len__(self) -> int:
+        return len(self._constants)
+
+    def add(self, value: Any, path: str, problems: ProblemCollector, *,
+            positive: bool = False, nonnegative: bool = False, default: float | None = None) -> int:
+        """Register one numeric entry found at YAML ``path``; returns its index (-1 on error)."""
+        if value is None and default is not None:
+            value = default
+        idx = len(self._constants)
+        if isinstance(value, bool) or value is None:
+            problems.add(path, f"expected a number or an expression, found {value!r}")
+            return -1
+        if isinstance(value, (int, float)):
+            v = float(value)
+            if not np.isfinite(v):
+                problems.add(path, f"expected a finite number, found {value!r}")
+                return -1
+            if positive and v <= 0:
+                problems.add(path, f"must be > 0, found {value!r}")
+                return -1
+            if nonnegative and v < 0:
+                problems.add(path, f"must be >= 0, found {value!r}")
+                return -1
+            self._constants.append(v)
+            return idx
+        if isinstance(value, str):
+            try:
+                expr = compile_expression(value, self._known)
+            except ExpressionError as exc:
+                problems.add(path, str(exc))
+                return -1
+            self._constants.append(0.0)
+            self._exprs.append((idx, expr))
+            return idx
+        problems.add(path, f"expected a number or an expression, found {type(value).__name__} {value!r}")
+        return -1
+
+    def add_many(self, values: Any, path: str, problems: ProblemCollector, length: int | None = None,
+                 **kw: Any) -> list[int]:
+        """Register a list of numeric entries (e.g. a coordinate triple)."""
+        if not isinstance(values, (list, tuple)):
+            problems.add(path, f"expected a list of numbers, found {values!r}")
+            return [-1] * (length or 0)
+        if length is not None and len(values) != length:
+            problems.add(path, f"expected {length} entries, found {len(values)}")
+            return [-1] * length
+        return [self.add(v, f"{path}[{i}]", problems, **kw) for i, v in enumerate(values)]
+
+    def depends_on_design(self, index: int) -> bool:
+        """True when entry ``index`` is an expression of design variables."""
+        return any(i == index and e.symbols for i, e in self._exprs)
+
+    def evaluate(self, x: Array) -> Array:
+        """All entries for design ``x`` (m,); complex when ``x`` is complex."""
+        dtype = np.result_type(x.dtype, float)
+        out = np.array(self._constants, dtype=dtype)
+        if self._exprs:
+            env: Mapping[str, Any] = dict(zip(self.design_names, x))
+            for i, expr in self._exprs:
+                out[i] = expr.evaluate(env)
+        return out
+
+
+class Model(ABC):
+    """Base class of all models; see the module docstring for the contract."""
+
+    traits: Traits
+
+    @abstractmethod
+    def parameters(self, x: Array) -> Any:
+        """System parameters for design ``x`` (m,) (complex-safe)."""
+
+    @abstractmethod
+    def initial_state(self, params: Any) -> tuple[Array, Array, Array]:
+        """Initial coordinates q0 (n_q,), velocities qd0 (n_q,), first-order states p0 (n_p,)."""
+
+    def initial_guess(self, params: Any) -> tuple[Array, Array]:
+        """Starting values (lam0, pd0) for the initial solve; zeros unless the model knows better."""
+        return np.zeros(self.traits.n_lam), np.zeros(self.traits.n_p)
+
+    @abstractmethod
+    def residual(self, t: float, s: StepState, params: Any) -> Array:
+        """F_R (n_z,) at time t (s) and state s."""
+
+    @abstractmethod
+    def linearize(self, t: float, s: StepState, params: Any) -> Linearization:
+        """Exact partial derivatives of F_R at (t, s)."""
+
+    @abstractmethod
+    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
+        """Resolve a quantity spec from a case; report problems under ``path``."""
+
+    def structural_mass(self, params: Any) -> Any:
+        """Total mass of the structure (model mass unit); complex-safe."""
+        raise NotImplementedError(f"{type(self).__name__} does not define a structural mass")
+
+    def check_state(self, t: float, s: StepState, params: Any) -> None:
+        """Raise ModelError when the state leaves the model's range of validity."""
+
+    def monitors(self, t: float, s: StepState, params: Any) -> dict[str, float]:
+        """Scalar per-step diagnostics stored with the results (e.g. constraint drift)."""
+        return {}
+
+    def dof_labels(self) -> list[str]:
+        """Names of the coordinates q, used in reports and the HDF5 file."""
+        return [f"q{i}" for i in range(self.traits.n_q)]
+
+
+def as_dense(a: Matrix) -> Array:
+    """Dense ndarray view of a dense or sparse matrix."""
+    return a.toarray() if sp.issparse(a) else np.asarray(a)

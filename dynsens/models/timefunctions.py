@@ -1,0 +1,130 @@
+"""Time functions that scale loads: constant, step, ramp, smoothstep, harmonic, pulse, table.
+
+Each function is dimensionless and multiplies a load amplitude.  Its own parameters
+(times in s, frequency in Hz, phase in rad, table values) may be design expressions,
+so evaluation takes the model's parameter vector and is complex-safe in it.
+"""
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import ProblemCollector
+from .base import ParameterTable
+
+KINDS = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
+_KEYS = {
+    "constant": set(),
+    "step": {"t0"},
+    "ramp": {"t0", "t1"},
+    "smoothstep": {"t0", "t1"},
+    "harmonic": {"frequency", "phase"},
+    "pulse": {"t0", "duration"},
+    "table": {"t", "values"},
+}
+
+
+@dataclass(frozen=True)
+class TimeFunction:
+    """A load time function; ``value(t, pv)`` with pv the evaluated parameter vector."""
+
+    kind: str
+    idx: tuple[int, ...]          # indices into the parameter vector
+    table_t: tuple[float, ...] = ()
+
+    def value(self, t: float, pv: np.ndarray) -> Any:
+        """Dimensionless factor at time t (s)."""
+        k = self.kind
+        if k == "constant":
+            return 1.0
+        if k == "step":
+            return 1.0 if t >= pv[self.idx[0]].real else 0.0
+        if k in ("ramp", "smoothstep"):
+            t0, t1 = pv[self.idx[0]], pv[self.idx[1]]
+            if t <= t0.real:
+                return 0.0
+            if t >= t1.real:
+                return 1.0
+            tau = (t - t0) / (t1 - t0)
+            return tau if k == "ramp" else tau * tau * (3.0 - 2.0 * tau)
+        if k == "harmonic":
+            f, phase = pv[self.idx[0]], pv[self.idx[1]]
+            return np.sin(2.0 * np.pi * f * t + phase)
+        if k == "pulse":
+            t0, d = pv[self.idx[0]], pv[self.idx[1]]
+            if t <= t0.real or t >= (t0 + d).real:
+                return 0.0
+            return np.sin(np.pi * (t - t0) / d) ** 2
+        # table: piecewise linear in the tabulated values, constant beyond the ends
+        ts = self.table_t
+        vals = [pv[i] for i in self.idx]
+        if t <= ts[0]:
+            return vals[0]
+        if t >= ts[-1]:
+            return vals[-1]
+        j = int(np.searchsorted(ts, t, side="right")) - 1
+        w = (t - ts[j]) / (ts[j + 1] - ts[j])
+        return vals[j] + w * (vals[j + 1] - vals[j])
+
+
+def build_time_function(spec: Any, path: str, table: ParameterTable,
+                        problems: ProblemCollector) -> TimeFunction | None:
+    """Read a time-function entry (``{type: ..., ...}`` or a bare kind name)."""
+    if spec is None:
+        spec = {"type": "constant"}
+    if isinstance(spec, str):
+        spec = {"type": spec}
+    if not isinstance(spec, dict):
+        problems.add(path, f"expected a mapping with 'type', found {spec!r}")
+        return None
+    kind = spec.get("type")
+    if kind not in KINDS:
+        close = difflib.get_close_matches(str(kind), KINDS, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        problems.add(f"{path}.type", f"unknown time function {kind!r}{hint} (known: {', '.join(KINDS)})")
+        return None
+    allowed = _KEYS[kind] | {"type"}
+    for key in spec:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            problems.add(f"{path}.{key}", f"unknown key for a '{kind}' function{hint} "
+                                          f"(allowed: {', '.join(sorted(allowed))})")
+    if kind == "constant":
+        return TimeFunction(kind, ())
+    if kind == "step":
+        return TimeFunction(kind, (table.add(spec.get("t0", 0.0), f"{path}.t0", problems),))
+    if kind in ("ramp", "smoothstep"):
+        for key in ("t0", "t1"):
+            if key not in spec and not (key == "t0"):
+                problems.add(f"{path}.{key}", "missing (end time of the ramp, s)")
+        i0 = table.add(spec.get("t0", 0.0), f"{path}.t0", problems)
+        i1 = table.add(spec.get("t1", 1.0), f"{path}.t1", problems)
+        if isinstance(spec.get("t0", 0.0), (int, float)) and isinstance(spec.get("t1"), (int, float)) \
+                and spec["t1"] <= spec.get("t0", 0.0):
+            problems.add(f"{path}.t1", f"must be greater than t0 ({spec.get('t0', 0.0)}), found {spec['t1']}")
+        return TimeFunction(kind, (i0, i1))
+    if kind == "harmonic":
+        if "frequency" not in spec:
+            problems.add(f"{path}.frequency", "missing (Hz)")
+        return TimeFunction(kind, (table.add(spec.get("frequency", 1.0), f"{path}.frequency", problems,
+                                             positive=True),
+                                   table.add(spec.get("phase", 0.0), f"{path}.phase", problems)))
+    if kind == "pulse":
+        if "duration" not in spec:
+            problems.add(f"{path}.duration", "missing (s)")
+        return TimeFunction(kind, (table.add(spec.get("t0", 0.0), f"{path}.t0", problems),
+                                   table.add(spec.get("duration", 1.0), f"{path}.duration", problems,
+                                             positive=True)))
+    ts, vs = spec.get("t"), spec.get("values")
+    if not isinstance(ts, list) or not isinstance(vs, list) or len(ts) != len(vs) or len(ts) < 2:
+        problems.add(path, "a table needs lists 't' and 'values' of equal length >= 2")
+        return None
+    if not all(isinstance(v, (int, float)) for v in ts) or any(b <= a for a, b in zip(ts, ts[1:])):
+        problems.add(f"{path}.t", "must be strictly increasing numbers")
+        return None
+    idx = tuple(table.add(v, f"{path}.values[{i}]", problems) for i, v in enumerate(vs))
+    return TimeFunction(kind, idx, tuple(float(v) for v in ts))

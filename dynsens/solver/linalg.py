@@ -1,0 +1,107 @@
+"""Factorizations of the iteration matrix: one factor, many right-hand sides.
+
+Dense LU (LAPACK getrf via scipy) or sparse LU (SuperLU via ``splu``), chosen once from
+the model's traits.  A diagonal matrix needs no factorization at all: it is inverted
+elementwise (lumped masses, the initial-acceleration solve of spring-mass systems).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+
+class SingularMatrixError(ArithmeticError):
+    """The iteration matrix is singular (or numerically so)."""
+
+
+@dataclass
+class Counters:
+    """Work counters reported with every run (what was done, and so what was left out)."""
+
+    steps: int = 0
+    newton_iterations: int = 0
+    residual_evaluations: int = 0
+    linearizations: int = 0
+    factorizations: int = 0
+    diagonal_inversions: int = 0
+    solves: int = 0
+    solve_columns: int = 0
+    sensitivity_residual_evaluations: int = 0
+    output_evaluations: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, int]:
+        """Plain mapping of the counters (for reports and HDF5 attributes)."""
+        d = {k: v for k, v in self.__dict__.items() if k != "extra"}
+        d.update(self.extra)
+        return d
+
+
+class Factor:
+    """A factorized square matrix; ``solve(rhs)`` for rhs (n,) or (n, k)."""
+
+    def __init__(self, S: Any, counters: Counters):
+        self.counters = counters
+        self.n = S.shape[0]
+        diag = _diagonal_or_none(S)
+        if diag is not None:
+            if np.any(diag.real == 0.0) or not np.all(np.isfinite(diag)):
+                raise SingularMatrixError("zero on the diagonal")
+            self._kind = "diag"
+            self._inv = 1.0 / diag
+            counters.diagonal_inversions += 1
+            return
+        counters.factorizations += 1
+        if sp.issparse(S):
+            self._kind = "sparse"
+            try:
+                self._lu = spla.splu(sp.csc_matrix(S))
+            except RuntimeError as exc:  # SuperLU reports exact singularity this way
+                raise SingularMatrixError(str(exc)) from None
+            udiag = self._lu.U.diagonal()
+        else:
+            self._kind = "dense"
+            if not np.all(np.isfinite(S)):
+                raise SingularMatrixError("matrix has non-finite entries")
+            lu, piv = sla.lu_factor(S, check_finite=False)
+            self._lu = (lu, piv)
+            udiag = np.diagonal(lu)
+        scale = np.max(np.abs(udiag)) if udiag.size else 1.0
+        if udiag.size and (np.min(np.abs(udiag)) <= 1e-14 * scale or scale == 0.0):
+            raise SingularMatrixError(
+                f"pivot ratio {np.min(np.abs(udiag)) / max(scale, 1e-300):.1e}")
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve S x = rhs; rhs (n,) or (n, k), real or complex."""
+        self.counters.solves += 1
+        self.counters.solve_columns += 1 if rhs.ndim == 1 else rhs.shape[1]
+        if self._kind == "diag":
+            return rhs * (self._inv if rhs.ndim == 1 else self._inv[:, None])
+        if self._kind == "sparse":
+            if np.iscomplexobj(rhs) and not np.iscomplexobj(self._lu.U.data):
+                return self._lu.solve(np.ascontiguousarray(rhs.real)) + \
+                    1j * self._lu.solve(np.ascontiguousarray(rhs.imag))
+            return self._lu.solve(np.asarray(rhs))
+        return sla.lu_solve(self._lu, rhs, check_finite=False)
+
+
+def _diagonal_or_none(S: Any) -> np.ndarray | None:
+    if sp.issparse(S):
+        S = sp.csr_matrix(S)
+        if S.nnz <= S.shape[0]:
+            d = S.diagonal()
+            if np.count_nonzero(d) == S.nnz:
+                return d
+        return None
+    S = np.asarray(S)
+    if S.shape[0] == 1:
+        return S[0].copy()
+    d = np.diagonal(S)
+    if np.count_nonzero(S) == np.count_nonzero(d):
+        return d.copy()
+    return None

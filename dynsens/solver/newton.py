@@ -1,0 +1,152 @@
+r"""Newton-Raphson on the step equation, and the sensitivity solve that reuses it.
+
+Within a step, q, q̇ and p are functions of the unknowns z = [q̈; λ; ṗ] through the
+corrector, so the iteration matrix is the total derivative (method.md §3)
+
+.. math:: S = ∂F_R/∂z + (c_q ∂F_R/∂q + c_{q̇} ∂F_R/∂\dot q) E_q + c_p ∂F_R/∂p E_p
+
+with (c_q, c_q̇, c_p) = (βΔt², γΔt, γΔt) for Newmark and (0, 0, 0) for the initial
+solve at t0.  The sensitivity step (method.md §4) is the same linear system with the
+matrix right-hand side −P: :func:`solve_sensitivity` uses the factor of S at the
+converged state handed back by :func:`solve_step`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import ConvergenceError, NonFiniteError
+from ..integrators.newmark import Prediction
+from ..models.base import Linearization, Model, StepState
+from .linalg import Counters, Factor, SingularMatrixError
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Newton tolerances: converged when, for every block b of z (q̈, λ, ṗ),
+    ‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol, scale_b being the largest ‖z_b‖ seen so far
+    in the run (so the test is relative to the problem's own magnitudes, in any units)."""
+
+    rtol: float = 1e-10
+    atol: float = 0.0
+    max_iterations: int = 25
+
+
+@dataclass
+class StepOutcome:
+    """Result of one step solve: new state, linearization and factor at the solution."""
+
+    state: StepState
+    lin: Linearization | None
+    factor: Factor | None
+    iterations: int
+
+
+def _real_norm(v: np.ndarray) -> float:
+    return float(np.linalg.norm(v.real)) if v.size else 0.0
+
+
+class StepSolver:
+    """Solves F_R(z) = 0 on one step; one instance per run holds the plan and the counters.
+
+    Parameters
+    ----------
+    model : the residual.
+    newton : whether Newton iterations are needed (False for linear models: one solve).
+    refactor : whether S changes during the run (False for constant matrices: factor once
+        per distinct coefficient triple).
+    need_converged_factor : factor S at the converged state for the sensitivity solve.
+    """
+
+    def __init__(self, model: Model, settings: NewtonSettings, counters: Counters, *,
+                 newton: bool, refactor: bool, need_converged_factor: bool):
+        self.model = model
+        self.settings = settings
+        self.counters = counters
+        self.newton = newton
+        self.refactor = refactor
+        self.need_converged_factor = need_converged_factor
+        t = model.traits
+        self._blocks = [slice(0, t.n_q), slice(t.n_q, t.n_q + t.n_lam),
+                        slice(t.n_q + t.n_lam, t.n_z)]
+        self._scales = np.zeros(3)
+        self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
+
+    def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        b = self._blocks
+        return z[b[0]], z[b[1]], z[b[2]]
+
+    def _linearize_and_factor(self, t: float, s: StepState, params: Any,
+                              coeffs: tuple[float, float, float]) -> tuple[Linearization, Factor]:
+        if not self.refactor and coeffs in self._cache:
+            return self._cache[coeffs]
+        self.counters.linearizations += 1
+        lin = self.model.linearize(t, s, params)
+        S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
+        factor = Factor(S, self.counters)
+        if not self.refactor:
+            self._cache[coeffs] = (lin, factor)
+        return lin, factor
+
+    def solve_step(self, t: float, step: int, pred: Prediction, z0: np.ndarray, params: Any,
+                   coeffs: tuple[float, float, float],
+                   correct: Callable[[Prediction, np.ndarray, np.ndarray, np.ndarray], StepState]
+                   ) -> StepOutcome:
+        """Solve the step equation at time t (s) starting from the guess z0 (n_z,)."""
+        st = self.settings
+        z = z0.copy()
+        history: list[float] = []
+        lin: Linearization | None = None
+        factor: Factor | None = None
+        for it in range(1, st.max_iterations + 1):
+            s = correct(pred, *self._split(z))
+            R = self.model.residual(t, s, params)
+            self.counters.residual_evaluations += 1
+            rnorm = _real_norm(R)
+            history.append(rnorm)
+            if not np.isfinite(rnorm):
+                raise NonFiniteError(
+                    f"the residual became NaN/Inf at t = {t:.6g} s (step {step}), Newton iteration "
+                    f"{it}: check the initial conditions, the parameters and the time step")
+            try:
+                lin, factor = self._linearize_and_factor(t, s, params, coeffs)
+            except SingularMatrixError as exc:
+                raise ConvergenceError(
+                    f"singular iteration matrix ({exc})", t=t, step=step, iterations=it,
+                    residual_history=history,
+                    hint="check for redundant constraints, zero masses or unsupported "
+                         "(rigid-body) degrees of freedom") from None
+            dz = factor.solve(-R)
+            z = z + dz
+            self.counters.newton_iterations += 1
+            if not self.newton:
+                s = correct(pred, *self._split(z))
+                return StepOutcome(s, lin, factor, it)
+            if self._converged(z, dz):
+                s = correct(pred, *self._split(z))
+                if self.need_converged_factor and self.refactor:
+                    # the sensitivity solve needs S at the converged state, not at the
+                    # previous iterate (method.md §4)
+                    lin, factor = self._linearize_and_factor(t, s, params, coeffs)
+                return StepOutcome(s, lin, factor, it)
+        raise ConvergenceError(
+            "Newton-Raphson did not converge", t=t, step=step, iterations=st.max_iterations,
+            residual_history=history,
+            hint="reduce the time step, check that the loads and parameters are physical, "
+                 "or raise solver.max_iterations")
+
+    def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
+        st = self.settings
+        ok = True
+        for k, b in enumerate(self._blocks):
+            zn = _real_norm(z[b])
+            self._scales[k] = max(self._scales[k], zn)
+            if _real_norm(dz[b]) > st.rtol * max(zn, self._scales[k]) + st.atol:
+                ok = False
+        return ok
+
+    def solve_sensitivity(self, factor: Factor, pseudo_load: np.ndarray) -> np.ndarray:
+        """∇z (n_z, m) from S ∇z = −P with the factor of the converged step."""
+        return factor.solve(-pseudo_load)
