@@ -60,9 +60,10 @@ class RunPlan:
 
     def step_size(self, i: int) -> float:
         """Size of step i (1-based), s."""
-        if i < self.n_steps:
+        last = self.t_end - self.t0 - (self.n_steps - 1) * self.dt
+        if i < self.n_steps or abs(last - self.dt) <= 1e-9 * self.dt:
             return self.dt
-        return self.t_end - self.t0 - (self.n_steps - 1) * self.dt
+        return last
 
 
 @dataclass

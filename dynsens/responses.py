@@ -314,7 +314,9 @@ class ResponseSet:
         for oid, o in enumerate(self.outputs):
             v = np.asarray(o.fn(t, s, params))
             g = None
-            if ds is not None and total is not None:
+            if ds is not None and o.linear:
+                g = np.asarray(o.fn(t, ds, params))
+            elif ds is not None and total is not None:
                 g = total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds)
             out[oid] = Sample(t, v, g, g, None)
         return out

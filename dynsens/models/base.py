@@ -144,12 +144,15 @@ class Output:
     """A quantity a response or event can read at every step.
 
     ``fn(t, state, params)`` returns a complex-safe (k,) array; ``labels`` names its
-    k components; ``unit`` is the unit shown in reports.
+    k components; ``unit`` is the unit shown in reports.  ``linear`` declares that fn is
+    linear in the state and independent of the design, so its gradient is fn applied to
+    the sensitivity state (no numerical differentiation needed).
     """
 
     fn: OutputFn
     labels: tuple[str, ...]
     unit: str = ""
+    linear: bool = False
 
 
 class ParameterTable:

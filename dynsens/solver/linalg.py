@@ -21,13 +21,19 @@ class SingularMatrixError(ArithmeticError):
 
 @dataclass
 class Counters:
-    """Work counters reported with every run (what was done, and so what was left out)."""
+    """Work counters reported with every run (what was done, and so what was left out).
+
+    ``factorizations`` counts every factorization (diagonal ones included, see
+    ``diagonal_inversions``); ``step_factorizations`` only those of the time-step iteration
+    matrix, i.e. without the initial-acceleration solve at t0.
+    """
 
     steps: int = 0
     newton_iterations: int = 0
     residual_evaluations: int = 0
     linearizations: int = 0
     factorizations: int = 0
+    step_factorizations: int = 0
     diagonal_inversions: int = 0
     solves: int = 0
     solve_columns: int = 0
@@ -49,14 +55,15 @@ class Factor:
         self.counters = counters
         self.n = S.shape[0]
         diag = _diagonal_or_none(S)
+        counters.factorizations += 1
         if diag is not None:
+            # a diagonal matrix is its own factorization: invert elementwise
             if np.any(diag.real == 0.0) or not np.all(np.isfinite(diag)):
                 raise SingularMatrixError("zero on the diagonal")
             self._kind = "diag"
             self._inv = 1.0 / diag
             counters.diagonal_inversions += 1
             return
-        counters.factorizations += 1
         if sp.issparse(S):
             self._kind = "sparse"
             try:

@@ -1,0 +1,13 @@
+"""dynsens: gradient-based design optimization of nonlinear dynamic systems.
+
+Governing equation -> Newmark-beta time integration -> Newton-Raphson, run once for the
+state and once more, with matrix right-hand sides, for the design sensitivities.
+"""
+__version__ = "0.1.0"
+
+from .case.load import Case, load_case, load_case_dict  # noqa: E402
+from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
+from .simulation import run_case  # noqa: E402
+
+__all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "__version__",
+           "load_case", "load_case_dict", "run_case"]

@@ -1,0 +1,423 @@
+"""Read and validate a case: every problem is collected with its YAML path, then raised once.
+
+Top-level keys (see the README's case-file reference): ``name``, ``description``,
+``design``, ``model``, ``integrator``, ``sensitivity``, ``output``, ``events``,
+``responses``.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+from ..errors import CaseError, ProblemCollector
+from ..expressions import ExpressionError, compile_expression
+from ..integrators.newmark import Newmark, make_scheme
+from ..march import HISTORY_FIELDS, RunPlan
+from ..models._keys import check_keys, did_you_mean
+from ..models.base import Model, Output, ParameterTable
+from ..models.registry import build_model
+from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
+                         StructuralMass, TimeIntegral, ValueAt)
+from ..sensitivity import METHODS
+from ..solver.newton import NewtonSettings
+from .overrides import apply_overrides
+
+TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
+            "events", "responses")
+RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class DesignVariable:
+    """A design variable: name, initial value, bounds and scale (units of the case)."""
+
+    name: str
+    value: float
+    lower: float
+    upper: float
+    scale: float
+
+
+@dataclass
+class Case:
+    """A validated case, ready to run."""
+
+    source: str
+    text: str
+    name: str
+    description: str
+    design: list[DesignVariable]
+    model: Model
+    scheme: Newmark
+    plan: RunPlan
+    overrides: tuple[str, ...]
+    _make_responses: Callable[[], ResponseSet]
+    response_names: tuple[str, ...]
+    event_names: tuple[str, ...]
+
+    @property
+    def design_names(self) -> tuple[str, ...]:
+        """Names of the design variables, in order."""
+        return tuple(v.name for v in self.design)
+
+    @property
+    def x0(self) -> np.ndarray:
+        """Initial design (m,)."""
+        return np.array([v.value for v in self.design], dtype=float)
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower bounds (m,)."""
+        return np.array([v.lower for v in self.design], dtype=float)
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper bounds (m,)."""
+        return np.array([v.upper for v in self.design], dtype=float)
+
+    @property
+    def scale(self) -> np.ndarray:
+        """Typical magnitudes of the design variables (m,)."""
+        return np.array([v.scale for v in self.design], dtype=float)
+
+    def new_response_set(self) -> ResponseSet:
+        """Fresh accumulators for one run."""
+        return self._make_responses()
+
+
+def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
+    """Load, override and validate the case file at ``path``.
+
+    Raises CaseError naming the file for a missing file, invalid YAML or any invalid entry.
+    """
+    path = Path(path)
+    src = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CaseError(f"file not found: {src}", src) from None
+    except OSError as exc:
+        raise CaseError(f"cannot read {src}: {exc.strerror}", src) from None
+    return load_case_text(text, src, overrides)
+
+
+def load_case_text(text: str, source: str = "<string>", overrides: list[str] | tuple[str, ...] = ()) -> Case:
+    """Validate a case given as YAML text (safe loading only)."""
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise CaseError(f"not valid YAML{where}: {getattr(exc, 'problem', exc)}", source) from None
+    if not isinstance(raw, dict):
+        raise CaseError(f"expected a mapping at the top level, found {type(raw).__name__}", source)
+    return load_case_dict(raw, source, overrides, text=text)
+
+
+def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tuple[str, ...] = (),
+                   text: str | None = None) -> Case:
+    """Validate a case given as a mapping (as scripts build them)."""
+    raw = copy.deepcopy(raw)
+    if overrides:
+        apply_overrides(raw, list(overrides), source)
+        text = None
+    if text is None:
+        text = yaml.safe_dump(raw, sort_keys=False)
+    pc = ProblemCollector(source)
+    check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
+    pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
+    design = _design(raw.get("design", {"variables": []}), pc)
+    names = tuple(v.name for v in design)
+    table = ParameterTable(names)
+    model = build_model(raw.get("model"), "model", table, pc)
+    scheme, plan, event_location = _integrator(raw.get("integrator", {}), raw.get("sensitivity", {}),
+                                               raw.get("output", {}), pc)
+    outputs: list[Output] = []
+    keys: list[str] = []
+    factory = None
+    events: list[EventSpec] = []
+    if model is not None:
+        def output_id(spec: Any, path: str) -> int | None:
+            key = json.dumps(spec, sort_keys=True, default=str)
+            if key in keys:
+                return keys.index(key)
+            out = model.output(spec, path, pc)
+            if out is None:
+                return None
+            outputs.append(out)
+            keys.append(key)
+            return len(outputs) - 1
+        events = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
+        factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, events, names, model, pc)
+    pc.raise_if_any()
+    assert model is not None and factory is not None and scheme is not None and plan is not None
+    ev = events
+    return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
+                description=str(raw.get("description", "")), design=design, model=model,
+                scheme=scheme, plan=plan, overrides=tuple(overrides),
+                _make_responses=lambda: ResponseSet(outputs, factory(), ev),
+                response_names=rnames, event_names=tuple(e.name for e in events))
+
+
+def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        try:
+            value = float(compile_expression(str(value), set()).evaluate({})) if isinstance(value, str) else None
+        except ExpressionError as exc:
+            pc.add(path, f"expected a number, found {value!r} ({exc})")
+            return None
+        if value is None:
+            pc.add(path, "expected a number, found nothing" if value is None else f"expected a number")
+            return None
+    v = float(value)
+    if not np.isfinite(v) or (positive and v <= 0):
+        pc.add(path, f"expected a {'positive ' if positive else ''}finite number, found {value!r}")
+        return None
+    return v
+
+
+def _design(spec: Any, pc: ProblemCollector) -> list[DesignVariable]:
+    if not check_keys(spec, "design", ("variables",), pc):
+        return []
+    out = []
+    for i, v in enumerate(spec.get("variables", []) or []):
+        p = f"design.variables[{i}]"
+        if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
+            continue
+        name = v.get("name")
+        if not isinstance(name, str) or not _IDENT.match(name):
+            pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {name!r}")
+            continue
+        if name in [d.name for d in out]:
+            pc.add(f"{p}.name", f"duplicate design variable {name!r}")
+        value = _number(v.get("value"), f"{p}.value", pc)
+        lower = _number(v.get("lower", -np.inf), f"{p}.lower", pc) if "lower" in v else -np.inf
+        upper = _number(v.get("upper", np.inf), f"{p}.upper", pc) if "upper" in v else np.inf
+        scale = _number(v.get("scale", 1.0), f"{p}.scale", pc, positive=True) if "scale" in v else None
+        if value is None or lower is None or upper is None:
+            continue
+        if lower >= upper:
+            pc.add(p, f"lower >= upper ({lower} >= {upper}): did you swap the bounds?")
+            continue
+        if not lower <= value <= upper:
+            pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")
+        if scale is None:
+            scale = abs(value) if value != 0 else 1.0
+        out.append(DesignVariable(name, value, lower, upper, scale))
+    return out
+
+
+def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
+                ) -> tuple[Newmark | None, RunPlan | None, str]:
+    ok = check_keys(spec, "integrator", ("scheme", "beta", "gamma", "dt", "t0", "t_end", "solver",
+                                        "event_location"), pc, required=("dt", "t_end"))
+    if sens is None:
+        sens = {}
+    ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
+    if output is None:
+        output = {}
+    ok &= check_keys(output, "output", ("history", "sensitivity_history"), pc)
+    if not ok:
+        return None, None, "interpolate"
+    beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
+    gamma = _number(spec.get("gamma", 0.5), "integrator.gamma", pc)
+    dt = _number(spec.get("dt"), "integrator.dt", pc, positive=True)
+    t0 = _number(spec.get("t0", 0.0), "integrator.t0", pc)
+    t_end = _number(spec.get("t_end"), "integrator.t_end", pc)
+    scheme = None
+    if beta is not None and gamma is not None:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("default")
+                scheme = make_scheme(str(spec.get("scheme", "newmark")), beta, gamma)
+        except ValueError as exc:
+            pc.add("integrator", str(exc))
+    solver = spec.get("solver", {}) or {}
+    newton = NewtonSettings()
+    if check_keys(solver, "integrator.solver", ("rtol", "atol", "max_iterations"), pc):
+        rtol = _number(solver.get("rtol", newton.rtol), "integrator.solver.rtol", pc, positive=True)
+        atol = _number(solver.get("atol", newton.atol), "integrator.solver.atol", pc)
+        mi = solver.get("max_iterations", newton.max_iterations)
+        if not isinstance(mi, int) or mi < 1:
+            pc.add("integrator.solver.max_iterations", f"expected a positive integer, found {mi!r}")
+            mi = newton.max_iterations
+        if rtol is not None and atol is not None:
+            newton = NewtonSettings(rtol, atol, mi)
+    if t0 is not None and t_end is not None and t_end <= t0:
+        pc.add("integrator.t_end", f"must be greater than t0 = {t0}, found {t_end}")
+    enabled = sens.get("enabled", True)
+    if not isinstance(enabled, bool):
+        pc.add("sensitivity.enabled", f"expected true or false, found {enabled!r}")
+    partials = sens.get("partials", "forward")
+    if partials not in METHODS:
+        pc.add("sensitivity.partials", f"expected one of {', '.join(METHODS)}, found {partials!r}"
+                                       f"{did_you_mean(partials, METHODS)}")
+    step = sens.get("step")
+    if step is not None:
+        step = _number(step, "sensitivity.step", pc, positive=True)
+    matrix = sens.get("matrix", "converged")
+    if matrix not in ("converged", "reuse"):
+        pc.add("sensitivity.matrix", f"expected converged or reuse, found {matrix!r}")
+    hist = output.get("history", ["q", "qd", "qdd"])
+    if hist in (None, "none", False):
+        hist = []
+    if hist == "all":
+        hist = list(HISTORY_FIELDS)
+    if not isinstance(hist, list) or any(h not in HISTORY_FIELDS for h in hist):
+        pc.add("output.history", f"expected a list from {list(HISTORY_FIELDS)}, 'all' or 'none', found {hist!r}")
+        hist = []
+    sh = output.get("sensitivity_history", False)
+    if not isinstance(sh, bool):
+        pc.add("output.sensitivity_history", f"expected true or false, found {sh!r}")
+    loc = spec.get("event_location", "interpolate")
+    if loc not in ("interpolate", "step"):
+        pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
+    if None in (dt, t0, t_end) or pc.problems:
+        return scheme, None, str(loc)
+    plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
+                   partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
+                   history=tuple(hist), sensitivity_history=bool(sh))
+    return scheme, plan, str(loc)
+
+
+def _component(out: Output, comp: Any, path: str, pc: ProblemCollector) -> int | None:
+    if comp is None:
+        if len(out.labels) != 1:
+            pc.add(path, f"the quantity has {len(out.labels)} components {list(out.labels)}: name one with 'component'")
+            return None
+        return 0
+    if isinstance(comp, int) and not isinstance(comp, bool) and 0 <= comp < len(out.labels):
+        return comp
+    if comp in out.labels:
+        return out.labels.index(comp)
+    pc.add(path, f"component {comp!r} not found (components: {list(out.labels)})")
+    return None
+
+
+def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: str,
+            pc: ProblemCollector) -> list[EventSpec]:
+    if not isinstance(spec, list):
+        pc.add("events", "expected a list")
+        return []
+    events = []
+    for i, ev in enumerate(spec):
+        p = f"events[{i}]"
+        if not check_keys(ev, p, ("name", "quantity", "component", "value", "direction", "action", "location"),
+                          pc, required=("name", "quantity", "value")):
+            continue
+        oid = output_id(ev.get("quantity"), f"{p}.quantity")
+        level = _number(ev.get("value"), f"{p}.value", pc)
+        direction = ev.get("direction", "either")
+        if direction not in ("rising", "falling", "either"):
+            pc.add(f"{p}.direction", f"expected rising, falling or either, found {direction!r}")
+        if ev.get("action", "terminate") != "terminate":
+            pc.add(f"{p}.action", f"only 'terminate' is supported, found {ev.get('action')!r}")
+        loc = ev.get("location", default_loc)
+        if loc not in ("interpolate", "step"):
+            pc.add(f"{p}.location", f"expected interpolate or step, found {loc!r}")
+        if oid is None or level is None:
+            continue
+        comp = _component(outputs[oid], ev.get("component"), f"{p}.component", pc)
+        if comp is not None:
+            events.append(EventSpec(str(ev["name"]), oid, comp, level, direction, loc))
+    return events
+
+
+def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: list[EventSpec],
+               design_names: tuple[str, ...], model: Model, pc: ProblemCollector
+               ) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
+    if not isinstance(spec, list):
+        pc.add("responses", "expected a list")
+        spec = []
+    makers: list[Callable[[], Response]] = []
+    names: list[str] = []
+    event_names = [e.name for e in events]
+    common = ("name", "type", "unit")
+    for i, r in enumerate(spec):
+        p = f"responses[{i}]"
+        if not isinstance(r, dict):
+            pc.add(p, f"expected a mapping, found {r!r}")
+            continue
+        name, kind = r.get("name"), r.get("type")
+        if not isinstance(name, str) or not _IDENT.match(name):
+            pc.add(f"{p}.name", f"expected an identifier, found {name!r}")
+            continue
+        if name in names or name in design_names:
+            pc.add(f"{p}.name", f"{name!r} is already a response or design variable name")
+        unit = str(r.get("unit", ""))
+        if kind == "value":
+            check_keys(r, p, common + ("quantity", "component", "at", "time", "event", "derivative"), pc,
+                       required=("quantity",))
+            oid = output_id(r.get("quantity"), f"{p}.quantity")
+            deriv = r.get("derivative", "total")
+            if deriv not in ("total", "fixed_time"):
+                pc.add(f"{p}.derivative", f"expected total or fixed_time, found {deriv!r}")
+            time = _number(r["time"], f"{p}.time", pc) if "time" in r else None
+            event = r.get("event")
+            if event is not None and event not in event_names:
+                pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
+            at = r.get("at", "end")
+            if at != "end":
+                pc.add(f"{p}.at", f"expected 'end' (use 'time: T' or 'event: NAME' otherwise), found {at!r}")
+            if oid is None:
+                continue
+            comp = _component(outputs[oid], r.get("component"), f"{p}.component", pc)
+            u = unit or outputs[oid].unit
+            makers.append(lambda n=name, o=oid, c=comp, u=u, tm=time, e=event, f=(deriv == "fixed_time"):
+                          ValueAt(n, o, c, u, time=tm, event=e, fixed_time=f))
+        elif kind == "ks":
+            check_keys(r, p, common + ("quantity", "quantities", "rho", "components"), pc, required=("rho",))
+            qs = r.get("quantities", [r["quantity"]] if "quantity" in r else None)
+            if not isinstance(qs, list) or not qs:
+                pc.add(p, "a KS response needs 'quantity' or a list 'quantities'")
+                continue
+            rho = _number(r.get("rho"), f"{p}.rho", pc, positive=True)
+            oids = [output_id(q, f"{p}.quantities[{k}]") for k, q in enumerate(qs)]
+            if rho is None or any(o is None for o in oids):
+                continue
+            comps = tuple(slice(None) for _ in oids)
+            u = unit or outputs[oids[0]].unit
+            makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
+        elif kind == "integral":
+            check_keys(r, p, common + ("quantity", "component"), pc, required=("quantity",))
+            oid = output_id(r.get("quantity"), f"{p}.quantity")
+            if oid is None:
+                continue
+            comp = _component(outputs[oid], r.get("component"), f"{p}.component", pc)
+            u = unit or f"{outputs[oid].unit}*s"
+            makers.append(lambda n=name, o=oid, c=comp, u=u: TimeIntegral(n, o, c, u))
+        elif kind in ("event_time", "end_time"):
+            check_keys(r, p, common + (("event",) if kind == "event_time" else ()), pc,
+                       required=("event",) if kind == "event_time" else ())
+            event = r.get("event")
+            if kind == "event_time" and event not in event_names:
+                pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
+            makers.append(lambda n=name, e=event: EventTime(n, e))
+        elif kind == "mass":
+            check_keys(r, p, common, pc)
+            if type(model).structural_mass is Model.structural_mass:
+                pc.add(f"{p}.type", f"model type {type(model).__name__} defines no structural mass")
+            makers.append(lambda n=name, u=unit or "mass": StructuralMass(n, u))
+        elif kind == "expression":
+            check_keys(r, p, common + ("expression",), pc, required=("expression",))
+            try:
+                expr = compile_expression(str(r.get("expression")), set(names) | set(design_names))
+            except ExpressionError as exc:
+                pc.add(f"{p}.expression", f"{exc} (an expression may use earlier responses and design variables)")
+                continue
+            makers.append(lambda n=name, e=expr, u=unit: Combination(n, e, u, design_names))
+        else:
+            pc.add(f"{p}.type", f"unknown response type {kind!r}{did_you_mean(kind, RESPONSE_TYPES)} "
+                                f"(known: {', '.join(RESPONSE_TYPES)})")
+            continue
+        names.append(name)
+    return (lambda: [mk() for mk in makers]), tuple(names)

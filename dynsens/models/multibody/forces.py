@@ -1,0 +1,127 @@
+r"""Applied forces: gravity, point forces, torques, point-to-point spring-dampers.
+
+Each element adds its generalized force ``Q_ext`` (n_q, k) to an accumulator through
+the transposed Jacobians of the vector terms (virtual work), for a batch of states:
+
+* gravity: ``m g`` on every moving body's COM (g a global vector, length/s²);
+* point force ``f(t) = F·φ(t)`` at a point of a body, F given in global axes or in
+  body axes (a follower force, ``f = A(p) F̄``); φ a dimensionless time function;
+* torque ``n(t) = N·φ(t)``, global (``Q_p = 2 Eᵀ n``) or body axes (``Q_p = 2 Gᵀ n̄``);
+* spring-damper between points P_1 (body_1) and P_2 (body_2), tension positive:
+  ``F = k (L − L0) + k3 (L − L0)³ + c L̇``, ``L = sqrt(d·d)``, ``d = P_2 − P_1``,
+  ``L̇ = d·ḋ / L``; ``−F d/L`` acts on P_2 and ``+F d/L`` on P_1.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..timefunctions import TimeFunction
+from .bodies import GROUND, Ctx, Diff, Point
+from .rotations import ET_mul, GT_mul, dot, rotate
+
+Array = np.ndarray
+
+
+class ForceElement:
+    """Base class: ``add(ctx, out)`` adds Q_ext; ``name`` for outputs."""
+
+    name: str = ""
+
+    def add(self, ctx: Ctx, out: Array) -> None:
+        raise NotImplementedError
+
+
+@dataclass(eq=False)
+class Gravity(ForceElement):
+    """Weight of every moving body; g = pv[idx] (3 entries, length/s²)."""
+
+    idx: tuple[int, int, int]
+    name: str = "gravity"
+
+    def add(self, ctx: Ctx, out: Array) -> None:
+        g = np.array([ctx.params.pv[i] for i in self.idx]).reshape(3, 1)
+        for i, bp in enumerate(ctx.params.bodies):
+            out[7 * i:7 * i + 3] += bp.mass * g
+
+
+@dataclass(eq=False)
+class PointForce(ForceElement):
+    """Force F φ(t) (force unit) at ``point``; ``frame`` is ``global`` or ``body``."""
+
+    name: str
+    point: Point
+    idx: tuple[int, int, int]
+    frame: str
+    fn: TimeFunction
+
+    def force(self, ctx: Ctx) -> Array:
+        pv = ctx.params.pv
+        F = np.array([pv[i] for i in self.idx]).reshape(3, 1) * self.fn.value(ctx.t, pv)
+        if self.frame == "body" and self.point.body != GROUND:
+            a = 7 * self.point.body
+            return rotate(ctx.q[a + 3:a + 7], F)
+        return F + np.zeros((3, ctx.k))
+
+    def add(self, ctx: Ctx, out: Array) -> None:
+        self.point.apply(ctx, self.force(ctx), out)
+
+
+@dataclass(eq=False)
+class Torque(ForceElement):
+    """Torque N φ(t) (force·length) on ``body``; ``frame`` is ``global`` or ``body``."""
+
+    name: str
+    body: int
+    idx: tuple[int, int, int]
+    frame: str
+    fn: TimeFunction
+
+    def add(self, ctx: Ctx, out: Array) -> None:
+        if self.body == GROUND:
+            return
+        pv = ctx.params.pv
+        n = np.array([pv[i] for i in self.idx]).reshape(3, 1) * self.fn.value(ctx.t, pv)
+        a = 7 * self.body
+        p = ctx.q[a + 3:a + 7]
+        out[a + 3:a + 7] += 2.0 * (GT_mul(p, n + 0 * p[:3]) if self.frame == "body"
+                                   else ET_mul(p, n + 0 * p[:3]))
+
+
+@dataclass(eq=False)
+class SpringDamper(ForceElement):
+    """Point-to-point spring-damper; parameters k, k3, c, L0 by parameter index.
+
+    ``free_length`` is a key of params.scal (the free length L0, length unit).
+    """
+
+    name: str
+    d: Diff
+    k: int
+    k3: int
+    c: int
+    free_length: str
+
+    def state(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+        """(L, L̇, F) each (1, k): length, rate and tension force."""
+        dv, dd, _ = self.d.kin(ctx)
+        L = np.sqrt(dot(dv, dv))
+        Ld = dot(dv, dd) / L
+        pv = ctx.params.pv
+        e = L - ctx.params.scal[self.free_length]
+        F = pv[self.k] * e + pv[self.k3] * e * e * e + pv[self.c] * Ld
+        return L, Ld, F
+
+    def add(self, ctx: Ctx, out: Array) -> None:
+        dv = self.d.kin(ctx)[0]
+        L, _, F = self.state(ctx)
+        self.d.apply(ctx, -F * dv / L, out)
+
+
+def total_force_on(elements: list[ForceElement], ctx: Ctx, out: Array) -> Any:
+    """Add all elements' generalized forces to out (n_q, k)."""
+    for el in elements:
+        el.add(ctx, out)
+    return out

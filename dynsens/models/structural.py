@@ -1,0 +1,502 @@
+r"""Structural dynamics models: point masses, springs, dampers and truss bars.
+
+Residual (method.md §1) with z = q̈:
+
+.. math:: F_R = M\ddot q + D\dot q + f_{int}(q) - f_{ext}(t) = 0
+
+* ``M`` is diagonal (point masses and lumped bar masses, ρAL/2 per node and direction);
+* springs between two DOFs (or a DOF and ground) carry f = k₁δ + k₂δ² + k₃δ³ with
+  δ = u_a − u_b (cubic hardening for k₃ > 0, softening for k₃ < 0);
+* viscous dampers f = c δ̇, and Rayleigh damping D_R = α M + β K₀ (K₀: the stiffness at q = 0);
+* bars (2D or 3D truss elements) are geometrically nonlinear: total Lagrangian with the
+  Green–Lagrange strain ε = (ℓ² − L²)/(2L²), axial force N = E A ε, nodal forces
+  ± N d/L (d the current bar vector); the tangent is (EA/L³) d dᵀ + (N/L) I per node pair.
+
+Elements of one kind are stored as arrays and evaluated together.  Fixed DOFs (supports,
+``ground``) map to an extra slot that always holds zero.  All code is complex-safe.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import ProblemCollector
+from ._keys import check_keys, did_you_mean
+from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
+from .registry import register
+from .timefunctions import TimeFunction, build_time_function
+
+GROUND = "ground"
+AXES = ("x", "y", "z")
+SPARSE_THRESHOLD = 200  # DOFs above which the sparse (splu) path is chosen
+
+
+@dataclass
+class _Group:
+    """Elements of one kind: connectivity (n_e, k) into the extended DOF vector and parameters."""
+
+    names: list[str] = field(default_factory=list)
+    dofs: list[list[int]] = field(default_factory=list)
+    params: dict[str, list[int]] = field(default_factory=dict)
+
+    def add(self, name: str, dofs: list[int], **params: int) -> None:
+        self.names.append(name)
+        self.dofs.append(dofs)
+        for k, v in params.items():
+            self.params.setdefault(k, []).append(v)
+
+    def freeze(self, width: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        idx = np.array(self.dofs, dtype=int).reshape(-1, width)
+        return idx, {k: np.array(v, dtype=int) for k, v in self.params.items()}
+
+
+class StructuralModel(Model):
+    """Assembled structural model; built from a case by :func:`build_structural`."""
+
+    def __init__(self, *, dof_names: list[str], table: ParameterTable, mass_terms: list[tuple[int, int]],
+                 springs: _Group, dampers: _Group, bars: _Group, dim: int, node_coords: dict[str, list[int]],
+                 bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
+                 initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
+                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool):
+        self.dof_names = dof_names
+        self.table = table
+        n = len(dof_names)
+        self.n = n
+        self.mass_dof = np.array([d for d, _ in mass_terms], dtype=int)
+        self.mass_idx = np.array([p for _, p in mass_terms], dtype=int)
+        self.spring_dofs, sp_par = springs.freeze(2)
+        self.spring_names = springs.names
+        self.k1, self.k2, self.k3 = (sp_par.get(k, np.zeros(0, int)) for k in ("k1", "k2", "k3"))
+        self.damper_dofs, dp_par = dampers.freeze(2)
+        self.damper_names = dampers.names
+        self.c = dp_par.get("c", np.zeros(0, int))
+        self.dim = dim
+        self.bar_dofs, bar_par = bars.freeze(2 * dim)
+        self.bar_names = bars.names
+        self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))
+        # undeformed bar vectors from nodal coordinates (parameter indices, may be design-dependent)
+        self.bar_X = np.array([[node_coords[b] + [] for b in pair] for pair in bar_nodes], dtype=int) \
+            .reshape(-1, 2, dim) if bar_nodes else np.zeros((0, 2, dim), int)
+        self.loads = loads
+        self.init_q, self.init_qd = initial
+        self.rayleigh = rayleigh
+        nonlinear = bool(len(self.bar_names)) or spring_nonlinear
+        has_damping = bool(len(self.damper_names)) or rayleigh is not None
+        use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
+        self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
+                             has_damping=has_damping, sparse=use_sparse)
+
+    # ------------------------------------------------------------------ parameters
+    def parameters(self, x: np.ndarray) -> dict[str, Any]:
+        """Evaluated parameter vector and derived element data for design x."""
+        pv = self.table.evaluate(np.asarray(x))
+        out: dict[str, Any] = {"pv": pv}
+        mass = np.zeros(self.n + 1, dtype=pv.dtype)
+        np.add.at(mass, self.mass_dof, pv[self.mass_idx])
+        if len(self.bar_names):
+            X = pv[self.bar_X]                       # (n_e, 2, dim)
+            D0 = X[:, 1] - X[:, 0]
+            L0 = np.sqrt(np.sum(D0 * D0, axis=1))
+            A, E, rho = pv[self.bar_A], pv[self.bar_E], pv[self.bar_rho]
+            half = 0.5 * rho * A * L0
+            lumped = np.repeat(half[:, None], 2 * self.dim, axis=1)
+            np.add.at(mass, self.bar_dofs, lumped)
+            out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
+        out["mass"] = mass[:self.n]
+        if self.rayleigh is not None:
+            out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out)
+        if self.traits.has_damping:
+            # viscous and Rayleigh damping depend on the design only: assemble once per design
+            out["D"] = self._damping(out, pv.dtype)
+        return out
+
+    def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pv = params["pv"]
+        q0 = np.zeros(self.n, dtype=pv.dtype)
+        qd0 = np.zeros(self.n, dtype=pv.dtype)
+        for d, i in self.init_q:
+            q0[d] = pv[i]
+        for d, i in self.init_qd:
+            qd0[d] = pv[i]
+        return q0, qd0, np.zeros(0, dtype=pv.dtype)
+
+    # ------------------------------------------------------------------ element kernels
+    def _ext(self, v: np.ndarray) -> np.ndarray:
+        return np.concatenate([v, np.zeros(1, dtype=v.dtype)])
+
+    def _spring_state(self, q: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Spring forces f (n_s,) and tangents df/dδ (n_s,)."""
+        qe = self._ext(q)
+        delta = qe[self.spring_dofs[:, 0]] - qe[self.spring_dofs[:, 1]]
+        k1 = pv[self.k1]
+        f = k1 * delta
+        kt = k1 + 0 * delta
+        if self.traits.linear:
+            return f, kt
+        k2, k3 = pv[self.k2], pv[self.k3]
+        f = f + k2 * delta ** 2 + k3 * delta ** 3
+        kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
+        return f, kt
+
+    def _bar_state(self, q: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
+        qe = self._ext(q)
+        U = qe[self.bar_dofs].reshape(-1, 2, self.dim)
+        du = U[:, 1] - U[:, 0]
+        D0 = params["D0"]
+        d = D0 + du
+        L0 = params["L0"]
+        # (ℓ² − L²) written as 2 D0·Δu + Δu·Δu: no cancellation for small displacements
+        strain = (2.0 * np.sum(D0 * du, axis=1) + np.sum(du * du, axis=1)) / (2 * L0 * L0)
+        N = params["EA"] * strain
+        return {"d": d, "strain": strain, "N": N}
+
+    def _tangent(self, q: np.ndarray, params: dict[str, Any]) -> Any:
+        """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse)."""
+        pv = params["pv"]
+        rows, cols, vals = [], [], []
+        if len(self.spring_names):
+            _, kt = self._spring_state(q, pv)
+            a, b = self.spring_dofs[:, 0], self.spring_dofs[:, 1]
+            rows += [a, b, a, b]
+            cols += [a, b, b, a]
+            vals += [kt, kt, -kt, -kt]
+        if len(self.bar_names):
+            bs = self._bar_state(q, params)
+            d, N, L0, EA = bs["d"], bs["N"], params["L0"], params["EA"]
+            k_node = (EA / L0 ** 3)[:, None, None] * d[:, :, None] * d[:, None, :] \
+                + (N / L0)[:, None, None] * np.eye(self.dim)
+            ke = np.block([[k_node, -k_node], [-k_node, k_node]])
+            idx = self.bar_dofs
+            rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
+            cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
+            vals.append(ke.reshape(len(idx), -1).ravel())
+        return self._assemble(rows, cols, vals, np.result_type(q, pv))
+
+    def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
+        rows, cols, vals = [], [], []
+        if len(self.damper_names):
+            c = params["pv"][self.c]
+            a, b = self.damper_dofs[:, 0], self.damper_dofs[:, 1]
+            rows += [a, b, a, b]
+            cols += [a, b, b, a]
+            vals += [c, c, -c, -c]
+        D = self._assemble(rows, cols, vals, np.result_type(dtype, params["pv"]))
+        if self.rayleigh is not None:
+            pv = params["pv"]
+            alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
+            Mdiag = params["mass"]
+            D = D + alpha * (sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)) + beta * params["K0"]
+        return D
+
+    def _assemble(self, rows: list, cols: list, vals: list, dtype: Any) -> Any:
+        n = self.n
+        if not rows:
+            return sp.csc_matrix((n, n), dtype=dtype) if self.traits.sparse else np.zeros((n, n), dtype)
+        r = np.concatenate([np.ravel(x) for x in rows])
+        c = np.concatenate([np.ravel(x) for x in cols])
+        v = np.concatenate([np.ravel(x) for x in vals])
+        keep = (r < n) & (c < n)
+        r, c, v = r[keep], c[keep], v[keep]
+        if self.traits.sparse:
+            return sp.csc_matrix((v, (r, c)), shape=(n, n))
+        K = np.zeros((n + 1) * (n + 1), dtype=np.result_type(dtype, v))
+        np.add.at(K, r * (n + 1) + c, v)
+        return K.reshape(n + 1, n + 1)[:n, :n]
+
+    def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
+        """f_ext(t) (n,) in force units."""
+        pv = params["pv"]
+        f = np.zeros(self.n + 1, dtype=pv.dtype)
+        for dof, amp, fn in self.loads:
+            f[dof] += pv[amp] * fn.value(t, pv)
+        return f[:self.n]
+
+    # ------------------------------------------------------------------ residual contract
+    def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
+        f_int = self._internal_force(s.q, params)
+        R = params["mass"] * s.qdd + f_int - self.external_force(t, params)
+        if self.traits.has_damping:
+            R = R + params["D"] @ s.qd
+        return R
+
+    def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
+        """f_int(q) (n,) in force units."""
+        pv = params["pv"]
+        f = np.zeros(self.n + 1, dtype=np.result_type(q, pv))
+        if len(self.spring_names):
+            fs, _ = self._spring_state(q, pv)
+            np.add.at(f, self.spring_dofs[:, 0], fs)
+            np.add.at(f, self.spring_dofs[:, 1], -fs)
+        if len(self.bar_names):
+            bs = self._bar_state(q, params)
+            fe = (bs["N"] / params["L0"])[:, None] * bs["d"]
+            np.add.at(f, self.bar_dofs, np.concatenate([-fe, fe], axis=1))
+        return f[:self.n]
+
+    def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
+        K = self._tangent(s.q, params)
+        M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+        D = params["D"] if self.traits.has_damping else None
+        return Linearization(R_z=M, R_q=K, R_qd=D)
+
+    def structural_mass(self, params: dict[str, Any]) -> Any:
+        """Sum of point masses and bar masses ρAL (mass unit of the case)."""
+        total = np.sum(params["pv"][self.mass_idx]) if len(self.mass_idx) else 0.0
+        if len(self.bar_names):
+            total = total + np.sum(params["bar_mass"])
+        return total
+
+    def dof_labels(self) -> list[str]:
+        return list(self.dof_names)
+
+    # ------------------------------------------------------------------ outputs
+    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
+        ``{element: NAME|[NAMES]|all, kind: force|stress|strain}``."""
+        if not check_keys(spec, path, ("dof", "element", "kind"), problems):
+            return None
+        kind = spec.get("kind", "displacement" if "dof" in spec else "force")
+        if "dof" in spec:
+            names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
+            field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
+            if kind not in field_of:
+                problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "
+                                             f"(known: {', '.join(field_of)})")
+                return None
+            idx = []
+            for i, nm in enumerate(names):
+                if nm not in self.dof_names:
+                    problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
+                else:
+                    idx.append(self.dof_names.index(nm))
+            if len(idx) != len(names):
+                return None
+            ia = np.array(idx)
+            fld = field_of[kind]
+            unit = {"q": "length", "qd": "length/s", "qdd": "length/s^2"}[fld]
+            return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
+                          tuple(f"{n}.{kind}" for n in names), unit, linear=True)
+        if "element" not in spec:
+            problems.add(path, "expected 'dof' or 'element'")
+            return None
+        names = spec["element"]
+        all_names = self.spring_names + self.damper_names + self.bar_names
+        if names == "all":
+            names = list(self.bar_names) if self.bar_names else list(self.spring_names)
+        names = names if isinstance(names, list) else [names]
+        kinds = ("force", "stress", "strain")
+        if kind not in kinds:
+            problems.add(f"{path}.kind", f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
+            return None
+        bars, springs = [], []
+        for nm in names:
+            if nm in self.bar_names:
+                bars.append(self.bar_names.index(nm))
+            elif nm in self.spring_names and kind == "force":
+                springs.append(self.spring_names.index(nm))
+            elif nm in self.spring_names:
+                problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
+            else:
+                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
+        if len(bars) + len(springs) != len(names):
+            return None
+        if springs and bars:
+            problems.add(f"{path}.element", "mix springs and bars in separate quantities")
+            return None
+        if springs:
+            si = np.array(springs)
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm["pv"])[0][_i],
+                          tuple(f"{n}.force" for n in names), "force")
+        bi = np.array(bars)
+
+        def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
+            bs = self._bar_state(s.q, prm)
+            if _k == "strain":
+                return bs["strain"][_i]
+            if _k == "force":
+                return bs["N"][_i]
+            return (prm["E"] * bs["strain"])[_i]
+
+        return Output(bar_out, tuple(f"{n}.{kind}" for n in names),
+                      {"force": "force", "stress": "stress", "strain": "-"}[kind])
+
+
+# ---------------------------------------------------------------------- builder
+_MODEL_KEYS = ("type", "dofs", "dim", "nodes", "elements", "loads", "initial", "damping", "linear_algebra")
+
+
+@register("structural")
+def build_structural(spec: dict, path: str, table: ParameterTable,
+                     problems: ProblemCollector) -> StructuralModel | None:
+    """Build a :class:`StructuralModel` from the case's ``model`` mapping."""
+    check_keys(spec, path, _MODEL_KEYS, problems)
+    dim = spec.get("dim", 2)
+    if dim not in (2, 3):
+        problems.add(f"{path}.dim", f"must be 2 or 3, found {dim!r}")
+        dim = 2
+    dof_names: list[str] = []
+    fixed: set[str] = set()
+    scalar = spec.get("dofs", [])
+    if not isinstance(scalar, list) or not all(isinstance(d, str) for d in scalar):
+        problems.add(f"{path}.dofs", f"expected a list of DOF names, found {scalar!r}")
+        scalar = []
+    dof_names += scalar
+    node_coords: dict[str, list[int]] = {}
+    nodes = spec.get("nodes", {}) or {}
+    if not isinstance(nodes, dict):
+        problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
+        nodes = {}
+    for name, nd in nodes.items():
+        npath = f"{path}.nodes.{name}"
+        if not check_keys(nd, npath, ("coords", "fixed"), problems, required=("coords",)):
+            continue
+        node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
+        fx = nd.get("fixed", [])
+        if fx is True or fx == "all":
+            fx = list(AXES[:dim])
+        if not isinstance(fx, list) or any(a not in AXES[:dim] for a in fx):
+            problems.add(f"{npath}.fixed", f"expected a list of axes from {list(AXES[:dim])} or 'all', found {fx!r}")
+            fx = []
+        for a in AXES[:dim]:
+            (fixed.add if a in fx else dof_names.append)(f"{name}.{a}")
+    if len(set(dof_names)) != len(dof_names):
+        problems.add(f"{path}.dofs", "DOF names must be unique")
+    n = len(dof_names)
+    index = {d: i for i, d in enumerate(dof_names)}
+
+    def dof(name: Any, p: str) -> int:
+        if name == GROUND or name in fixed:
+            return n
+        if name not in index:
+            problems.add(p, f"unknown dof {name!r}{did_you_mean(name, list(index) + [GROUND])}")
+            return n
+        return index[name]
+
+    def node_dofs(name: Any, p: str) -> list[int]:
+        if name not in node_coords:
+            problems.add(p, f"unknown node {name!r}{did_you_mean(name, node_coords)}")
+            return [n] * dim
+        return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
+
+    mass_terms: list[tuple[int, int]] = []
+    springs, dampers, bars = _Group(), _Group(), _Group()
+    bar_nodes: list[tuple[str, str]] = []
+    names_seen: set[str] = set()
+    spring_nonlinear = False
+    zero_index = -1
+    elements = spec.get("elements", [])
+    if not isinstance(elements, list):
+        problems.add(f"{path}.elements", "expected a list")
+        elements = []
+    kinds = ("mass", "spring", "damper", "bar")
+    for k, el in enumerate(elements):
+        ep = f"{path}.elements[{k}]"
+        if not isinstance(el, dict):
+            problems.add(ep, f"expected a mapping, found {el!r}")
+            continue
+        kind = el.get("type")
+        name = str(el.get("name", f"{kind}{k}"))
+        if name in names_seen:
+            problems.add(f"{ep}.name", f"duplicate element name {name!r}")
+        names_seen.add(name)
+        if kind == "mass":
+            check_keys(el, ep, ("type", "name", "dof", "node", "mass"), problems, required=("mass",))
+            pi = table.add(el.get("mass"), f"{ep}.mass", problems, positive=True)
+            targets = [dof(el["dof"], f"{ep}.dof")] if "dof" in el else \
+                node_dofs(el.get("node"), f"{ep}.node") if "node" in el else []
+            if not targets:
+                problems.add(ep, "a mass needs 'dof' or 'node'")
+            mass_terms += [(d, pi) for d in targets]
+        elif kind in ("spring", "damper"):
+            keys = ("type", "name", "dofs", "k", "k2", "k3") if kind == "spring" else ("type", "name", "dofs", "c")
+            check_keys(el, ep, keys, problems, required=("dofs", "k" if kind == "spring" else "c"))
+            pair = el.get("dofs", [])
+            if not isinstance(pair, list) or len(pair) not in (1, 2):
+                problems.add(f"{ep}.dofs", f"expected [dof] or [dof_a, dof_b|ground], found {pair!r}")
+                continue
+            ids = [dof(d, f"{ep}.dofs") for d in pair] + ([n] if len(pair) == 1 else [])
+            if kind == "spring":
+                higher = {}
+                for key in ("k2", "k3"):
+                    if key in el:
+                        spring_nonlinear = True
+                        higher[key] = table.add(el[key], f"{ep}.{key}", problems)
+                    else:
+                        if zero_index < 0:
+                            zero_index = table.add(0.0, "", problems)
+                        higher[key] = zero_index
+                springs.add(name, ids, k1=table.add(el.get("k"), f"{ep}.k", problems), **higher)
+            else:
+                dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
+        elif kind == "bar":
+            check_keys(el, ep, ("type", "name", "nodes", "area", "E", "density"), problems,
+                       required=("nodes", "area", "E"))
+            pair = el.get("nodes", [])
+            if not isinstance(pair, list) or len(pair) != 2:
+                problems.add(f"{ep}.nodes", f"expected [node_a, node_b], found {pair!r}")
+                continue
+            ids = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
+            bars.add(name, ids, A=table.add(el.get("area"), f"{ep}.area", problems, positive=True),
+                     E=table.add(el.get("E"), f"{ep}.E", problems, positive=True),
+                     rho=table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
+            bar_nodes.append((pair[0], pair[1]))
+        else:
+            problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
+                                       f"(known: {', '.join(kinds)})")
+    loads = []
+    for k, ld in enumerate(spec.get("loads", []) or []):
+        lp = f"{path}.loads[{k}]"
+        if not check_keys(ld, lp, ("dof", "node", "direction", "value", "function"), problems, required=("value",)):
+            continue
+        if "dof" in ld:
+            target = dof(ld["dof"], f"{lp}.dof")
+        elif "node" in ld:
+            direction = ld.get("direction")
+            if direction not in AXES[:dim]:
+                problems.add(f"{lp}.direction", f"expected one of {list(AXES[:dim])}, found {direction!r}")
+                continue
+            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)]
+        else:
+            problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
+            continue
+        amp = table.add(ld.get("value"), f"{lp}.value", problems)
+        fn = build_time_function(ld.get("function"), f"{lp}.function", table, problems)
+        if fn is not None:
+            loads.append((target, amp, fn))
+    init = spec.get("initial", {}) or {}
+    init_lists: tuple[list[tuple[int, int]], list[tuple[int, int]]] = ([], [])
+    if check_keys(init, f"{path}.initial", ("displacement", "velocity"), problems):
+        for j, key in enumerate(("displacement", "velocity")):
+            entries = init.get(key, {}) or {}
+            if not isinstance(entries, dict):
+                problems.add(f"{path}.initial.{key}", "expected a mapping dof -> value")
+                continue
+            for d, v in entries.items():
+                ip = f"{path}.initial.{key}.{d}"
+                di = dof(d, ip)
+                init_lists[j].append((di, table.add(v, ip, problems)))
+    rayleigh = None
+    damping = spec.get("damping")
+    if damping is not None and check_keys(damping, f"{path}.damping", ("rayleigh",), problems):
+        ry = damping.get("rayleigh")
+        if check_keys(ry, f"{path}.damping.rayleigh", ("alpha", "beta"), problems):
+            rayleigh = (table.add(ry.get("alpha", 0.0), f"{path}.damping.rayleigh.alpha", problems, nonnegative=True),
+                        table.add(ry.get("beta", 0.0), f"{path}.damping.rayleigh.beta", problems, nonnegative=True))
+    la = spec.get("linear_algebra", "auto")
+    if la not in ("auto", "dense", "sparse"):
+        problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
+    if n == 0:
+        problems.add(path, "the model has no free degrees of freedom")
+    massed = {d for d, _ in mass_terms} | ({d for row in bars.dofs for d in row} if bars.names else set())
+    for i, d in enumerate(dof_names):
+        if i not in massed:
+            problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
+    if problems.problems:
+        return None
+    return StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
+                           dampers=dampers, bars=bars, dim=dim, node_coords=node_coords, bar_nodes=bar_nodes,
+                           loads=loads, initial=init_lists, rayleigh=rayleigh,
+                           sparse=None if la == "auto" else la == "sparse", spring_nonlinear=spring_nonlinear)

@@ -1,0 +1,33 @@
+"""Run a loaded case: the library entry point behind ``dynsens simulate``."""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from .case.load import Case
+from .march import RunResult, integrate
+
+
+def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
+             history: tuple[str, ...] | None = None,
+             progress: Callable[[int, int], None] | None = None) -> RunResult:
+    """Simulate ``case`` at design ``x`` (default: the case's initial design).
+
+    Parameters
+    ----------
+    x : design (m,), real or complex (complex forces ``sensitivities=False``).
+    sensitivities : override the case's ``sensitivity.enabled``.
+    history : override which state histories are stored.
+    """
+    x = case.x0 if x is None else np.asarray(x)
+    plan = case.plan
+    if sensitivities is not None:
+        plan = replace(plan, sensitivities=sensitivities)
+    if np.iscomplexobj(x):
+        plan = replace(plan, sensitivities=False)
+    if history is not None:
+        plan = replace(plan, history=history)
+    return integrate(case.model, x, case.scheme, plan, case.new_response_set(),
+                     design_names=case.design_names, design_scale=case.scale, progress=progress)
