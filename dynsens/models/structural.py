@@ -276,7 +276,7 @@ class StructuralModel(Model):
                 return None
             ia = np.array(idx)
             fld = field_of[kind]
-            unit = {"q": "length", "qd": "length/s", "qdd": "length/s^2"}[fld]
+            unit = ""  # the case's own unit system; a response may name it with 'unit'
             return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
                           tuple(f"{n}.{kind}" for n in names), unit, linear=True)
         if "element" not in spec:
@@ -309,7 +309,7 @@ class StructuralModel(Model):
         if springs:
             si = np.array(springs)
             return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm["pv"])[0][_i],
-                          tuple(f"{n}.force" for n in names), "force")
+                          tuple(f"{n}.force" for n in names), "")
         bi = np.array(bars)
 
         def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
@@ -320,8 +320,7 @@ class StructuralModel(Model):
                 return bs["N"][_i]
             return (prm["E"] * bs["strain"])[_i]
 
-        return Output(bar_out, tuple(f"{n}.{kind}" for n in names),
-                      {"force": "force", "stress": "stress", "strain": "-"}[kind])
+        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "")
 
 
 # ---------------------------------------------------------------------- builder

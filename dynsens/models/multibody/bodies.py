@@ -78,12 +78,14 @@ class MBParams:
     """System parameters of a multibody model for one design.
 
     pv : the evaluated parameter vector; bodies : per moving body; vec : body-fixed or
-    global vectors (3, 1) by key (marker positions, joint points and axes in body axes).
+    global vectors (3, 1) by key (marker positions, joint points and axes in body axes);
+    scal : derived scalars by key (free lengths, areas); x : the design.
     """
 
     pv: Array
     bodies: list[BodyParams]
     vec: dict[str, Array]
+    scal: dict[str, Any]
     x: Array
 
 

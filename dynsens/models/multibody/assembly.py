@@ -1,0 +1,296 @@
+r"""Consistent initial conditions and their exact design derivatives.
+
+Position level.  The bodies' given poses form the guess q_g(x).  With the joint
+equations Φ (incl. normalisation) and the case's extra assembly equations Φ_a
+(``initial.hold`` coordinates and ``initial.distances``), Φ_c = [Φ; Φ_a], the initial
+configuration is the point of the constraint manifold closest to the guess:
+
+    F(q, μ; x) = [ q − q_g(x) − J_cᵀ(q) μ ;  Φ_c(q, t0; x) ] = 0
+
+(the guess is kept in a least-squares sense; held coordinates are kept exactly).  F is
+solved by Newton with the exact matrix [[I − ∂(J_cᵀμ)/∂q, −J_cᵀ], [J_c, 0]], and ∇q0
+follows by implicit differentiation: ∂F/∂(q, μ) ∇(q, μ) = −∂_x F, with ∂_x F taken by the
+run's design-partials method (``partials.of``).
+
+Velocity level: q̇0 = q̇_g + Aᵀ (A Aᵀ)⁻¹ (b − A q̇_g), A = [J_Φ; J_a], b = [−Φ_t; J_a q̇_g]
+(least-squares closest velocities; held coordinates keep their given rates).  q̇_g has
+ṗ = ½ E(p)ᵀ ω from the given angular velocities.
+
+Pressures: given, or ``static``: with q̈ = 0 the equations of motion
+Jᵀλ − Q_other − Q_v − Σ_c (p1 A1)_c Q_unit,c = 0 are solved for λ and the piston-side
+forces p1 A1 (Q_other includes the rod-side pressure p2 = given or p_T, and the damping).  λ0 and ṗ0 = h(t0) are returned as Newton guesses.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+from ...errors import CaseError, ModelError
+from .bodies import Ctx, MBParams
+from .rotations import ET_mul
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import MultibodyModel
+
+Array = np.ndarray
+
+
+@dataclass
+class InitialConditions:
+    q0: Array
+    qd0: Array
+    p0: Array
+    lam0: Array
+    pd0: Array
+    mu: Array
+
+
+def _ctx(q: Array, qd: Array | None, params: MBParams, t: float) -> Ctx:
+    q = q.reshape(q.shape[0], -1)
+    qd = np.zeros_like(q) if qd is None else qd.reshape(q.shape)
+    return Ctx(q, qd, np.zeros_like(q), params, t)
+
+
+def jacobian_rows(eqs: list, q: Array, params: MBParams, t: float) -> Array:
+    """J (n_eq, n_q) of the equations at q (n_q,), analytic through the terms (complex-safe)."""
+    ctx = _ctx(q, None, params, t)
+    dt = np.result_type(q, params.pv, float)
+    J = np.zeros((len(eqs), q.shape[0]), dt)
+    for i, eq in enumerate(eqs):
+        out = np.zeros((q.shape[0], 1), dt)
+        eq.apply(ctx, np.ones((1, 1)), out)
+        J[i] = out[:, 0]
+    return J
+
+
+def _jac(fn: Callable[[Array], Array], x: Array, real: bool) -> Array:
+    """∂fn/∂x by batched complex step (real data) or central differences (complex data)."""
+    n = x.shape[0]
+    if real:
+        h = 1e-30
+        return np.imag(fn(x[:, None] + 1j * h * np.eye(n))) / h
+    hs = 1e-7 * (1.0 + np.abs(np.real(x)))
+    return (fn(x[:, None] + np.diag(hs)) - fn(x[:, None] - np.diag(hs))) / (2.0 * hs[None, :])
+
+
+def guess(model: "MultibodyModel", params: MBParams) -> Array:
+    """q_g (n_q,) from the bodies' given poses."""
+    return np.concatenate([np.concatenate([bp.r0, bp.p0]) for bp in params.bodies]) \
+        if params.bodies else np.zeros(0)
+
+
+def _all_eqs(model: "MultibodyModel") -> list:
+    return model.eqs + model.assembly.equations
+
+
+def _F(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
+    """The assembly residual F(q, μ) (n_q + n_c,)."""
+    eqs = _all_eqs(model)
+    t0 = model.assembly.t0
+    ctx = _ctx(q, None, params, t0)
+    phi = model.constraint_values(ctx, eqs)[0][:, 0]
+    dt = np.result_type(q, mu, params.pv, float)
+    JTmu = np.zeros((q.shape[0], 1), dt)
+    for i, eq in enumerate(eqs):
+        eq.apply(ctx, mu[i:i + 1].reshape(1, 1), JTmu)
+    return np.concatenate([q - guess(model, params) - JTmu[:, 0], phi])
+
+
+def _F_matrix(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
+    """∂F/∂(q, μ)."""
+    eqs = _all_eqs(model)
+    t0 = model.assembly.t0
+    n_q = q.shape[0]
+    real = not (np.iscomplexobj(q) or np.iscomplexobj(mu) or np.iscomplexobj(params.pv))
+
+    def JTmu(qb: Array) -> Array:
+        ctx = Ctx(qb, np.zeros_like(qb), np.zeros_like(qb), params, t0)
+        out = np.zeros(qb.shape, np.result_type(qb, mu, params.pv, float))
+        for i, eq in enumerate(eqs):
+            eq.apply(ctx, mu[i:i + 1].reshape(1, 1), out)
+        return out
+
+    H = _jac(JTmu, q, real)
+    Jc = jacobian_rows(eqs, q, params, t0)
+    K = np.block([[np.eye(n_q) - H, -Jc.T], [Jc, np.zeros((len(eqs), len(eqs)))]])
+    return K
+
+
+def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str) -> None:
+    """CaseError naming the equations (joints) involved when J (n_eq, n_q) is rank-deficient."""
+    if J.shape[0] == 0:
+        return
+    U, sv, _ = np.linalg.svd(np.real(J), full_matrices=True)
+    tol = max(J.shape) * np.finfo(float).eps * 1e3 * (sv[0] if sv.size else 1.0)
+    svf = np.concatenate([sv, np.zeros(J.shape[0] - sv.size)])
+    null = np.flatnonzero(svf <= tol)
+    if null.size == 0:
+        return
+    involved = sorted({labels[i] for j in null for i in np.flatnonzero(np.abs(U[:, j]) > 1e-6)})
+    joints = sorted({lab.split(".")[0] for lab in involved})
+    raise CaseError(
+        f"{where}: the constraint Jacobian has rank {J.shape[0] - null.size} < {J.shape[0]} "
+        f"({null.size} redundant equation{'s' if null.size > 1 else ''}); linearly dependent "
+        f"equations: {', '.join(involved)} (joints/conditions: {', '.join(joints)}). "
+        "A closed loop whose joint axes are all parallel is over-constrained in 3D: replace one "
+        "revolute by a planar_pin (or a spherical/cylindrical joint), or drop a hold/distance.")
+
+
+def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
+    """q0 (n_q,) and the assembly multipliers μ by Newton on F (module docstring)."""
+    a = model.assembly
+    eqs = _all_eqs(model)
+    labels = model.eq_owner + a.labels
+    q = guess(model, params).astype(np.result_type(params.pv, float))
+    n_q = q.shape[0]
+    Jg = jacobian_rows(eqs, q, params, a.t0)
+    _rank_check(model, Jg[:model.traits.n_lam], model.eq_owner, "assembly (at the given poses)")
+    if len(eqs) > n_q:
+        raise CaseError(f"assembly: {len(eqs)} equations (joints, normalisations, holds, "
+                        f"distances) for {n_q} coordinates: drop some initial.hold/distances")
+    _rank_check(model, Jg, labels, "assembly (joints with the initial holds/distances)")
+    mu = np.zeros(len(eqs), q.dtype)
+    extra = 0
+    scale = 1.0 + np.linalg.norm(np.real(q))
+    for it in range(a.max_iterations):
+        F = _F(model, q, mu, params)
+        K = _F_matrix(model, q, mu, params)
+        try:
+            dx = np.linalg.solve(K, -F)
+        except np.linalg.LinAlgError:
+            _rank_check(model, jacobian_rows(eqs, q, params, a.t0), labels, "assembly")
+            raise
+        q = q + dx[:n_q]
+        mu = mu + dx[n_q:]
+        if np.linalg.norm(np.real(dx[:n_q])) <= a.tol * scale:
+            extra += 1
+            if extra >= 2:   # two more iterations so complex parts converge too
+                break
+    phi = model.constraint_values(_ctx(q, None, params, a.t0), eqs)[0][:, 0]
+    res = np.abs(np.real(phi))
+    if not np.all(np.isfinite(res)) or extra == 0 or np.max(res, initial=0.0) > 1e-8 * scale:
+        worst = int(np.nanargmax(res)) if res.size else 0
+        raise ModelError(
+            f"assembly failed: ‖Φ‖ = {np.linalg.norm(res):.3e} after {a.max_iterations} Newton "
+            f"iterations; largest residual {res[worst]:.3e} in '{labels[worst]}'. Check the joint "
+            "points/axes and give initial poses closer to an assembled configuration")
+    _rank_check(model, jacobian_rows(model.eqs, q, params, a.t0), model.eq_owner,
+                "assembly (at the assembled pose)")
+    return q, mu
+
+
+def velocities(model: "MultibodyModel", q: Array, params: MBParams) -> Array:
+    """q̇0 (n_q,) by the least-squares projection of the module docstring (complex-safe)."""
+    t0 = model.assembly.t0
+    parts = []
+    for i, bp in enumerate(params.bodies):
+        p = q[7 * i + 3:7 * i + 7].reshape(4, 1)
+        parts += [bp.v0, 0.5 * ET_mul(p, bp.w0.reshape(3, 1))[:, 0]]
+    qdg = np.concatenate(parts) if parts else np.zeros(0)
+    J = jacobian_rows(model.eqs, q, params, t0)
+    Ja = jacobian_rows(model.assembly.equations, q, params, t0)
+    phi_t = model.constraint_values(_ctx(q, None, params, t0))[1][:, 0]
+    A = np.vstack([J, Ja])
+    b = np.concatenate([-phi_t, Ja @ qdg])
+    y = np.linalg.solve(A @ A.T, b - A @ qdg)
+    return qdg + A.T @ y
+
+
+def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
+                  params: MBParams) -> tuple[Array, Array]:
+    """(λ0, p0) with the static cylinders' p1 from equilibrium at q̈ = 0 (complex-safe)."""
+    t0 = model.assembly.t0
+    static = [c for c in model.cylinders if c.initial == "static"]
+    ctx = _ctx(q, qd, params, t0)
+    n_q = q.shape[0]
+    dt = np.result_type(q, qd, p_given, params.pv, float)
+    # everything but the unknown cylinder forces, at q̈ = 0, λ = 0
+    p_tmp = p_given.astype(dt).reshape(-1, 1)
+    for c in static:
+        # the piston-side pressure force p1 A1 of a static cylinder is the unknown
+        p_tmp[c.p_index] = 0.0
+    zero_lam = np.zeros((model.traits.n_lam, 1))
+    R1 = model.residual_batch(t0, q[:, None], qd[:, None], np.zeros((n_q, 1)), zero_lam, p_tmp,
+                              np.zeros_like(p_tmp), params)[:n_q, 0]
+    cols = [jacobian_rows(model.eqs, q, params, t0).T]
+    for c in static:
+        _, _, e = c.kinematics(ctx)
+        Qu = np.zeros((n_q, 1), dt)
+        c.d.apply(ctx, e, Qu)
+        cols.append(-Qu)
+    A = np.hstack(cols)
+    if A.shape[1] == n_q:
+        y = np.linalg.solve(A, -R1)
+    else:
+        cs = 1.0 / np.sqrt(np.sum(np.real(A) ** 2, axis=0))
+        As = A * cs[None, :]
+        y = np.linalg.solve(As.T @ As, -(As.T @ R1)) * cs
+    resid = A @ y + R1
+    if np.linalg.norm(np.real(resid)) > 1e-6 * (1.0 + np.linalg.norm(np.real(R1))):
+        raise CaseError(
+            f"initial pressures 'static': no static equilibrium at the initial pose (residual "
+            f"{np.linalg.norm(np.real(resid)):.3e}); the cylinders with static initial pressures "
+            "must hold all degrees of freedom, or give the pressures explicitly")
+    n_lam = model.traits.n_lam
+    lam0 = y[:n_lam]
+    p0 = p_given.astype(dt).copy()
+    for j, c in enumerate(static):
+        p0[c.p_index] = y[n_lam + j] / c.areas(params)[0]
+    return lam0, p0
+
+
+def pressures_given(model: "MultibodyModel", params: MBParams) -> Array:
+    """p0 as given (static cylinders: p1 = 0 placeholder, p2 given or tank pressure)."""
+    pv = params.pv
+    p = np.zeros(model.traits.n_p, np.result_type(pv, float))
+    for c in model.cylinders:
+        p[c.p_index + 1] = pv[c.initial_p2]
+        if c.initial != "static":
+            p[c.p_index] = pv[c.initial]
+    return p
+
+
+def initial_conditions(model: "MultibodyModel", params: MBParams) -> InitialConditions:
+    """Assembly, velocities, pressures and Newton guesses (λ0, ṗ0)."""
+    q0, mu = assemble(model, params)
+    qd0 = velocities(model, q0, params)
+    p0 = pressures_given(model, params)
+    lam0, p0 = static_forces(model, q0, qd0, p0, params)
+    pd0 = np.zeros_like(p0)
+    if model.cylinders:
+        ctx = _ctx(q0, qd0, params, model.assembly.t0)
+        for c in model.cylinders:
+            h1, h2 = c.rates(ctx, p0.reshape(-1, 1))
+            pd0[c.p_index], pd0[c.p_index + 1] = h1[0, 0], h2[0, 0]
+    return InitialConditions(q0, qd0, p0, lam0, pd0, mu)
+
+
+def initial_gradient(model: "MultibodyModel", params0: MBParams, partials: Any
+                     ) -> tuple[Array, Array, Array]:
+    """∇q0, ∇q̇0, ∇p0 (each (n, m)) by implicit differentiation (module docstring)."""
+    ic = initial_conditions(model, params0)
+    q0, mu, qd0 = ic.q0, ic.mu, ic.qd0
+    n_q = q0.shape[0]
+    K = _F_matrix(model, q0, mu, params0)
+    Fx = partials.of(lambda prm: _F(model, q0, mu, prm))
+    dqmu = np.linalg.solve(K, -Fx)
+    dq = dqmu[:n_q]
+    Vq = _jac(lambda qb: np.stack([velocities(model, qb[:, j], params0)
+                                   for j in range(qb.shape[1])], axis=1), q0, True)
+    dqd = Vq @ dq + partials.of(lambda prm: velocities(model, q0, prm))
+    pg = pressures_given(model, params0)
+
+    def P(qq: Array, qqd: Array, prm: MBParams) -> Array:
+        return static_forces(model, qq, qqd, pressures_given(model, prm), prm)[1]
+
+    if model.traits.n_p == 0:
+        return dq, dqd, np.zeros((0, dq.shape[1]))
+    Pq = _jac(lambda qb: np.stack([P(qb[:, j], qd0, params0) for j in range(qb.shape[1])], axis=1),
+              q0, True)
+    Pqd = _jac(lambda qb: np.stack([P(q0, qb[:, j], params0) for j in range(qb.shape[1])], axis=1),
+               qd0, True)
+    dp = Pq @ dq + Pqd @ dqd + partials.of(lambda prm: P(q0, qd0, prm))
+    del pg
+    return dq, dqd, dp

@@ -1,0 +1,119 @@
+r"""Double-acting hydraulic cylinder between two markers, with two pressure states.
+
+(weir_model.md §3.5.)  Stroke and rate from the pin points A (body_1) and B (body_2):
+
+    s = ‖r_B − r_A‖ − L0,   ṡ = ê·(ṙ_B − ṙ_A),   ê = (r_B − r_A)/‖r_B − r_A‖
+
+Chamber volumes and pressure build-up (first-order states p1 piston side, p2 rod side;
+pressure unit = force/length², e.g. MPa with N and mm):
+
+    V1 = V_h1 + A1 s                 V2 = V_h2 + A2 (s_max − s)
+    ṗ1 = K/V1 (Q_P(t) − A1 ṡ)         ṗ2 = K/V2 (A2 ṡ − G_T (p2 − p_T))
+    Q_P(t) = V̇_S φ(t)  (pump flow, φ a time function, e.g. smoothstep over the valve time)
+
+Actuator force (positive pushes B away from A), applied as an internal pair along ê:
+
+    F_h = p1 A1 − p2 A2 − d_HA ṡ
+
+The residual rows of the cylinder are ``ṗ − h`` (method.md §1, block row 3).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...errors import ModelError
+from ..timefunctions import TimeFunction
+from .bodies import Ctx, Diff
+from .rotations import dot
+
+Array = np.ndarray
+
+# parameter names of a cylinder (keys of ``idx``)
+CYLINDER_PARAMS = ("area_1", "area_2", "length_0", "stroke_max", "bulk_modulus", "dead_volume_1",
+                   "dead_volume_2", "tank_conductance", "tank_pressure", "damping", "pump_flow")
+
+
+@dataclass(eq=False)
+class HydraulicCylinder:
+    """One cylinder; ``p_index`` is the position of p1 in the first-order state (p2 follows).
+
+    ``idx`` maps the names of :data:`CYLINDER_PARAMS` to parameter-vector indices
+    (areas are stored derived in params.scal under ``name + '.A1'`` / ``'.A2'``).
+    """
+
+    name: str
+    d: Diff
+    idx: dict[str, int]
+    pump: TimeFunction
+    p_index: int
+    initial: Any = "static"     # "static" or (i_p1, i_p2) parameter indices
+    initial_p2: int = -1
+
+    def areas(self, prm: Any) -> tuple[Any, Any]:
+        return prm.scal[self.name + ".A1"], prm.scal[self.name + ".A2"]
+
+    def kinematics(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+        """(s, ṡ, ê): stroke (1, k), stroke rate (1, k), unit axis A→B (3, k)."""
+        dv, dd, _ = self.d.kin(ctx)
+        L = np.sqrt(dot(dv, dv))
+        e = dv / L
+        return L - ctx.params.pv[self.idx["length_0"]], dot(e, dd), e
+
+    def volumes(self, s: Array, prm: Any) -> tuple[Array, Array]:
+        """Chamber volumes V1, V2 (length³) for stroke s."""
+        pv = prm.pv
+        A1, A2 = self.areas(prm)
+        return (pv[self.idx["dead_volume_1"]] + A1 * s,
+                pv[self.idx["dead_volume_2"]] + A2 * (pv[self.idx["stroke_max"]] - s))
+
+    def force(self, ctx: Ctx, p: Array) -> Array:
+        """F_h (1, k), force unit, for pressures p (n_p, k)."""
+        s, sd, _ = self.kinematics(ctx)
+        A1, A2 = self.areas(ctx.params)
+        j = self.p_index
+        return p[j:j + 1] * A1 - p[j + 1:j + 2] * A2 - ctx.params.pv[self.idx["damping"]] * sd
+
+    def add(self, ctx: Ctx, p: Array, out: Array) -> None:
+        """Generalized force of the actuator pair into out (n_q, k)."""
+        _, _, e = self.kinematics(ctx)
+        self.d.apply(ctx, self.force(ctx, p) * e, out)
+
+    def pump_flow(self, t: float, prm: Any) -> Any:
+        """Q_P(t) (length³/s)."""
+        return prm.pv[self.idx["pump_flow"]] * self.pump.value(t, prm.pv)
+
+    def rates(self, ctx: Ctx, p: Array) -> tuple[Array, Array]:
+        """h1, h2 (1, k): pressure rates (pressure/s)."""
+        prm = ctx.params
+        pv = prm.pv
+        s, sd, _ = self.kinematics(ctx)
+        V1, V2 = self.volumes(s, prm)
+        A1, A2 = self.areas(prm)
+        K = pv[self.idx["bulk_modulus"]]
+        j = self.p_index
+        h1 = K / V1 * (self.pump_flow(ctx.t, prm) - A1 * sd)
+        h2 = K / V2 * (A2 * sd - pv[self.idx["tank_conductance"]] * (p[j + 1:j + 2] - pv[self.idx["tank_pressure"]]))
+        return h1, h2
+
+    def check(self, ctx: Ctx, t: float) -> None:
+        """Raise ModelError when a chamber volume is not positive."""
+        s, _, _ = self.kinematics(ctx)
+        V1, V2 = self.volumes(s, ctx.params)
+        prm = ctx.params
+        A1, A2 = self.areas(prm)
+        sr = float(np.real(s[0, 0]))
+        if np.real(V1[0, 0]) <= 0.0:
+            lim = -np.real(prm.pv[self.idx["dead_volume_1"]] / A1)
+            raise ModelError(
+                f"hydraulic cylinder '{self.name}': piston-side volume V1 <= 0 at t = {t:.6g} s "
+                f"(stroke s = {sr:.6g}, limit s > {lim:.6g}: the cylinder is pushed beyond its "
+                "retracted end)")
+        if np.real(V2[0, 0]) <= 0.0:
+            lim = np.real(prm.pv[self.idx["stroke_max"]] + prm.pv[self.idx["dead_volume_2"]] / A2)
+            raise ModelError(
+                f"hydraulic cylinder '{self.name}': rod-side volume V2 <= 0 at t = {t:.6g} s "
+                f"(stroke s = {sr:.6g}, limit s < {lim:.6g} = s_max + V_h2/A2): stop the run "
+                "earlier with an event on the stroke")
