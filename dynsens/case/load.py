@@ -32,6 +32,7 @@ from .overrides import apply_overrides
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
             "events", "responses")
+SCHEMES = ("newmark",)
 RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -135,31 +136,35 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
-    design = _design(raw.get("design", {"variables": []}), pc)
+    design, declared = _design(raw.get("design", {"variables": []}), pc)
     names = tuple(v.name for v in design)
-    table = ParameterTable(names)
+    # expressions may name every declared variable, even one whose entry has a problem
+    # (that problem is reported once, not again at every use)
+    table = ParameterTable(declared)
     model = build_model(raw.get("model"), "model", table, pc)
     scheme, plan, event_location = _integrator(raw.get("integrator", {}), raw.get("sensitivity", {}),
                                                raw.get("output", {}), pc)
     outputs: list[Output] = []
     keys: list[str] = []
-    factory = None
-    events: list[EventSpec] = []
-    if model is not None:
-        def output_id(spec: Any, path: str) -> int | None:
-            key = json.dumps(spec, sort_keys=True, default=str)
-            if key in keys:
-                return keys.index(key)
-            out = model.output(spec, path, pc)
-            if out is None:
-                return None
-            outputs.append(out)
-            keys.append(key)
-            return len(outputs) - 1
-        events = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
-        factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, events, names, model, pc)
+
+    def output_id(spec: Any, path: str) -> int | None:
+        if model is None:  # the model's own problems are already listed
+            return None
+        key = json.dumps(spec, sort_keys=True, default=str)
+        if key in keys:
+            return keys.index(key)
+        out = model.output(spec, path, pc)
+        if out is None:
+            return None
+        outputs.append(out)
+        keys.append(key)
+        return len(outputs) - 1
+
+    events, event_names = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
+    factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, event_names,
+                                 declared, model, plan, pc)
     pc.raise_if_any()
-    assert model is not None and factory is not None and scheme is not None and plan is not None
+    assert model is not None and scheme is not None and plan is not None
     ev = events
     return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
                 description=str(raw.get("description", "")), design=design, model=model,
@@ -169,15 +174,17 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
 
 
 def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    """A plain number (or a constant expression such as '1/3') found at ``path``."""
+    if isinstance(value, str):
         try:
-            value = float(compile_expression(str(value), set()).evaluate({})) if isinstance(value, str) else None
-        except ExpressionError as exc:
-            pc.add(path, f"expected a number, found {value!r} ({exc})")
+            value = compile_expression(value, set()).evaluate({})
+        except ExpressionError:
+            pc.add(path, f"expected a number or a constant expression such as '1/3', found {value!r}")
             return None
-        if value is None:
-            pc.add(path, "expected a number, found nothing" if value is None else f"expected a number")
-            return None
+    elif isinstance(value, bool) or not isinstance(value, (int, float)):
+        found = "nothing" if value is None else f"{type(value).__name__} {value!r}"
+        pc.add(path, f"expected a number, found {found}")
+        return None
     v = float(value)
     if not np.isfinite(v) or (positive and v <= 0):
         pc.add(path, f"expected a {'positive ' if positive else ''}finite number, found {value!r}")
@@ -185,10 +192,11 @@ def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = Fal
     return v
 
 
-def _design(spec: Any, pc: ProblemCollector) -> list[DesignVariable]:
+def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tuple[str, ...]]:
     if not check_keys(spec, "design", ("variables",), pc):
-        return []
+        return [], ()
     out = []
+    declared: list[str] = []
     for i, v in enumerate(spec.get("variables", []) or []):
         p = f"design.variables[{i}]"
         if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
@@ -197,8 +205,9 @@ def _design(spec: Any, pc: ProblemCollector) -> list[DesignVariable]:
         if not isinstance(name, str) or not _IDENT.match(name):
             pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {name!r}")
             continue
-        if name in [d.name for d in out]:
+        if name in declared:
             pc.add(f"{p}.name", f"duplicate design variable {name!r}")
+        declared.append(name)
         value = _number(v.get("value"), f"{p}.value", pc)
         lower = _number(v.get("lower", -np.inf), f"{p}.lower", pc) if "lower" in v else -np.inf
         upper = _number(v.get("upper", np.inf), f"{p}.upper", pc) if "upper" in v else np.inf
@@ -213,7 +222,7 @@ def _design(spec: Any, pc: ProblemCollector) -> list[DesignVariable]:
         if scale is None:
             scale = abs(value) if value != 0 else 1.0
         out.append(DesignVariable(name, value, lower, upper, scale))
-    return out
+    return out, tuple(declared)
 
 
 def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
@@ -230,11 +239,16 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
         return None, None, "interpolate"
     beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
     gamma = _number(spec.get("gamma", 0.5), "integrator.gamma", pc)
-    dt = _number(spec.get("dt"), "integrator.dt", pc, positive=True)
+    # a missing dt / t_end is already reported by check_keys
+    dt = _number(spec["dt"], "integrator.dt", pc, positive=True) if "dt" in spec else None
     t0 = _number(spec.get("t0", 0.0), "integrator.t0", pc)
-    t_end = _number(spec.get("t_end"), "integrator.t_end", pc)
+    t_end = _number(spec["t_end"], "integrator.t_end", pc) if "t_end" in spec else None
     scheme = None
-    if beta is not None and gamma is not None:
+    scheme_name = spec.get("scheme", "newmark")
+    if scheme_name not in SCHEMES:
+        pc.add("integrator.scheme", f"unknown scheme {scheme_name!r}{did_you_mean(scheme_name, SCHEMES)} "
+                                    f"(known: {', '.join(SCHEMES)})")
+    elif beta is not None and gamma is not None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("default")
@@ -264,7 +278,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     step = sens.get("step")
     if step is not None:
         step = _number(step, "sensitivity.step", pc, positive=True)
-    matrix = sens.get("matrix", "converged")
+    matrix = sens.get("matrix", "reuse")
     if matrix not in ("converged", "reuse"):
         pc.add("sensitivity.matrix", f"expected converged or reuse, found {matrix!r}")
     hist = output.get("history", ["q", "qd", "qdd"])
@@ -304,16 +318,18 @@ def _component(out: Output, comp: Any, path: str, pc: ProblemCollector) -> int |
 
 
 def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: str,
-            pc: ProblemCollector) -> list[EventSpec]:
+            pc: ProblemCollector) -> tuple[list[EventSpec], list[str]]:
     if not isinstance(spec, list):
         pc.add("events", "expected a list")
-        return []
+        return [], []
     events = []
+    names: list[str] = []
     for i, ev in enumerate(spec):
         p = f"events[{i}]"
         if not check_keys(ev, p, ("name", "quantity", "component", "value", "direction", "action", "location"),
                           pc, required=("name", "quantity", "value")):
             continue
+        names.append(str(ev.get("name")))
         oid = output_id(ev.get("quantity"), f"{p}.quantity")
         level = _number(ev.get("value"), f"{p}.value", pc)
         direction = ev.get("direction", "either")
@@ -329,18 +345,17 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
         comp = _component(outputs[oid], ev.get("component"), f"{p}.component", pc)
         if comp is not None:
             events.append(EventSpec(str(ev["name"]), oid, comp, level, direction, loc))
-    return events
+    return events, names
 
 
-def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: list[EventSpec],
-               design_names: tuple[str, ...], model: Model, pc: ProblemCollector
-               ) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
+def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_names: list[str],
+               design_names: tuple[str, ...], model: Model | None, plan: RunPlan | None,
+               pc: ProblemCollector) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
     if not isinstance(spec, list):
         pc.add("responses", "expected a list")
         spec = []
     makers: list[Callable[[], Response]] = []
     names: list[str] = []
-    event_names = [e.name for e in events]
     common = ("name", "type", "unit")
     for i, r in enumerate(spec):
         p = f"responses[{i}]"
@@ -353,6 +368,8 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: li
             continue
         if name in names or name in design_names:
             pc.add(f"{p}.name", f"{name!r} is already a response or design variable name")
+        # register the name first: a later expression using it must not report it again
+        names.append(name)
         unit = str(r.get("unit", ""))
         if kind == "value":
             check_keys(r, p, common + ("quantity", "component", "at", "time", "event", "derivative"), pc,
@@ -362,6 +379,8 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: li
             if deriv not in ("total", "fixed_time"):
                 pc.add(f"{p}.derivative", f"expected total or fixed_time, found {deriv!r}")
             time = _number(r["time"], f"{p}.time", pc) if "time" in r else None
+            if time is not None and plan is not None and not plan.t0 <= time <= plan.t_end:
+                pc.add(f"{p}.time", f"{time} is outside the simulated interval [{plan.t0}, {plan.t_end}] s")
             event = r.get("event")
             if event is not None and event not in event_names:
                 pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
@@ -404,13 +423,13 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: li
             makers.append(lambda n=name, e=event: EventTime(n, e))
         elif kind == "mass":
             check_keys(r, p, common, pc)
-            if type(model).structural_mass is Model.structural_mass:
+            if model is not None and type(model).structural_mass is Model.structural_mass:
                 pc.add(f"{p}.type", f"model type {type(model).__name__} defines no structural mass")
             makers.append(lambda n=name, u=unit or "mass": StructuralMass(n, u))
         elif kind == "expression":
             check_keys(r, p, common + ("expression",), pc, required=("expression",))
             try:
-                expr = compile_expression(str(r.get("expression")), set(names) | set(design_names))
+                expr = compile_expression(str(r.get("expression")), set(names[:-1]) | set(design_names))
             except ExpressionError as exc:
                 pc.add(f"{p}.expression", f"{exc} (an expression may use earlier responses and design variables)")
                 continue
@@ -418,6 +437,4 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], events: li
         else:
             pc.add(f"{p}.type", f"unknown response type {kind!r}{did_you_mean(kind, RESPONSE_TYPES)} "
                                 f"(known: {', '.join(RESPONSE_TYPES)})")
-            continue
-        names.append(name)
     return (lambda: [mk() for mk in makers]), tuple(names)

@@ -28,7 +28,6 @@ class DynsensGroup(click.Group):
 def cli(verbose: int) -> None:
     """dynsens: transient simulation with exact design gradients, and optimization."""
     logging.basicConfig(level=logging.WARNING - 10 * verbose, format="%(levelname)s: %(message)s")
-    warnings.formatwarning = lambda msg, cat, *a, **k: f"Warning: {msg}\n"  # type: ignore[assignment]
 
 
 def main() -> None:
@@ -38,4 +37,6 @@ def main() -> None:
         from . import optimize  # noqa: F401
     except ImportError:  # pragma: no cover
         pass
+    # plain one-line warnings for users of the console script (not for library callers)
+    warnings.formatwarning = lambda msg, cat, *a, **k: f"Warning: {msg}\n"  # type: ignore[assignment]
     cli()

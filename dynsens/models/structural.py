@@ -331,6 +331,7 @@ _MODEL_KEYS = ("type", "dofs", "dim", "nodes", "elements", "loads", "initial", "
 def build_structural(spec: dict, path: str, table: ParameterTable,
                      problems: ProblemCollector) -> StructuralModel | None:
     """Build a :class:`StructuralModel` from the case's ``model`` mapping."""
+    n_before = len(problems.problems)
     check_keys(spec, path, _MODEL_KEYS, problems)
     dim = spec.get("dim", 2)
     if dim not in (2, 3):
@@ -493,9 +494,16 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     for i, d in enumerate(dof_names):
         if i not in massed:
             problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
-    if problems.problems:
-        return None
-    return StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
-                           dampers=dampers, bars=bars, dim=dim, node_coords=node_coords, bar_nodes=bar_nodes,
-                           loads=loads, initial=init_lists, rayleigh=rayleigh,
-                           sparse=None if la == "auto" else la == "sparse", spring_nonlinear=spring_nonlinear)
+    try:
+        model = StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
+                                dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
+                                bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
+                                sparse=None if la == "auto" else la == "sparse",
+                                spring_nonlinear=spring_nonlinear)
+    except (ValueError, IndexError, TypeError):
+        if len(problems.problems) > n_before:
+            return None  # the problems already listed explain why it cannot be assembled
+        raise
+    # with problems listed, the model is still returned so that the responses can be checked
+    # against its DOFs and elements; the loader raises before anything runs
+    return model

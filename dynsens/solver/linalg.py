@@ -75,8 +75,14 @@ class Factor:
             self._kind = "dense"
             if not np.all(np.isfinite(S)):
                 raise SingularMatrixError("matrix has non-finite entries")
-            lu, piv = sla.lu_factor(S, check_finite=False)
+            # LAPACK getrf/getrs directly: scipy's lu_factor/lu_solve wrappers cost more
+            # than the factorization itself for the small matrices of mechanisms
+            getrf, self._getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (S,))
+            lu, piv, info = getrf(S)
+            if info > 0:
+                raise SingularMatrixError(f"exactly zero pivot in column {info}")
             self._lu = (lu, piv)
+            self._complex = np.iscomplexobj(lu)
             udiag = np.diagonal(lu)
         scale = np.max(np.abs(udiag)) if udiag.size else 1.0
         if udiag.size and (np.min(np.abs(udiag)) <= 1e-14 * scale or scale == 0.0):
@@ -94,7 +100,11 @@ class Factor:
                 return self._lu.solve(np.ascontiguousarray(rhs.real)) + \
                     1j * self._lu.solve(np.ascontiguousarray(rhs.imag))
             return self._lu.solve(np.asarray(rhs))
-        return sla.lu_solve(self._lu, rhs, check_finite=False)
+        lu, piv = self._lu
+        if np.iscomplexobj(rhs) and not self._complex:
+            return self._getrs(lu, piv, rhs.real)[0] + 1j * self._getrs(lu, piv, rhs.imag)[0]
+        x, info = self._getrs(lu, piv, rhs)
+        return x
 
 
 def _diagonal_or_none(S: Any) -> np.ndarray | None:

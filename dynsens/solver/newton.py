@@ -45,7 +45,14 @@ class StepOutcome:
 
 
 def _real_norm(v: np.ndarray) -> float:
-    return float(np.linalg.norm(v.real)) if v.size else 0.0
+    """2-norm of the real part, scaled so that huge entries do not overflow the sum of squares."""
+    if not v.size:
+        return 0.0
+    r = v.real
+    big = float(np.max(np.abs(r)))
+    if big == 0.0 or not np.isfinite(big):
+        return big
+    return big * float(np.linalg.norm(r / big))
 
 
 class StepSolver:
@@ -109,9 +116,12 @@ class StepSolver:
             rnorm = _real_norm(R)
             history.append(rnorm)
             if not np.isfinite(rnorm):
+                k = int(np.flatnonzero(~np.isfinite(R))[0])
+                labels = self.model.dof_labels()
+                where = labels[k] if k < len(labels) else f"equation {k}"
                 raise NonFiniteError(
-                    f"the residual became NaN/Inf at t = {t:.6g} s (step {step}), Newton iteration "
-                    f"{it}: check the initial conditions, the parameters and the time step")
+                    f"NaN/Inf first appeared in the residual of {where} at t = {t:.6g} s (step {step}), "
+                    f"Newton iteration {it}: check the initial conditions, the parameters and the time step")
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:

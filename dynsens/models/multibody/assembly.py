@@ -203,6 +203,8 @@ def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
     """(λ0, p0) with the static cylinders' p1 from equilibrium at q̈ = 0 (complex-safe)."""
     t0 = model.assembly.t0
     static = [c for c in model.cylinders if c.initial == "static"]
+    if not static:
+        return np.zeros(model.traits.n_lam), p_given
     ctx = _ctx(q, qd, params, t0)
     n_q = q.shape[0]
     dt = np.result_type(q, qd, p_given, params.pv, float)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .rotations import E_mul, G_mul, GT_mul, gvec, qbil, rotate
+from .rotations import E_mul, T_G, point_tensor
 
 GROUND = -1
 Array = np.ndarray
@@ -95,11 +95,39 @@ class Ctx:
     def __init__(self, q: Array, qd: Array, qdd: Array, params: MBParams, t: float):
         self.q, self.qd, self.qdd, self.params, self.t = q, qd, qdd, params, t
         self.cache: dict[int, tuple[Array, Array, Array]] = {}
+        self.forces: dict[int, tuple["Term", Array]] = {}
+        self.pending: list[tuple[Any, Array]] = []
+        self._ts: dict[str, Array] = {}
         self.k = q.shape[1]
         dt = np.result_type(q, qd, qdd, float)
         self._zero3 = np.zeros((3, 1), dt)
         self._p_ground = np.array([[1.0], [0.0], [0.0], [0.0]], dt)
         self._zero4 = np.zeros((4, 1), dt)
+
+    def ts(self, key: str) -> Array:
+        """point_tensor of params.vec[key], cached per call."""
+        t = self._ts.get(key)
+        if t is None:
+            t = point_tensor(self.params.vec[key])
+            self._ts[key] = t
+        return t
+
+    def push(self, term: "Term", f: Array) -> None:
+        """Accumulate a force f (3, k) on ``term``; :meth:`flush` applies all of them."""
+        if not term.bodies or all(b == GROUND for b in term.bodies):
+            return
+        key = id(term)
+        hit = self.forces.get(key)
+        self.forces[key] = (term, f if hit is None else hit[1] + f)
+
+    def flush(self, out: Array) -> None:
+        """out += Σ (∂term/∂q)ᵀ f over the accumulated forces."""
+        for term, f in self.forces.values():
+            term.apply(self, f, out)
+        self.forces.clear()
+        for eq, lam in self.pending:
+            eq.apply(self, lam, out)
+        self.pending.clear()
 
     def body(self, i: int) -> tuple[Array, Array, Array, Array, Array, Array]:
         """(r, ṙ, r̈, p, ṗ, p̈) of body i; constants for the ground."""
@@ -115,12 +143,14 @@ class Ctx:
 class Term:
     """A vector quantity of the state; see the module docstring."""
 
-    def kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        """(value, velocity, acceleration), each (3, k), cached per call."""
+    def kin(self, ctx: Ctx) -> Array:
+        """(value, velocity, acceleration) stacked (3, 3, k), cached per call."""
         key = id(self)
         hit = ctx.cache.get(key)
         if hit is None:
             hit = self._kin(ctx)
+            if not isinstance(hit, np.ndarray):
+                hit = np.stack(np.broadcast_arrays(*hit))
             ctx.cache[key] = hit
         return hit
 
@@ -144,21 +174,20 @@ class Point(Term):
     key: str
 
     def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        s = ctx.params.vec[self.key]
-        r, rd, rdd, p, pd, pdd = ctx.body(self.body)
         if self.body == GROUND:
+            s = ctx.params.vec[self.key]
             z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
             return s + z, z, z
-        return (r + rotate(p, s), rd + 2.0 * qbil(p, pd, s),
-                rdd + 2.0 * qbil(p, pdd, s) + 2.0 * qbil(pd, pd, s))
+        r, rd, rdd, p, pd, pdd = ctx.body(self.body)
+        v, vd, vdd = _quad_kin(ctx.ts(self.key), p, pd, pdd)
+        return r + v, rd + vd, rdd + vdd
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
-        p = ctx.q[a + 3:a + 7]
         out[a:a + 3] += f
-        out[a + 3:a + 7] += 2.0 * gvec(p, ctx.params.vec[self.key], f)
+        out[a + 3:a + 7] += 2.0 * np.einsum("akl,ln,an->kn", ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
 
     @property
     def bodies(self) -> tuple[int, ...]:
@@ -173,18 +202,18 @@ class Direction(Term):
     key: str
 
     def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        s = ctx.params.vec[self.key]
         if self.body == GROUND:
+            s = ctx.params.vec[self.key]
             z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
             return s + z, z, z
         _, _, _, p, pd, pdd = ctx.body(self.body)
-        return rotate(p, s), 2.0 * qbil(p, pd, s), 2.0 * qbil(p, pdd, s) + 2.0 * qbil(pd, pd, s)
+        return _quad_kin(ctx.ts(self.key), p, pd, pdd)
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
-        out[a + 3:a + 7] += 2.0 * gvec(ctx.q[a + 3:a + 7], ctx.params.vec[self.key], f)
+        out[a + 3:a + 7] += 2.0 * np.einsum("akl,ln,an->kn", ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
 
     @property
     def bodies(self) -> tuple[int, ...]:
@@ -214,8 +243,7 @@ class Diff(Term):
     b: Term
 
     def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        ka, kb = self.a.kin(ctx), self.b.kin(ctx)
-        return ka[0] - kb[0], ka[1] - kb[1], ka[2] - kb[2]
+        return self.a.kin(ctx) - self.b.kin(ctx)
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         self.a.apply(ctx, f, out)
@@ -226,6 +254,14 @@ class Diff(Term):
         return tuple(dict.fromkeys(self.a.bodies + self.b.bodies))
 
 
+def _quad_kin(Ts: Array, p: Array, pd: Array, pdd: Array) -> tuple[Array, Array, Array]:
+    """A(p)s, its velocity 2Q(p,ṗ)s and acceleration 2Q(p,p̈)s + 2Q(ṗ,ṗ)s (Ts = point_tensor(s))."""
+    P = np.stack([p, pd])                       # (2, 4, k)
+    v = np.einsum("akl,ikn,ln->ian", Ts, P, p)   # [Q(p,p)s, Q(ṗ,p)s]
+    acc = 2.0 * np.einsum("akl,ikn,iln->an", Ts, P, np.stack([pdd, pd]))
+    return v[0], 2.0 * v[1], acc
+
+
 def inertial_forces(ctx: Ctx, n_bodies: int, out: Array) -> None:
     """out (n_q, k) += M(q) q̈ − Q_v(q, q̇) for all bodies (Euler-parameter form)."""
     for i, bp in enumerate(ctx.params.bodies):
@@ -233,7 +269,11 @@ def inertial_forces(ctx: Ctx, n_bodies: int, out: Array) -> None:
         a = 7 * i
         J = bp.inertia
         out[a:a + 3] += bp.mass * rdd
-        out[a + 3:a + 7] += 4.0 * GT_mul(p, J @ G_mul(p, pdd)) - 8.0 * GT_mul(pd, J @ G_mul(pd, p))
+        # w = [G(p) p̈, G(ṗ) p]
+        w = np.einsum("ikl,jkn,jln->jin", T_G, np.stack([p, pd]), np.stack([pdd, p]))
+        Jw = np.einsum("ab,jbn->jan", J, w)
+        out[a + 3:a + 7] += np.einsum("ikl,jkn,jin->jln", T_G, np.stack([p, pd]),
+                                      np.stack([4.0 * Jw[0], -8.0 * Jw[1]])).sum(0)
 
 
 def angular_velocity(p: Array, pd: Array) -> Array:

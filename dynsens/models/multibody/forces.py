@@ -28,7 +28,7 @@ Array = np.ndarray
 class ForceElement:
     """Base class: ``add(ctx, out)`` adds Q_ext; ``name`` for outputs."""
 
-    name: str = ""
+    name: str
 
     def add(self, ctx: Ctx, out: Array) -> None:
         raise NotImplementedError

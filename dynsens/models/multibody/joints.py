@@ -101,6 +101,11 @@ class Equation:
         raise NotImplementedError
 
     def apply(self, ctx: Ctx, lam: Array, out: Array) -> None:
+        """out (n_q, k) += (∂φ/∂q)ᵀ λ."""
+        raise NotImplementedError
+
+    def push(self, ctx: Ctx, lam: Array) -> None:
+        """Like apply, but accumulated in ctx until ctx.flush(out) (shared terms applied once)."""
         raise NotImplementedError
 
 
@@ -116,11 +121,10 @@ class DotEq(Equation):
         phi = phid = phidd = 0.0
         for coef, a, b in self.terms:
             c, cd, cdd = coef(t, prm)
-            av, ad, aa = a.kin(ctx)
-            bv, bd, ba = b.kin(ctx)
-            x = np.sum(av * bv, axis=0, keepdims=True)
-            xd = np.sum(ad * bv + av * bd, axis=0, keepdims=True)
-            xdd = np.sum(aa * bv + 2.0 * ad * bd + av * ba, axis=0, keepdims=True)
+            D = np.einsum("jin,lin->jln", a.kin(ctx), b.kin(ctx))   # all 9 dot products
+            x = D[0, 0:1]
+            xd = D[1, 0:1] + D[0, 1:2]
+            xdd = D[2, 0:1] + 2.0 * D[1, 1:2] + D[0, 2:3]
             phi = phi + c * x
             phid = phid + cd * x + c * xd
             phidd = phidd + cdd * x + 2.0 * cd * xd + c * xdd
@@ -130,12 +134,17 @@ class DotEq(Equation):
         return phi, phid, phidd
 
     def apply(self, ctx: Ctx, lam: Array, out: Array) -> None:
+        self.push(ctx, lam)
+        ctx.flush(out)
+
+    def push(self, ctx: Ctx, lam: Array) -> None:
+        """Accumulate this equation's J_Φᵀ λ as forces on its terms (applied by ctx.flush)."""
         for coef, a, b in self.terms:
             c = coef(ctx.t, ctx.params)[0]
-            av = a.kin(ctx)[0]
-            bv = b.kin(ctx)[0]
-            a.apply(ctx, c * lam * bv, out)
-            b.apply(ctx, c * lam * av, out)
+            if a.bodies:
+                ctx.push(a, c * lam * b.kin(ctx)[0])
+            if b.bodies:
+                ctx.push(b, c * lam * a.kin(ctx)[0])
 
 
 @dataclass(eq=False)
@@ -153,6 +162,10 @@ class NormEq(Equation):
     def apply(self, ctx: Ctx, lam: Array, out: Array) -> None:
         a = 7 * self.body + 3
         out[a:a + 4] += 2.0 * lam * ctx.q[a:a + 4]
+
+    def push(self, ctx: Ctx, lam: Array) -> None:
+        """Applied directly (no shared terms)."""
+        ctx.pending.append((self, lam))
 
 
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "driving")

@@ -147,7 +147,8 @@ class MultibodyModel(Model):
         R1 = np.zeros((self.traits.n_q, k), dt)
         inertial_forces(ctx, len(self.bodies), R1)
         for i, eq in enumerate(self.eqs):
-            eq.apply(ctx, lam[i:i + 1], R1)
+            eq.push(ctx, lam[i:i + 1])
+        ctx.flush(R1)
         R1 = R1 - self.generalized_forces(ctx, p)
         phi, phid, phidd = self.constraint_values(ctx)
         R2 = self.scale * (phidd + 2.0 * self.alpha * phid + self.beta ** 2 * phi)

@@ -131,3 +131,28 @@ def perpendicular_pair(w: Array) -> tuple[Array, Array]:
     u = u / np.sqrt(np.sum(u * u))
     v = cross(w.reshape(3, 1), u.reshape(3, 1))[:, 0]
     return u, v
+
+
+def _tensors() -> tuple[Array, Array, Array]:
+    """Constant tensors of the bilinear forms: Q(a,b)_ab = T[a,b,k,l] a_k b_l,
+    G(a) b = Gt[i,k,l] a_k b_l, E(a) b = Et[i,k,l] a_k b_l."""
+    E4, I3 = np.eye(4), np.eye(3)
+    T = np.zeros((3, 3, 4, 4))
+    Gt = np.zeros((3, 4, 4))
+    Et = np.zeros((3, 4, 4))
+    for k in range(4):
+        for l in range(4):
+            a, b = E4[:, k:k + 1], E4[:, l:l + 1]
+            Gt[:, k, l] = G_mul(a, b)[:, 0]
+            Et[:, k, l] = E_mul(a, b)[:, 0]
+            for j in range(3):
+                T[:, j, k, l] = qbil(a, b, I3[:, j:j + 1])[:, 0]
+    return T, Gt, Et
+
+
+T_Q, T_G, T_E = _tensors()
+
+
+def point_tensor(s: Array) -> Array:
+    """Ts (3, 4, 4) with Q(a, b) s = Ts[:, k, l] a_k b_l for a constant vector s (3,) or (3, 1)."""
+    return np.einsum("abkl,b->akl", T_Q, np.asarray(s).reshape(3))
