@@ -3,6 +3,14 @@
 Governing equation -> Newmark-beta time integration -> Newton-Raphson, run once for the
 state and once more, with matrix right-hand sides, for the design sensitivities.
 """
+import os as _os
+
+# The per-step matrices are small (mechanisms, chains) or sparse: a threaded BLAS only adds
+# overhead and, on a busy machine, contention.  Parallelism in dynsens is across simulations
+# (finite-difference columns, optimization starts).  Set the variables yourself to override.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    _os.environ.setdefault(_var, "1")
+
 __version__ = "0.1.0"
 
 from .case.load import Case, load_case, load_case_dict  # noqa: E402

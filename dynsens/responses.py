@@ -307,7 +307,7 @@ class ResponseSet:
         self.end_dt_dx: np.ndarray | None = None
 
     def evaluate(self, t: float, s: StepState, ds: StepState | None, params: Any,
-                 total: Callable[[Callable[[StepState, Any], np.ndarray], StepState, StepState], np.ndarray] | None
+                 total: Callable[..., np.ndarray] | None
                  ) -> dict[int, Sample]:
         """Outputs at one step, with total gradients when ``ds`` is given."""
         out = {}
@@ -317,7 +317,7 @@ class ResponseSet:
             if ds is not None and o.linear:
                 g = np.asarray(o.fn(t, ds, params))
             elif ds is not None and total is not None:
-                g = total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds)
+                g = total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds, o.batched)
             out[oid] = Sample(t, v, g, g, None)
         return out
 

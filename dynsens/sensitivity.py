@@ -62,6 +62,52 @@ class DesignPartials:
         else:
             self._plus = [model.parameters(self.x + 1j * self.h[j] * eye[j]) for j in range(self.m)]
 
+        # The parameter sets one partials call evaluates, in a fixed list (models may cache
+        # stacked parameters on its identity), with the state offset of each entry: entry b is
+        # evaluated at s + coef[b]·∇s[:, col[b]] (coef = 0 for the unperturbed entry).
+        m, h = self.m, self.h
+        if method == "forward":
+            self._batch = [self.params0] + self._plus
+            self._col = np.concatenate([[0], np.arange(m)])
+            self._coef: np.ndarray = np.concatenate([[0.0], h])
+        elif method == "central":
+            self._batch = self._plus + self._minus
+            self._col = np.concatenate([np.arange(m), np.arange(m)])
+            self._coef = np.concatenate([h, -h])
+        else:
+            self._batch = self._plus
+            self._col = np.arange(m)
+            self._coef = 1j * h
+        self._stacked = model.stack_parameters(self._batch)
+
+    def _combine(self, F: np.ndarray) -> np.ndarray:
+        """Difference quotients (k, m) from the values (k, B) of the batch entries."""
+        m = self.m
+        if self.method == "forward":
+            return (F[:, 1:] - F[:, :1]) / self.h
+        if self.method == "central":
+            return (F[:, :m] - F[:, m:]) / (2.0 * self.h)
+        return np.imag(F) / self.h
+
+    def residual_partials(self, t: float, s: StepState) -> np.ndarray:
+        """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation."""
+        return self._combine(self.model.residual_batch(t, s, self._batch))
+
+    def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,
+              batched: bool = False) -> np.ndarray:
+        """Total derivative d fn(s(x), x)/dx (k, m): directional derivatives along (∇s e_j, e_j).
+
+        With ``batched`` (fn accepts a leading batch axis on the state leaves and stacked
+        parameters) all directions are evaluated in one call.
+        """
+        if batched and self._stacked is not None:
+            states = StepState(*(v[None, :] + (dv[:, self._col] * self._coef).T if v.size
+                                 else np.zeros((len(self._batch), 0)) for v, dv in zip(s, ds)))
+            return self._combine(np.asarray(fn(states, self._stacked)).T)
+        cols = [np.asarray(fn(StepState(*(v + c * dv[:, j] for v, dv in zip(s, ds))), prm))
+                for prm, j, c in zip(self._batch, self._col, self._coef)]
+        return self._combine(np.stack(cols, axis=-1))
+
     @property
     def evaluations_per_call(self) -> int:
         """Function evaluations one partial-derivative call costs."""
@@ -82,25 +128,6 @@ class DesignPartials:
                 cols.append(np.imag(fn(self._plus[j])) / self.h[j])
         return np.stack(cols, axis=-1) if cols else np.zeros((np.size(base) if base is not None else 0, 0))
 
-    def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState,
-              ds: StepState) -> np.ndarray:
-        """Total derivative d fn(s(x), x)/dx (k, m): directional derivatives along (∇s e_j, e_j)."""
-        cols = []
-        if self.method == "complex":
-            for j in range(self.m):
-                sj = StepState(*(v + 1j * self.h[j] * dv[:, j] for v, dv in zip(s, ds)))
-                cols.append(np.imag(fn(sj, self._plus[j])) / self.h[j])
-        elif self.method == "forward":
-            f0 = fn(s, self.params0)
-            for j in range(self.m):
-                sj = StepState(*(v + self.h[j] * dv[:, j] for v, dv in zip(s, ds)))
-                cols.append((fn(sj, self._plus[j]) - f0) / self.h[j])
-        else:
-            for j in range(self.m):
-                sp_ = StepState(*(v + self.h[j] * dv[:, j] for v, dv in zip(s, ds)))
-                sm_ = StepState(*(v - self.h[j] * dv[:, j] for v, dv in zip(s, ds)))
-                cols.append((fn(sp_, self._plus[j]) - fn(sm_, self._minus[j])) / (2.0 * self.h[j]))
-        return np.stack(cols, axis=-1)
 
 
 def initial_state_gradient(model: Model, partials: DesignPartials
@@ -126,6 +153,6 @@ def initial_state_gradient(model: Model, partials: DesignPartials
 def pseudo_load(model: Model, t: float, s: StepState, lin: Any, dq_pred: np.ndarray,
                 dqd_pred: np.ndarray, dp_pred: np.ndarray, partials: DesignPartials) -> np.ndarray:
     """P (n_z, m) of method.md §4 at the converged state s of time t (s)."""
-    P = partials.of(lambda prm: model.residual(t, s, prm))
+    P = partials.residual_partials(t, s)
     state_part = lin.state_product(dq_pred, dqd_pred, dp_pred) if lin is not None else None
     return P if state_part is None else P + state_part

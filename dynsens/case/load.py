@@ -28,10 +28,11 @@ from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Respons
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
+from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
-            "events", "responses")
+            "events", "responses", "optimization")
 SCHEMES = ("newmark",)
 RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -64,6 +65,7 @@ class Case:
     _make_responses: Callable[[], ResponseSet]
     response_names: tuple[str, ...]
     event_names: tuple[str, ...]
+    optimization: OptimizationSpec | None = None
 
     @property
     def design_names(self) -> tuple[str, ...]:
@@ -163,6 +165,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     events, event_names = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
     factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, event_names,
                                  declared, model, plan, pc)
+    optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
@@ -170,7 +173,8 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
                 _make_responses=lambda: ResponseSet(outputs, factory(), ev),
-                response_names=rnames, event_names=tuple(e.name for e in events))
+                response_names=rnames, event_names=tuple(e.name for e in events),
+                optimization=optimization)
 
 
 def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:

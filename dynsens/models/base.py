@@ -146,13 +146,16 @@ class Output:
     ``fn(t, state, params)`` returns a complex-safe (k,) array; ``labels`` names its
     k components; ``unit`` is the unit shown in reports.  ``linear`` declares that fn is
     linear in the state and independent of the design, so its gradient is fn applied to
-    the sensitivity state (no numerical differentiation needed).
+    the sensitivity state (no numerical differentiation needed).  ``batched`` declares that fn
+    accepts state leaves with a leading batch axis together with the model's stacked
+    parameters (``Model.stack_parameters``), so all gradient directions take one call.
     """
 
     fn: OutputFn
     labels: tuple[str, ...]
     unit: str = ""
     linear: bool = False
+    batched: bool = False
 
 
 class ParameterTable:
@@ -251,6 +254,20 @@ class Model(ABC):
     @abstractmethod
     def residual(self, t: float, s: StepState, params: Any) -> Array:
         """F_R (n_z,) at time t (s) and state s."""
+
+    def stack_parameters(self, params_list: list[Any]) -> Any | None:
+        """Parameter sets stacked along a leading batch axis for vectorized evaluation, or None
+        when the model does not evaluate batches (then it is called once per set)."""
+        return None
+
+    def residual_batch(self, t: float, s: StepState, params_list: list[Any]) -> Array:
+        """F_R at one state for several parameter sets, (n_z, B).
+
+        Used for the numerical design partials (one column per perturbed design).  Models may
+        override it with a vectorized evaluation; ``params_list`` is the same list object for
+        a whole run, so stacked parameters can be cached on its identity.
+        """
+        return np.stack([self.residual(t, s, p) for p in params_list], axis=1)
 
     @abstractmethod
     def linearize(self, t: float, s: StepState, params: Any) -> Linearization:

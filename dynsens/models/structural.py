@@ -88,6 +88,25 @@ class StructuralModel(Model):
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
                              has_damping=has_damping, sparse=use_sparse)
+        # element forces -> nodal forces as one matrix product (works with a leading batch axis)
+        self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
+        self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
+        self._stacked: tuple[int, dict[str, Any]] | None = None
+
+    def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
+        """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
+
+        With ``per_element`` one value per element acts on its k DOFs with ``signs`` (springs);
+        otherwise every element supplies k values, one per DOF (bars).  Fixed DOFs are dropped.
+        """
+        n_e, k = dofs.shape
+        rows = dofs.ravel()
+        cols = np.repeat(np.arange(n_e), k) if per_element else np.arange(n_e * k)
+        vals = np.tile(signs, n_e)
+        keep = rows < self.n
+        G = sp.csr_matrix((vals[keep], (rows[keep], cols[keep])),
+                          shape=(self.n, n_e if per_element else n_e * k))
+        return G.T.tocsr() if self.traits.sparse else G.toarray().T
 
     # ------------------------------------------------------------------ parameters
     def parameters(self, x: np.ndarray) -> dict[str, Any]:
@@ -125,31 +144,33 @@ class StructuralModel(Model):
 
     # ------------------------------------------------------------------ element kernels
     def _ext(self, v: np.ndarray) -> np.ndarray:
-        return np.concatenate([v, np.zeros(1, dtype=v.dtype)])
+        """v with a trailing zero entry: the slot of fixed DOFs and ground."""
+        return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
 
     def _spring_state(self, q: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Spring forces f (n_s,) and tangents df/dδ (n_s,)."""
+        """Spring forces f (..., n_s) and tangents df/dδ; pv may carry a leading batch axis."""
         qe = self._ext(q)
-        delta = qe[self.spring_dofs[:, 0]] - qe[self.spring_dofs[:, 1]]
-        k1 = pv[self.k1]
+        delta = qe[..., self.spring_dofs[:, 0]] - qe[..., self.spring_dofs[:, 1]]
+        k1 = pv[..., self.k1]
         f = k1 * delta
         kt = k1 + 0 * delta
         if self.traits.linear:
             return f, kt
-        k2, k3 = pv[self.k2], pv[self.k3]
+        k2, k3 = pv[..., self.k2], pv[..., self.k3]
         f = f + k2 * delta ** 2 + k3 * delta ** 3
         kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
         return f, kt
 
     def _bar_state(self, q: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
+        """Bar vectors d (..., n_e, dim), Green–Lagrange strains and axial forces (..., n_e)."""
         qe = self._ext(q)
-        U = qe[self.bar_dofs].reshape(-1, 2, self.dim)
-        du = U[:, 1] - U[:, 0]
+        U = qe[..., self.bar_dofs].reshape(qe.shape[:-1] + (-1, 2, self.dim))
+        du = U[..., 1, :] - U[..., 0, :]
         D0 = params["D0"]
         d = D0 + du
         L0 = params["L0"]
         # (ℓ² − L²) written as 2 D0·Δu + Δu·Δu: no cancellation for small displacements
-        strain = (2.0 * np.sum(D0 * du, axis=1) + np.sum(du * du, axis=1)) / (2 * L0 * L0)
+        strain = (2.0 * np.sum(D0 * du, axis=-1) + np.sum(du * du, axis=-1)) / (2 * L0 * L0)
         N = params["EA"] * strain
         return {"d": d, "strain": strain, "N": N}
 
@@ -223,18 +244,38 @@ class StructuralModel(Model):
         return R
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
-        """f_int(q) (n,) in force units."""
+        """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
         pv = params["pv"]
-        f = np.zeros(self.n + 1, dtype=np.result_type(q, pv))
+        f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
             fs, _ = self._spring_state(q, pv)
-            np.add.at(f, self.spring_dofs[:, 0], fs)
-            np.add.at(f, self.spring_dofs[:, 1], -fs)
+            f = f + fs @ self._spring_scatter
         if len(self.bar_names):
             bs = self._bar_state(q, params)
-            fe = (bs["N"] / params["L0"])[:, None] * bs["d"]
-            np.add.at(f, self.bar_dofs, np.concatenate([-fe, fe], axis=1))
-        return f[:self.n]
+            fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
+            flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
+            f = f + flat @ self._bar_scatter
+        return f
+
+    def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
+        """Dense parameter arrays stacked along a leading batch axis (None for sparse models)."""
+        if self.traits.sparse:
+            return None
+        keys = [k for k in ("pv", "mass", "D", "D0", "L0", "EA", "E") if k in params_list[0]]
+        return {k: np.stack([p[k] for p in params_list]) for k in keys}
+
+    def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
+        """F_R for several parameter sets at one state, vectorized: (n, B)."""
+        if self.traits.sparse:
+            return super().residual_batch(t, s, params_list)
+        if self._stacked is None or self._stacked[0] != id(params_list):
+            self._stacked = (id(params_list), self.stack_parameters(params_list))
+        st = self._stacked[1]
+        R = st["mass"] * s.qdd + self._internal_force(s.q, st)
+        R = R - np.stack([self.external_force(t, p) for p in params_list])
+        if self.traits.has_damping:
+            R = R + st["D"] @ s.qd
+        return R.T
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
@@ -308,19 +349,20 @@ class StructuralModel(Model):
             return None
         if springs:
             si = np.array(springs)
-            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm["pv"])[0][_i],
-                          tuple(f"{n}.force" for n in names), "")
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm["pv"])[0][..., _i],
+                          tuple(f"{n}.force" for n in names), "", batched=True)
         bi = np.array(bars)
 
         def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
             bs = self._bar_state(s.q, prm)
             if _k == "strain":
-                return bs["strain"][_i]
+                return bs["strain"][..., _i]
             if _k == "force":
-                return bs["N"][_i]
-            return (prm["E"] * bs["strain"])[_i]
+                return bs["N"][..., _i]
+            return (prm["E"] * bs["strain"])[..., _i]
 
-        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "")
+        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "",
+                      batched=True)
 
 
 # ---------------------------------------------------------------------- builder

@@ -214,7 +214,7 @@ def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
         # the piston-side pressure force p1 A1 of a static cylinder is the unknown
         p_tmp[c.p_index] = 0.0
     zero_lam = np.zeros((model.traits.n_lam, 1))
-    R1 = model.residual_batch(t0, q[:, None], qd[:, None], np.zeros((n_q, 1)), zero_lam, p_tmp,
+    R1 = model.residual_columns(t0, q[:, None], qd[:, None], np.zeros((n_q, 1)), zero_lam, p_tmp,
                               np.zeros_like(p_tmp), params)[:n_q, 0]
     cols = [jacobian_rows(model.eqs, q, params, t0).T]
     for c in static:

@@ -87,6 +87,7 @@ class MBParams:
     vec: dict[str, Array]
     scal: dict[str, Any]
     x: Array
+    ts: dict[str, Array] = field(default_factory=dict)
 
 
 class Ctx:
@@ -97,7 +98,7 @@ class Ctx:
         self.cache: dict[int, tuple[Array, Array, Array]] = {}
         self.forces: dict[int, tuple["Term", Array]] = {}
         self.pending: list[tuple[Any, Array]] = []
-        self._ts: dict[str, Array] = {}
+        self._ps: dict[int, Array] = {}
         self.k = q.shape[1]
         dt = np.result_type(q, qd, qdd, float)
         self._zero3 = np.zeros((3, 1), dt)
@@ -105,12 +106,27 @@ class Ctx:
         self._zero4 = np.zeros((4, 1), dt)
 
     def ts(self, key: str) -> Array:
-        """point_tensor of params.vec[key], cached per call."""
-        t = self._ts.get(key)
+        """point_tensor of params.vec[key], cached with the parameters."""
+        cache = self.params.ts
+        t = cache.get(key)
         if t is None:
             t = point_tensor(self.params.vec[key])
-            self._ts[key] = t
+            cache[key] = t
         return t
+
+    def pstack(self, i: int) -> Array:
+        """[p, ṗ, p̈] (3, 4, k) of moving body i, cached per call."""
+        L = self._ps.get(i)
+        if L is None:
+            a = 7 * i + 3
+            L = np.stack([self.q[a:a + 4], self.qd[a:a + 4], self.qdd[a:a + 4]])
+            self._ps[i] = L
+        return L
+
+    def rstack(self, i: int) -> Array:
+        """[r, ṙ, r̈] (3, 3, k) of moving body i."""
+        a = 7 * i
+        return np.stack([self.q[a:a + 3], self.qd[a:a + 3], self.qdd[a:a + 3]])
 
     def push(self, term: "Term", f: Array) -> None:
         """Accumulate a force f (3, k) on ``term``; :meth:`flush` applies all of them."""
@@ -178,16 +194,14 @@ class Point(Term):
             s = ctx.params.vec[self.key]
             z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
             return s + z, z, z
-        r, rd, rdd, p, pd, pdd = ctx.body(self.body)
-        v, vd, vdd = _quad_kin(ctx.ts(self.key), p, pd, pdd)
-        return r + v, rd + vd, rdd + vdd
+        return ctx.rstack(self.body) + _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
         out[a:a + 3] += f
-        out[a + 3:a + 7] += 2.0 * np.einsum("akl,ln,an->kn", ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
+        out[a + 3:a + 7] += 2.0 * _jt_apply(ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
 
     @property
     def bodies(self) -> tuple[int, ...]:
@@ -206,14 +220,13 @@ class Direction(Term):
             s = ctx.params.vec[self.key]
             z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
             return s + z, z, z
-        _, _, _, p, pd, pdd = ctx.body(self.body)
-        return _quad_kin(ctx.ts(self.key), p, pd, pdd)
+        return _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
-        out[a + 3:a + 7] += 2.0 * np.einsum("akl,ln,an->kn", ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
+        out[a + 3:a + 7] += 2.0 * _jt_apply(ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
 
     @property
     def bodies(self) -> tuple[int, ...]:
@@ -254,12 +267,17 @@ class Diff(Term):
         return tuple(dict.fromkeys(self.a.bodies + self.b.bodies))
 
 
-def _quad_kin(Ts: Array, p: Array, pd: Array, pdd: Array) -> tuple[Array, Array, Array]:
-    """A(p)s, its velocity 2Q(p,ṗ)s and acceleration 2Q(p,p̈)s + 2Q(ṗ,ṗ)s (Ts = point_tensor(s))."""
-    P = np.stack([p, pd])                       # (2, 4, k)
-    v = np.einsum("akl,ikn,ln->ian", Ts, P, p)   # [Q(p,p)s, Q(ṗ,p)s]
-    acc = 2.0 * np.einsum("akl,ikn,iln->an", Ts, P, np.stack([pdd, pd]))
-    return v[0], 2.0 * v[1], acc
+def _jt_apply(Ts: Array, p: Array, f: Array) -> Array:
+    """g (4, k) = Σ_{a,l} Ts[a,k,l] p_l f_a, i.e. ½ ∂(A(p)s·f)/∂p."""
+    fp = (f[:, None, :] * p[None, :, :]).reshape(12, -1)
+    return Ts.transpose(1, 0, 2).reshape(4, 12) @ fp
+
+
+def _quad_kin(Ts: Array, L: Array) -> Array:
+    """Stacked [A(p)s, 2Q(p,ṗ)s, 2Q(p,p̈)s + 2Q(ṗ,ṗ)s] (3, 3, k) for L = [p, ṗ, p̈] (3, 4, k)."""
+    tmp = (Ts.transpose(0, 2, 1).reshape(12, 4) @ L[:2]).reshape(2, 1, 3, 4, -1)   # [i, ., a, l, n]
+    W = (tmp * L[None, :, None]).sum(3)                                            # [i, j, a, n]
+    return np.stack([W[0, 0], 2.0 * W[1, 0], 2.0 * (W[0, 2] + W[1, 1])])
 
 
 def inertial_forces(ctx: Ctx, n_bodies: int, out: Array) -> None:

@@ -121,7 +121,7 @@ class DotEq(Equation):
         phi = phid = phidd = 0.0
         for coef, a, b in self.terms:
             c, cd, cdd = coef(t, prm)
-            D = np.einsum("jin,lin->jln", a.kin(ctx), b.kin(ctx))   # all 9 dot products
+            D = (a.kin(ctx)[:, None] * b.kin(ctx)[None]).sum(2)      # all 9 dot products
             x = D[0, 0:1]
             xd = D[1, 0:1] + D[0, 1:2]
             xdd = D[2, 0:1] + 2.0 * D[1, 1:2] + D[0, 2:3]

@@ -91,10 +91,10 @@ class MultibodyModel(Model):
         for b in self.bodies:
             bps.append(self._body_params(b, pv))
         prm = MBParams(pv, bps, {}, {}, np.asarray(x))
-        for key, fn in self.scal_recipes:
-            prm.scal[key] = fn(prm)
         for key, fn in self.vec_recipes:
             prm.vec[key] = np.asarray(fn(prm)).reshape(3, 1)
+        for key, fn in self.scal_recipes:          # may use the vectors (free lengths)
+            prm.scal[key] = fn(prm)
         return prm
 
     @staticmethod
@@ -137,7 +137,7 @@ class MultibodyModel(Model):
             cyl.add(ctx, p, Q)
         return Q
 
-    def residual_batch(self, t: float, q: Array, qd: Array, qdd: Array, lam: Array, p: Array,
+    def residual_columns(self, t: float, q: Array, qd: Array, qdd: Array, lam: Array, p: Array,
                        pd: Array, params: MBParams) -> Array:
         """F_R (n_z, k) for a batch of states (each argument (n, k) or (n, 1))."""
         k = max(a.shape[1] for a in (q, qd, qdd, lam, p, pd))
@@ -162,7 +162,7 @@ class MultibodyModel(Model):
 
     def residual(self, t: float, s: StepState, params: MBParams) -> Array:
         """F_R (n_z,) at time t (s) and state s."""
-        return self.residual_batch(t, *(v[:, None] for v in s), params)[:, 0]
+        return self.residual_columns(t, *(v[:, None] for v in s), params)[:, 0]
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p) (complex step; central differences for complex states)."""
@@ -191,11 +191,11 @@ class MultibodyModel(Model):
 
         if real:
             h = 1e-30
-            D = np.imag(self.residual_batch(t, *batch(1j * h), params)) / h
+            D = np.imag(self.residual_columns(t, *batch(1j * h), params)) / h
         else:
             steps = [1e-7 * (1.0 + np.abs(np.real(v))) for v in base]
-            Rp = self.residual_batch(t, *batch(steps), params)
-            Rm = self.residual_batch(t, *batch([-x for x in steps]), params)
+            Rp = self.residual_columns(t, *batch(steps), params)
+            Rm = self.residual_columns(t, *batch([-x for x in steps]), params)
             hcol = np.concatenate([steps[i] for i in order])
             D = (Rp - Rm) / (2.0 * hcol[None, :])
         R_z = D[:, :n_z]
