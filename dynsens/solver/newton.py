@@ -116,12 +116,7 @@ class StepSolver:
             rnorm = _real_norm(R)
             history.append(rnorm)
             if not np.isfinite(rnorm):
-                k = int(np.flatnonzero(~np.isfinite(R))[0])
-                labels = self.model.dof_labels()
-                where = labels[k] if k < len(labels) else f"equation {k}"
-                raise NonFiniteError(
-                    f"NaN/Inf first appeared in the residual of {where} at t = {t:.6g} s (step {step}), "
-                    f"Newton iteration {it}: check the initial conditions, the parameters and the time step")
+                raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:
@@ -151,6 +146,21 @@ class StepSolver:
             residual_history=history,
             hint="reduce the time step, check that the loads and parameters are physical, "
                  "or raise solver.max_iterations")
+
+    def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
+        """Say where a non-finite residual comes from: an overflowing (diverging) coordinate,
+        or, when the state is still moderate, the equation that produced NaN (parameters)."""
+        labels = self.model.dof_labels()
+        head = f"NaN/Inf appeared at t = {t:.6g} s (step {step}), Newton iteration {it}"
+        q = np.abs(s.q.real)
+        if q.size and np.all(np.isfinite(q)) and np.max(q) > 1e100:
+            k = int(np.argmax(q))
+            return (f"{head}: the solution diverges at {labels[k]} (|q| = {q[k]:.3g}); reduce the time "
+                    "step, check the stiffness signs and the load magnitudes")
+        k = int(np.flatnonzero(~np.isfinite(R))[0])
+        where = labels[k] if k < len(labels) else f"equation {k}"
+        return (f"{head}: first in the equation of {where}; check the parameters of the elements "
+                "acting there, the initial conditions and the time step")
 
     def _converged(self, z: np.ndarray, dz: np.ndarray, relax: float = 1.0) -> bool:
         st = self.settings
