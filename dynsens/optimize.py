@@ -43,8 +43,10 @@ Output file (OPT.h5, appended after every iteration so an interruption loses not
 * ``/optimization/start_<k>/evaluations/*``: one row per simulation — ``x``, ``u``, ``f``,
   ``g`` (NaN when failed), ``failed``, ``message``, ``wall_time`` (s), ``iteration``;
 * ``/optimization/start_<k>`` attributes: ``x_start``, ``finished``, ``success``,
-  ``status``, ``message``, ``nit``, ``nfev`` (simulations), ``n_failed``, ``x_opt``,
-  ``f_opt``, ``max_violation``, ``feasible``;
+  ``status``, ``message``, ``nit`` (iterations recorded in ``history``: its rows − 1),
+  ``slsqp_nit`` (SLSQP's own count, which also counts iterations it ends on without
+  calling back), ``nfev`` (simulations), ``n_failed``, ``x_opt``, ``f_opt``, ``g_opt``,
+  ``responses_opt``, ``max_violation``, ``feasible``, ``wall_time`` (s);
 * ``/optimization/summary/*``: one row per start (``start``, ``x``, ``f``,
   ``max_violation``, ``success``, ``feasible``, ``nit``, ``n_sim``, ``message``), attribute
   ``best``;
@@ -441,6 +443,7 @@ class StartOutcome:
     n_failed: int
     wall_time: float
     messages: list[dict[str, Any]] = field(default_factory=list)
+    slsqp_nit: int = 0
 
 
 _CASES: dict[tuple[str, str], Case] = {}
@@ -560,7 +563,9 @@ def run_start(job: StartJob) -> StartOutcome:
     ev = evaluator(np.asarray(res.x, dtype=float))
     if ev.failed and evaluator.last_good is not None:
         ev = evaluator.last_good
-    return outcome(ev, bool(res.success), int(res.status), str(res.message), job.iteration0 + int(res.nit))
+    out = outcome(ev, bool(res.success), int(res.status), str(res.message), state["it"])
+    out.slsqp_nit = job.iteration0 + int(res.nit)
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -607,7 +612,7 @@ def _outcome_attrs(o: StartOutcome) -> dict[str, Any]:
     return {"finished": True, "success": o.success, "status": o.status, "message": o.message, "nit": o.nit,
             "nfev": o.n_sim, "n_failed": o.n_failed, "x_opt": o.x, "f_opt": o.f, "g_opt": o.g,
             "responses_opt": o.responses, "max_violation": o.max_violation, "feasible": o.feasible,
-            "wall_time": o.wall_time}
+            "wall_time": o.wall_time, "slsqp_nit": o.slsqp_nit}
 
 
 def _outcome_from_file(f: h5py.File, k: int) -> StartOutcome:
@@ -615,7 +620,7 @@ def _outcome_from_file(f: h5py.File, k: int) -> StartOutcome:
     return StartOutcome(k, a["x_start"], a["x_opt"], float(a["f_opt"]), a["g_opt"], a["responses_opt"],
                         float(a["max_violation"]), bool(a["feasible"]), bool(a["success"]), int(a["status"]),
                         str(a["message"]), int(a["nit"]), int(a["nfev"]), int(a["n_failed"]),
-                        float(a["wall_time"]))
+                        float(a["wall_time"]), slsqp_nit=int(a.get("slsqp_nit", 0)))
 
 
 # --------------------------------------------------------------------------------------
@@ -878,18 +883,22 @@ def _run_pool(jobs: list[StartJob], n_workers: int, handle: Callable[[dict[str, 
     global _QUEUE
     ctx = mp.get_context("fork")
     _QUEUE = ctx.Queue()
+    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
     try:
-        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
-            futs: dict[Future, StartJob] = {}
-            for j in jobs:
-                j.sink = "queue"
-                futs[pool.submit(run_start, j)] = j
-            try:
-                _drain(lambda: _QUEUE.get(timeout=0.05), futs, handle, finish)
-            except BaseException:
-                for fu in futs:
-                    fu.cancel()
-                raise
+        futs: dict[Future, StartJob] = {}
+        for j in jobs:
+            j.sink = "queue"
+            futs[pool.submit(run_start, j)] = j
+        _drain(lambda: _QUEUE.get(timeout=0.05), futs, handle, finish)
+    except BaseException:
+        # stop the starts still running (our own worker processes) instead of waiting for them
+        procs = list(getattr(pool, "_processes", {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
+        raise
+    else:
+        pool.shutdown(wait=True)
     finally:
         _QUEUE = None
 

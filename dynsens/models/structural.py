@@ -90,6 +90,7 @@ class StructuralModel(Model):
                              has_damping=has_damping, sparse=use_sparse)
         # element forces -> nodal forces as one matrix product (works with a leading batch axis)
         self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
+        self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._stacked: tuple[int, dict[str, Any]] | None = None
 
@@ -125,6 +126,8 @@ class StructuralModel(Model):
             np.add.at(mass, self.bar_dofs, lumped)
             out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
         out["mass"] = mass[:self.n]
+        if len(self.spring_names):
+            out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
             out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out)
         if self.traits.has_damping:
@@ -147,16 +150,15 @@ class StructuralModel(Model):
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
         return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
 
-    def _spring_state(self, q: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Spring forces f (..., n_s) and tangents df/dδ; pv may carry a leading batch axis."""
-        qe = self._ext(q)
-        delta = qe[..., self.spring_dofs[:, 0]] - qe[..., self.spring_dofs[:, 1]]
-        k1 = pv[..., self.k1]
+    def _spring_state(self, q: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+        """Spring forces f (..., n_s) and tangents df/dδ; params may carry a leading batch axis."""
+        delta = q @ self._spring_elongation          # δ = u_a − u_b for every spring
+        k1 = params["k1"]
         f = k1 * delta
         kt = k1 + 0 * delta
         if self.traits.linear:
             return f, kt
-        k2, k3 = pv[..., self.k2], pv[..., self.k3]
+        k2, k3 = params["k2"], params["k3"]
         f = f + k2 * delta ** 2 + k3 * delta ** 3
         kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
         return f, kt
@@ -179,7 +181,7 @@ class StructuralModel(Model):
         pv = params["pv"]
         rows, cols, vals = [], [], []
         if len(self.spring_names):
-            _, kt = self._spring_state(q, pv)
+            _, kt = self._spring_state(q, params)
             a, b = self.spring_dofs[:, 0], self.spring_dofs[:, 1]
             rows += [a, b, a, b]
             cols += [a, b, b, a]
@@ -228,12 +230,12 @@ class StructuralModel(Model):
         return K.reshape(n + 1, n + 1)[:n, :n]
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
-        """f_ext(t) (n,) in force units."""
+        """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis."""
         pv = params["pv"]
-        f = np.zeros(self.n + 1, dtype=pv.dtype)
+        f = np.zeros(pv.shape[:-1] + (self.n + 1,), dtype=pv.dtype)
         for dof, amp, fn in self.loads:
-            f[dof] += pv[amp] * fn.value(t, pv)
-        return f[:self.n]
+            f[..., dof] += pv[..., amp] * fn.value(t, pv)
+        return f[..., :self.n]
 
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
@@ -248,7 +250,7 @@ class StructuralModel(Model):
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
-            fs, _ = self._spring_state(q, pv)
+            fs, _ = self._spring_state(q, params)
             f = f + fs @ self._spring_scatter
         if len(self.bar_names):
             bs = self._bar_state(q, params)
@@ -261,7 +263,7 @@ class StructuralModel(Model):
         """Dense parameter arrays stacked along a leading batch axis (None for sparse models)."""
         if self.traits.sparse:
             return None
-        keys = [k for k in ("pv", "mass", "D", "D0", "L0", "EA", "E") if k in params_list[0]]
+        keys = [k for k in ("pv", "mass", "D", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -272,7 +274,7 @@ class StructuralModel(Model):
             self._stacked = (id(params_list), self.stack_parameters(params_list))
         st = self._stacked[1]
         R = st["mass"] * s.qdd + self._internal_force(s.q, st)
-        R = R - np.stack([self.external_force(t, p) for p in params_list])
+        R = R - self.external_force(t, st)
         if self.traits.has_damping:
             R = R + st["D"] @ s.qd
         return R.T
@@ -349,7 +351,7 @@ class StructuralModel(Model):
             return None
         if springs:
             si = np.array(springs)
-            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm["pv"])[0][..., _i],
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm)[0][..., _i],
                           tuple(f"{n}.force" for n in names), "", batched=True)
         bi = np.array(bars)
 

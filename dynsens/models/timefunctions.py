@@ -36,31 +36,36 @@ class TimeFunction:
     table_t: tuple[float, ...] = ()
 
     def value(self, t: float, pv: np.ndarray) -> Any:
-        """Dimensionless factor at time t (s)."""
+        """Dimensionless factor at time t (s).
+
+        ``pv`` may carry a leading batch axis (perturbed designs); branches (before, inside,
+        after a ramp) follow the first entry, as finite differences of the same branch would.
+        """
         k = self.kind
         if k == "constant":
             return 1.0
+        p = [pv[..., i] for i in self.idx]
         if k == "step":
-            return 1.0 if t >= pv[self.idx[0]].real else 0.0
+            return 1.0 if t >= _first(p[0]) else 0.0
         if k in ("ramp", "smoothstep"):
-            t0, t1 = pv[self.idx[0]], pv[self.idx[1]]
-            if t <= t0.real:
+            t0, t1 = p
+            if t <= _first(t0):
                 return 0.0
-            if t >= t1.real:
+            if t >= _first(t1):
                 return 1.0
             tau = (t - t0) / (t1 - t0)
             return tau if k == "ramp" else tau * tau * (3.0 - 2.0 * tau)
         if k == "harmonic":
-            f, phase = pv[self.idx[0]], pv[self.idx[1]]
+            f, phase = p
             return np.sin(2.0 * np.pi * f * t + phase)
         if k == "pulse":
-            t0, d = pv[self.idx[0]], pv[self.idx[1]]
-            if t <= t0.real or t >= (t0 + d).real:
+            t0, d = p
+            if t <= _first(t0) or t >= _first(t0 + d):
                 return 0.0
             return np.sin(np.pi * (t - t0) / d) ** 2
         # table: piecewise linear in the tabulated values, constant beyond the ends
         ts = self.table_t
-        vals = [pv[i] for i in self.idx]
+        vals = p
         if t <= ts[0]:
             return vals[0]
         if t >= ts[-1]:
@@ -68,6 +73,11 @@ class TimeFunction:
         j = int(np.searchsorted(ts, t, side="right")) - 1
         w = (t - ts[j]) / (ts[j + 1] - ts[j])
         return vals[j] + w * (vals[j + 1] - vals[j])
+
+
+def _first(v: Any) -> float:
+    """Real part of a scalar, or of the first entry of a batch."""
+    return float(np.real(np.ravel(v)[0]))
 
 
 def build_time_function(spec: Any, path: str, table: ParameterTable,

@@ -78,6 +78,7 @@ class StepSolver:
         t = model.traits
         self._blocks = [slice(0, t.n_q), slice(t.n_q, t.n_q + t.n_lam),
                         slice(t.n_q + t.n_lam, t.n_z)]
+        self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._scales = np.zeros(3)
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
 
@@ -165,7 +166,8 @@ class StepSolver:
     def _converged(self, z: np.ndarray, dz: np.ndarray, relax: float = 1.0) -> bool:
         st = self.settings
         ok = True
-        for k, b in enumerate(self._blocks):
+        for k in self._present:
+            b = self._blocks[k]
             zn = _real_norm(z[b])
             self._scales[k] = max(self._scales[k], zn)
             if _real_norm(dz[b]) > relax * st.rtol * max(zn, self._scales[k]) + st.atol:

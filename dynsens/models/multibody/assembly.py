@@ -154,28 +154,45 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
     mu = np.zeros(len(eqs), q.dtype)
     extra = 0
     scale = 1.0 + np.linalg.norm(np.real(q))
+
+    def fnorm(qq: Array, mm: Array) -> float:
+        return float(np.linalg.norm(np.real(_F(model, qq, mm, params))))
+
+    best = (np.inf, q)
     for it in range(a.max_iterations):
         F = _F(model, q, mu, params)
+        f0 = float(np.linalg.norm(np.real(F)))
+        phin = float(np.linalg.norm(np.real(F[n_q:])))
+        if phin < best[0]:
+            best = (phin, q)
         K = _F_matrix(model, q, mu, params)
         try:
             dx = np.linalg.solve(K, -F)
         except np.linalg.LinAlgError:
             _rank_check(model, jacobian_rows(eqs, q, params, a.t0), labels, "assembly")
             raise
-        q = q + dx[:n_q]
-        mu = mu + dx[n_q:]
-        if np.linalg.norm(np.real(dx[:n_q])) <= a.tol * scale:
+        # backtracking on ‖F‖ (decided on real parts) keeps far-off guesses from diverging
+        step = 1.0
+        while step > 1e-3 and fnorm(q + step * dx[:n_q], mu + step * dx[n_q:]) > f0 and f0 > 1e-14 * scale:
+            step *= 0.5
+        q = q + step * dx[:n_q]
+        mu = mu + step * dx[n_q:]
+        if step == 1.0 and np.linalg.norm(np.real(dx[:n_q])) <= a.tol * scale:
             extra += 1
             if extra >= 2:   # two more iterations so complex parts converge too
                 break
     phi = model.constraint_values(_ctx(q, None, params, a.t0), eqs)[0][:, 0]
     res = np.abs(np.real(phi))
     if not np.all(np.isfinite(res)) or extra == 0 or np.max(res, initial=0.0) > 1e-8 * scale:
-        worst = int(np.nanargmax(res)) if res.size else 0
+        qb = best[1]
+        res = np.abs(np.real(model.constraint_values(_ctx(qb, None, params, a.t0), eqs)[0][:, 0]))
+        joint_rows = [i for i, lab in enumerate(labels) if not lab.endswith(".normalization")]
+        worst = max(joint_rows or range(len(res)), key=lambda i: res[i])
         raise ModelError(
-            f"assembly failed: ‖Φ‖ = {np.linalg.norm(res):.3e} after {a.max_iterations} Newton "
-            f"iterations; largest residual {res[worst]:.3e} in '{labels[worst]}'. Check the joint "
-            "points/axes and give initial poses closer to an assembled configuration")
+            f"assembly failed: ‖Φ‖ = {np.linalg.norm(res):.3e} at the best of {a.max_iterations} "
+            f"Newton iterations; largest joint residual {res[worst]:.3e} in '{labels[worst]}'. "
+            "Check the joint points/axes, markers and distances, and give initial poses closer "
+            "to an assembled configuration")
     _rank_check(model, jacobian_rows(model.eqs, q, params, a.t0), model.eq_owner,
                 "assembly (at the assembled pose)")
     return q, mu

@@ -1,0 +1,149 @@
+"""``dynsens optimize``: SLSQP on the direct sensitivities, history appended to HDF5 per iteration."""
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import click
+import numpy as np
+
+from ..case.load import load_case
+from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, optimize_case,
+                        plot_optimization)
+from .main import cli
+from .options import case_argument, overwrite_option, set_option
+
+
+def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]:
+    """click callback: ('A=3', 'B=4.5') -> {'A': 3.0, 'B': 4.5}."""
+    out: dict[str, float] = {}
+    for item in values:
+        name, sep, val = item.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(val)
+        except ValueError:
+            raise click.BadParameter(f"expected NAME=VALUE, found {item!r}") from None
+    return out
+
+
+def _vec(v: Any) -> str:
+    return "[" + ", ".join(f"{a:.6g}" for a in np.asarray(v, dtype=float)) + "]"
+
+
+def progress_line(msg: dict[str, Any], objective: str) -> str | None:
+    """One line per iteration (and per failed simulation) for the terminal."""
+    r = msg["row"]
+    k = msg["start"]
+    if msg["kind"] == "evaluation":
+        if not r["failed"]:
+            return None
+        return (f"[start {k}] simulation failed at x = {_vec(r['x'])}: {r['message']} "
+                "-> rejected (penalty), SLSQP shortens the step")
+    return (f"[start {k}] it {r['iteration']:3d}  {objective} = {r['f']:.8g}  "
+            f"max viol {r['max_violation']:.2e}  KKT {r['kkt']:.2e}  |du| {r['step']:.2e}  "
+            f"sims {r['n_sim']}" + (f" ({r['failed']} failed)" if r["failed"] else "")
+            + f"  {r['wall_time']:.2f} s")
+
+
+def format_table(result: OptimizationResult, design_names: tuple[str, ...], objective: str) -> str:
+    """Table of the optima found, one row per start (the best marked with *)."""
+    labels = result.problem.constraint_labels
+    head = (f"{'start':>5}  {objective:>14}  {'max viol':>9}  {'converged':>9}  {'feasible':>8}  "
+            f"{'nit':>4}  {'sims':>5}  {'failed':>6}  x = [{', '.join(design_names)}]")
+    lines = [head]
+    for o in result.starts:
+        star = "*" if o.index == result.best_outcome.index else " "
+        lines.append(f"{o.index:>4}{star}  {o.f:>14.8g}  {o.max_violation:>9.2e}  "
+                     f"{'yes' if o.success else 'no':>9}  {'yes' if o.feasible else 'no':>8}  {o.nit:>4}  "
+                     f"{o.n_sim:>5}  {o.n_failed:>6}  {_vec(o.x)}")
+    if labels:
+        lines.append("constraints (scaled g >= 0 is satisfied): " + "; ".join(labels))
+    return "\n".join(lines)
+
+
+def format_verdict(o: StartOutcome) -> str:
+    """Plain sentences: did the optimizer converge, is the design feasible."""
+    conv = (f"The optimizer converged (SLSQP: {o.message})." if o.success else
+            f"The optimizer did NOT converge (SLSQP: {o.message}).")
+    feas = ("The result is feasible" if o.feasible else "The result is NOT feasible") + \
+        f" (max. scaled constraint violation {o.max_violation:.2e}, tolerance {FEAS_TOL:g})."
+    return f"{conv} {feas}"
+
+
+@cli.command()
+@case_argument
+@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
+              help="HDF5 file for the optimization history (appended after every iteration).")
+@overwrite_option
+@set_option
+@click.option("-x", "--x0", "x0", multiple=True, metavar="NAME=VALUE", callback=_parse_x0,
+              help="Start from this value of a design variable instead of the case's (repeatable).")
+@click.option("--maxiter", type=click.IntRange(min=1), default=None,
+              help="SLSQP iteration limit [default: the case's optimization.maxiter].")
+@click.option("--ftol", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="SLSQP tolerance on the scaled objective [default: the case's optimization.ftol].")
+@click.option("--starts", type=click.IntRange(min=1), default=None,
+              help="Number of starts: x0, then a Latin hypercube in the bounds [default: 1].")
+@click.option("--seed", type=int, default=None, help="Seed of the Latin hypercube [default: random, stored].")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes for several starts [default: min(starts, CPUs)].")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the starts on this Dask distributed scheduler (pip install 'dynsens[dask]').")
+@click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
+@click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="Write PNG plots of the history and of the best design's time histories to DIR.")
+def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
+             maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
+             workers: int | None, scheduler: str | None, resume: bool, plots: str | None) -> None:
+    """Minimize the case's objective subject to its constraints with SLSQP.
+
+    Objective, constraints and gradients come from one simulation with direct
+    sensitivities per design point.  Design variables are scaled to [0, 1] in their
+    bounds; the objective is normalized by its value at x0.  Exit status 0 when the best
+    start converged to a feasible design, 1 otherwise.
+    """
+    from pathlib import Path
+
+    from ..io.hdf5 import OutputExistsError
+    if resume and overwrite:
+        raise OptimizationError("--resume continues OUTPUT and --overwrite replaces it: give one of them")
+    if not resume and Path(output).exists() and not overwrite:
+        raise OutputExistsError(f"{output} exists: pass --overwrite to replace it, or --resume to continue it")
+    case = load_case(case_file, overrides)
+    if case.optimization is None:
+        raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "
+                                "and constraints (see the README)")
+    objective = case.optimization.objective
+
+    def on_message(msg: dict[str, Any]) -> None:
+        line = progress_line(msg, objective)
+        if line:
+            click.echo(line)
+
+    def on_done(o: StartOutcome) -> None:
+        click.echo(f"[start {o.index}] finished: {'converged' if o.success else 'not converged'} "
+                   f"({o.message}), {'feasible' if o.feasible else 'infeasible'}, {o.nit} iterations, "
+                   f"{o.n_sim} simulations ({o.n_failed} failed)")
+
+    try:
+        result = optimize_case(case, output, starts=starts, seed=seed, x0=x0, maxiter=maxiter, ftol=ftol,
+                               workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
+                               on_message=on_message, on_start_done=on_done)
+    except KeyboardInterrupt:
+        click.echo(f"interrupted: the history so far is in {output}; continue with --resume", err=True)
+        sys.exit(130)
+    click.echo("")
+    click.echo(format_table(result, case.design_names, objective))
+    b = result.best_outcome
+    click.echo("")
+    click.echo(f"best: start {b.index}, {objective} = {b.f:.8g}, x = {_vec(b.x)} "
+               f"({', '.join(case.design_names)})")
+    click.echo(format_verdict(b))
+    if plots:
+        for p in plot_optimization(output, plots):
+            click.echo(f"plot: {p}")
+    click.echo(f"written: {output}")
+    if not (result.converged and result.feasible):
+        sys.exit(1)
