@@ -131,7 +131,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     lam_guess, pd_guess = model.initial_guess(params)
     dtype = np.result_type(q0, qd0, p0, float)
     z0 = np.concatenate([np.zeros(n_q, dtype), np.asarray(lam_guess, dtype), np.asarray(pd_guess, dtype)])
-    pred = Prediction(q0, qd0, p0)
+    pred = Prediction(q0, qd0, p0, q0[:0], p0[:0])
 
     def correct0(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
         return StepState(pr.q, pr.qd, qdd, lam, pr.p, pd)
@@ -148,6 +148,8 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         dz = solver.solve_sensitivity(out.factor, P)
         dqdd, dlam, dpd = _split(dz, n_q, n_lam)
         ds = StepState(dq0, dqd0, dqdd, dlam, dp0, dpd)
+    aux = scheme.start(s)
+    daux = scheme.start(ds) if ds is not None else None
 
     # --- storage, decided once
     hist_fields = [f for f in plan.history if f in HISTORY_FIELDS]
@@ -181,7 +183,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         h = plan.step_size(i)
         t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
         coeffs = scheme.coefficients(h)
-        pred = scheme.predict(s, h)
+        pred = scheme.predict(s, aux, h)
         z_guess = np.concatenate([s.qdd, s.lam, s.pd])
 
         def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray,
@@ -192,13 +194,15 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         s_new = out.state
         _check_finite(s_new, t, i, labels)
         model.check_state(t, s_new, params)
-        if partials is not None and ds is not None:
-            dpred = scheme.predict(ds, h)
+        aux = scheme.advance(pred, s_new)
+        if partials is not None and ds is not None and daux is not None:
+            dpred = scheme.predict(ds, daux, h)
             P = pseudo_load(model, t, s_new, out.lin, dpred.q, dpred.qd, dpred.p, partials)
             counters.sensitivity_residual_evaluations += partials.evaluations_per_call
             assert out.factor is not None
             dz = solver.solve_sensitivity(out.factor, P)
             ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
+            daux = scheme.advance(dpred, ds)
         s = s_new
         counters.steps += 1
         record(i, t, s, ds)

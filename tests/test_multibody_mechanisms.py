@@ -2,8 +2,6 @@
 against complex step of the whole run, assembly errors and case-file problems."""
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 import yaml
@@ -114,7 +112,7 @@ def test_unassemblable_mechanism_names_residual_and_joint():
     with pytest.raises(ModelError) as exc:
         dynsens.run_case(case, sensitivities=False)
     msg = str(exc.value)
-    assert "assembly failed" in msg and "‖Φ‖" in msg and "largest residual" in msg
+    assert "assembly failed" in msg and "‖Φ‖" in msg and "largest joint residual" in msg
     assert any(f"'{j}." in msg for j in ("A", "B", "O4", "O2"))
 
 
@@ -126,18 +124,26 @@ def test_case_problems_are_collected_with_paths():
     m["joints"][2]["marker_1"] = "C"
     m["joints"].append({"name": "X", "type": "revolut", "body_1": "ground", "body_2": "rod"})
     m["forces"] = [{"type": "point_force", "body": "slider", "point": "B", "forc": [1, 0, 0]}]
-    raw["responses"][0]["quantity"] = {"joint": "AA", "kind": "reaction_force_norm"}
-    raw["responses"][1]["quantity"] = {"body": "slider", "kind": "positon"}
     with pytest.raises(CaseError) as exc:
         dynsens.load_case_dict(raw)
     msg = str(exc.value)
     for expected in ("model.bodies.rod.mas: unknown key; did you mean 'mass'?",
                      "model.joints[1].body_2: unknown body 'rood'; did you mean 'rod'?",
                      "model.joints[2].marker_1: body 'rod' has no marker 'C'",
-                     "model.joints[4].type: unknown joint type 'revolut'; did you mean 'revolute'?",
-                     "model.forces[0].forc: unknown key; did you mean 'force'?",
-                     "responses[0].quantity.joint: unknown joint 'AA'; did you mean 'A'?",
-                     "responses[1].quantity.kind: unknown body quantity 'positon'; did you mean 'position'?"):
+                     "model.joints[5].type: unknown joint type 'revolut'; did you mean 'revolute'?",
+                     "model.forces[0].forc: unknown key; did you mean 'force'?"):
+        assert expected in msg, (expected, msg)
+    # quantities are resolved once the model is valid
+    raw = _raw("slider_crank")
+    raw["responses"][0]["quantity"] = {"joint": "AA", "kind": "reaction_force_norm"}
+    raw["responses"][1]["quantity"] = {"body": "slider", "kind": "positon"}
+    raw["responses"][2]["quantity"] = {"element": "cyl", "kind": "stroke"}
+    with pytest.raises(CaseError) as exc:
+        dynsens.load_case_dict(raw)
+    msg = str(exc.value)
+    for expected in ("responses[0].quantities[0].joint: unknown joint 'AA'; did you mean 'A'?",
+                     "responses[1].quantity.kind: unknown body quantity 'positon'; did you mean 'position'?",
+                     "responses[2].quantities[0].element: unknown element 'cyl'"):
         assert expected in msg, (expected, msg)
 
 
@@ -148,4 +154,34 @@ def test_dof_and_multiplier_labels():
     lam = case.model.multiplier_labels()
     assert lam[0] == "O.x" and "drive.drive" in lam and lam[-1] == "slider.normalization"
     assert len(lam) == case.model.traits.n_lam == 5 + 5 + 2 + 5 + 1 + 3
-    del copy
+
+
+def test_reaction_sign_conventions_static_hanging_body():
+    """A body hanging at rest from a revolute: the joint pushes body_2 up with m g, the
+    moment about the joint point is zero, joint-frame components follow the joint axes."""
+    raw = yaml.safe_load((CASES / "pendulum_3d.yaml").read_text())
+    raw["model"]["bodies"]["bob"]["position"] = [0, "-L", 0]
+    raw["model"]["joints"][0]["axis"] = [1, 0, 0]
+    raw["events"], raw["responses"] = [], []
+    raw["integrator"]["t_end"] = 0.01
+    case = dynsens.load_case_dict(raw)
+    res = dynsens.run_case(case, sensitivities=False, history=("q", "qd", "qdd", "lam", "p", "pd"))
+    s = _states(res)[-1]
+    prm = case.model.parameters(case.x0)
+    f = _quantity(case, {"joint": "pivot", "kind": "reaction_force"}).fn(0.01, s, prm)
+    m = _quantity(case, {"joint": "pivot", "kind": "reaction_moment"}).fn(0.01, s, prm)
+    fj = _quantity(case, {"joint": "pivot", "kind": "reaction_force_joint_frame"}).fn(0.01, s, prm)
+    assert np.allclose(f, [0.0, 9.81, 0.0], atol=1e-9)
+    assert np.allclose(m, 0.0, atol=1e-9)
+    # joint frame (u, v, w = x): w-component 0, in-plane magnitude m g
+    assert abs(fj[2]) < 1e-9 and abs(np.hypot(fj[0], fj[1]) - 9.81) < 1e-9
+    assert np.max(np.abs(res.history["qdd"])) < 1e-9
+
+
+def test_prismatic_reaction_has_no_axial_component():
+    case = dynsens.load_case(CASES / "slider_crank.yaml", overrides=["integrator.t_end=0.1"])
+    res = dynsens.run_case(case, sensitivities=False, history=("q", "qd", "qdd", "lam", "p", "pd"))
+    prm = case.model.parameters(case.x0)
+    out = _quantity(case, {"joint": "P", "kind": "reaction_force_joint_frame"})
+    fj = np.array([out.fn(t, s, prm) for t, s in zip(res.time, _states(res))])
+    assert np.max(np.abs(fj[:, :2])) > 1.0 and np.max(np.abs(fj[:, 2])) < 1e-9

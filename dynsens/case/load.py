@@ -19,7 +19,7 @@ import yaml
 
 from ..errors import CaseError, ProblemCollector
 from ..expressions import ExpressionError, compile_expression
-from ..integrators.newmark import Newmark, make_scheme
+from ..integrators.newmark import SCHEMES, Newmark, make_scheme
 from ..march import HISTORY_FIELDS, RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
@@ -33,7 +33,6 @@ from .overrides import apply_overrides
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
             "events", "responses", "optimization")
-SCHEMES = ("newmark",)
 RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -231,8 +230,8 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
 
 def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                 ) -> tuple[Newmark | None, RunPlan | None, str]:
-    ok = check_keys(spec, "integrator", ("scheme", "beta", "gamma", "dt", "t0", "t_end", "solver",
-                                        "event_location"), pc, required=("dt", "t_end"))
+    ok = check_keys(spec, "integrator", ("scheme", "beta", "gamma", "alpha", "rho_inf", "dt", "t0", "t_end",
+                                        "solver", "event_location"), pc, required=("dt", "t_end"))
     if sens is None:
         sens = {}
     ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
@@ -256,7 +255,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("default")
-                scheme = make_scheme(str(spec.get("scheme", "newmark")), beta, gamma)
+                alpha = _number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
+                rho = _number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
+                scheme = make_scheme(str(scheme_name), beta, gamma, alpha=alpha, rho_inf=rho)
         except ValueError as exc:
             pc.add("integrator", str(exc))
     solver = spec.get("solver", {}) or {}

@@ -1,18 +1,30 @@
-r"""Newmark-β with the acceleration as primary unknown (method.md §2).
+r"""Newmark-β and its α-family (HHT-α, generalized-α), acceleration as primary unknown.
 
-Predictor from step i-1 and corrector with the new accelerations (and, for first-order
-states, the same γ-rule):
+Newmark (method.md §2): predictor from step i−1 and corrector with the new accelerations
+(first-order states use the same γ-rule):
 
 .. math::
 
-   q^{pred} = q + Δt\,\dot q + (½-β)Δt^2 \ddot q, \qquad
-   \dot q^{pred} = \dot q + (1-γ)Δt\,\ddot q, \qquad p^{pred} = p + (1-γ)Δt\,\dot p
+   q^{pred} = q + Δt\,\dot q + (½-β)Δt^2 a, \qquad \dot q^{pred} = \dot q + (1-γ)Δt\,a,
+   \qquad p^{pred} = p + (1-γ)Δt\,b
 
-   q_i = q^{pred} + βΔt^2 \ddot q_i,\quad \dot q_i = \dot q^{pred} + γΔt\,\ddot q_i,\quad
-   p_i = p^{pred} + γΔt\,\dot p_i
+   q_i = q^{pred} + βΔt^2 a_i,\quad \dot q_i = \dot q^{pred} + γΔt\,a_i,\quad
+   p_i = p^{pred} + γΔt\,b_i
 
-Both maps are linear in the state, so the same code predicts and corrects the primal
-vectors (n,) and the sensitivity matrices (n, m).
+For plain Newmark the "algorithmic" accelerations a, b are the true ones, q̈ and ṗ.  The
+generalized-α method (Chung & Hulbert 1993, in the form of Arnold & Brüls 2007 that keeps
+the equations of motion — and constraints — exactly at t_i) uses instead
+
+.. math:: (1-α_m)\,a_i + α_m a_{i-1} = (1-α_f)\,\ddot q_i + α_f \ddot q_{i-1}
+
+so a_i = c_a q̈_i + a_rest with c_a = (1−α_f)/(1−α_m).  Parameters from the spectral radius
+at infinity ρ∞: α_m = (2ρ∞−1)/(ρ∞+1), α_f = ρ∞/(ρ∞+1), γ = ½ + α_f − α_m, β = ¼(γ+½)².
+HHT-α is the member α_m = 0, α_f = α ∈ [0, ⅓] (γ = ½ + α, β = ¼(1+α)²); for linear problems
+it coincides with the classical HHT scheme.  Second order for γ = ½ + α_f − α_m.
+
+All maps are linear in the state, so the same code predicts and corrects the primal
+vectors (n,) and the sensitivity matrices (n, m): the sensitivities are derived from the
+scheme's own step equations.
 """
 from __future__ import annotations
 
@@ -25,37 +37,64 @@ import numpy as np
 from ..models.base import StepState
 
 
+class Aux(NamedTuple):
+    """Algorithmic accelerations a (n_q) and rates b (n_p) carried from step to step."""
+
+    a: np.ndarray
+    b: np.ndarray
+
+
 class Prediction(NamedTuple):
-    """Predicted q, q̇, p (the parts of the new state that do not depend on z)."""
+    """Predicted q, q̇, p and the parts of the new algorithmic accelerations known before the solve."""
 
     q: np.ndarray
     qd: np.ndarray
     p: np.ndarray
+    a_rest: np.ndarray
+    b_rest: np.ndarray
 
 
 @dataclass(frozen=True)
 class Newmark:
-    """Newmark-β scheme; β and γ dimensionless (defaults ¼, ½: average acceleration)."""
+    """Newmark-β (α_m = α_f = 0) or a generalized-α member; β, γ, α_m, α_f dimensionless."""
 
     beta: float = 0.25
     gamma: float = 0.5
+    alpha_m: float = 0.0
+    alpha_f: float = 0.0
+    name: str = "newmark"
 
     @property
     def order(self) -> int:
-        """Order of accuracy: 2 for γ = ½, 1 otherwise."""
-        return 2 if abs(self.gamma - 0.5) < 1e-14 else 1
+        """Order of accuracy: 2 when γ = ½ + α_f − α_m, else 1."""
+        return 2 if abs(self.gamma - 0.5 - self.alpha_f + self.alpha_m) < 1e-12 else 1
+
+    @property
+    def _c_a(self) -> float:
+        return (1.0 - self.alpha_f) / (1.0 - self.alpha_m)
+
+    def start(self, s: StepState) -> Aux:
+        """Algorithmic accelerations at t0: the true ones."""
+        return Aux(s.qdd, s.pd)
 
     def coefficients(self, dt: float) -> tuple[float, float, float]:
         """(c_q, c_qd, c_p) = (∂q/∂q̈, ∂q̇/∂q̈, ∂p/∂ṗ) of the corrector for step size dt (s)."""
-        return self.beta * dt * dt, self.gamma * dt, self.gamma * dt
+        c = self._c_a
+        return self.beta * dt * dt * c, self.gamma * dt * c, self.gamma * dt * c
 
-    def predict(self, s: StepState, dt: float) -> Prediction:
+    def predict(self, s: StepState, aux: Aux, dt: float) -> Prediction:
         """Predictor from the state at the previous step (vectors or (n, m) matrices)."""
-        b, g = self.beta, self.gamma
+        b, g, am, af = self.beta, self.gamma, self.alpha_m, self.alpha_f
+        if am == 0.0 and af == 0.0:
+            a_rest, b_rest = 0.0 * aux.a, 0.0 * aux.b
+        else:
+            a_rest = (af * s.qdd - am * aux.a) / (1.0 - am)
+            b_rest = (af * s.pd - am * aux.b) / (1.0 - am)
         return Prediction(
-            s.q + dt * s.qd + (0.5 - b) * dt * dt * s.qdd,
-            s.qd + (1.0 - g) * dt * s.qdd,
-            s.p + (1.0 - g) * dt * s.pd,
+            s.q + dt * s.qd + dt * dt * ((0.5 - b) * aux.a + b * a_rest),
+            s.qd + dt * ((1.0 - g) * aux.a + g * a_rest),
+            s.p + dt * ((1.0 - g) * aux.b + g * b_rest),
+            a_rest, b_rest,
         )
 
     def correct(self, pred: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray,
@@ -65,15 +104,38 @@ class Newmark:
         return StepState(pred.q + c_q * qdd, pred.qd + c_qd * qdd, qdd, lam,
                          pred.p + c_p * pd, pd)
 
+    def advance(self, pred: Prediction, s: StepState) -> Aux:
+        """Algorithmic accelerations of the new step."""
+        c = self._c_a
+        return Aux(pred.a_rest + c * s.qdd, pred.b_rest + c * s.pd)
 
-def make_scheme(name: str, beta: float = 0.25, gamma: float = 0.5) -> Newmark:
+
+SCHEMES = ("newmark", "hht", "generalized_alpha")
+
+
+def make_scheme(name: str, beta: float = 0.25, gamma: float = 0.5, *, alpha: float | None = None,
+                rho_inf: float | None = None) -> Newmark:
     """Build the time-integration scheme named in a case.
 
-    Raises ValueError for γ < ½ (negative numerical damping, unstable) and warns for
-    β < γ/2 (only conditionally stable) and γ > ½ (numerical damping, first order).
+    ``newmark`` takes β, γ: γ < ½ is rejected (negative numerical damping, unstable), β < γ/2
+    warns (only conditionally stable), γ > ½ warns (numerical damping, first order).
+    ``hht`` takes α ∈ [0, ⅓]; ``generalized_alpha`` takes ρ∞ ∈ [0, 1].
     """
+    if name == "hht":
+        a = 0.05 if alpha is None else alpha
+        if not 0.0 <= a <= 1.0 / 3.0:
+            raise ValueError(f"integrator.alpha = {a}: must be in [0, 1/3] for HHT-alpha")
+        return Newmark(beta=0.25 * (1 + a) ** 2, gamma=0.5 + a, alpha_m=0.0, alpha_f=a, name="hht")
+    if name == "generalized_alpha":
+        r = 0.8 if rho_inf is None else rho_inf
+        if not 0.0 <= r <= 1.0:
+            raise ValueError(f"integrator.rho_inf = {r}: must be in [0, 1] (spectral radius at infinity)")
+        am = (2 * r - 1) / (r + 1)
+        af = r / (r + 1)
+        g = 0.5 + af - am
+        return Newmark(beta=0.25 * (g + 0.5) ** 2, gamma=g, alpha_m=am, alpha_f=af, name="generalized_alpha")
     if name != "newmark":
-        raise ValueError(f"unknown scheme {name!r} (known: newmark)")
+        raise ValueError(f"unknown scheme {name!r} (known: {', '.join(SCHEMES)})")
     if gamma < 0.5:
         raise ValueError(f"integrator.gamma = {gamma}: must be >= 0.5 (gamma < 1/2 gives "
                          "negative numerical damping and an unstable scheme)")
@@ -89,11 +151,4 @@ def make_scheme(name: str, beta: float = 0.25, gamma: float = 0.5) -> Newmark:
     return Newmark(beta=beta, gamma=gamma)
 
 
-def zeros_like_state(s: StepState, m: int | None = None) -> StepState:
-    """A StepState of zeros shaped like ``s`` (with m columns when given)."""
-    if m is None:
-        return StepState(*(np.zeros_like(v) for v in s))
-    return StepState(*(np.zeros((v.shape[0], m), dtype=v.dtype) for v in s))
-
-
-__all__ = ["Newmark", "Prediction", "make_scheme", "zeros_like_state"]
+__all__ = ["SCHEMES", "Aux", "Newmark", "Prediction", "make_scheme"]
