@@ -1,0 +1,35 @@
+"""``dynsens convergence``: error against time step and wall time for each gradient method."""
+from __future__ import annotations
+
+import click
+
+from ..case.load import load_case
+from ..convergence import METHODS, observed_order, work_precision, write_report
+from .main import cli
+from .options import case_argument, parse_float_list, set_option
+
+
+@cli.command("convergence")
+@case_argument
+@click.option("--dt", "dts", callback=parse_float_list, default=None,
+              help="Comma-separated time steps (default: the case's Δt × 4, 2, 1, 1/2, 1/4).")
+@click.option("--methods", default=",".join(METHODS), show_default=True,
+              help=f"Comma-separated subset of {', '.join(METHODS)}.")
+@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
+              help="Folder for the tables and plots.")
+@set_option
+def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str,
+                    overrides: tuple[str, ...]) -> None:
+    """Work-precision study of CASE_FILE: tables (markdown, CSV) and log-log plots."""
+    case = load_case(case_file, overrides)
+    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    bad = [m for m in chosen if m not in METHODS]
+    if bad:
+        raise click.BadParameter(f"unknown methods {bad} (known: {', '.join(METHODS)})", param_hint="--methods")
+    dts = dts or [case.plan.dt * f for f in (4, 2, 1, 0.5, 0.25)]
+    rows, _, _ = work_precision(case, dts, chosen)
+    files = write_report(case, rows, outdir)
+    for n in rows[0].values:
+        click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "
+                   f"(scheme order {case.scheme.order})")
+    click.echo("written: " + ", ".join(str(f) for f in files))
