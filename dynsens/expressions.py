@@ -50,7 +50,7 @@ FUNCTIONS: dict[str, Callable[..., Number]] = {
     "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh,
     "sqrt": np.sqrt, "exp": np.exp, "log": np.log, "log10": np.log10,
     "abs": _cs_abs, "min": _cs_min, "max": _cs_max,
-    "deg": np.degrees, "rad": np.radians,
+    "deg": lambda a: a * (180.0 / math.pi), "rad": lambda a: a * (math.pi / 180.0),
 }
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
 

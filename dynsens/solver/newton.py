@@ -81,6 +81,7 @@ class StepSolver:
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._scales = np.zeros(3)
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
+        self._smax = 0.0
 
     def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         b = self._blocks
@@ -93,6 +94,7 @@ class StepSolver:
         self.counters.linearizations += 1
         lin = self.model.linearize(t, s, params)
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
+        self._smax = float(abs(S).max().real) if S.shape[0] else 0.0
         factor = Factor(S, self.counters)
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
@@ -118,6 +120,10 @@ class StepSolver:
             history.append(rnorm)
             if not np.isfinite(rnorm):
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
+            if it > 1 and rnorm <= st.rtol * self._force_scale(z):
+                # the residual is at the round-off level of the terms it is made of (this
+                # catches unknowns that are zero, e.g. accelerations of a static start)
+                return self._accept(t, s, params, coeffs, lin, factor, it - 1)
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:
@@ -132,21 +138,26 @@ class StepSolver:
             if not self.newton:
                 s = correct(pred, *self._split(z))
                 return StepOutcome(s, lin, factor, it)
-            # accept a correction that has reached the round-off floor: the residual no
-            # longer falls although the correction is already tiny (ill-conditioned S)
-            stalled = it >= 3 and history[-1] > 0.5 * history[-2]
-            if self._converged(z, dz, 1e3 if stalled else 1.0):
+            if self._converged(z, dz):
                 s = correct(pred, *self._split(z))
-                if self.need_converged_factor and self.refactor:
-                    # the sensitivity solve needs S at the converged state, not at the
-                    # previous iterate (method.md §4)
-                    lin, factor = self._linearize_and_factor(t, s, params, coeffs)
-                return StepOutcome(s, lin, factor, it)
+                return self._accept(t, s, params, coeffs, lin, factor, it)
         raise ConvergenceError(
             "Newton-Raphson did not converge", t=t, step=step, iterations=st.max_iterations,
             residual_history=history,
             hint="reduce the time step, check that the loads and parameters are physical, "
                  "or raise solver.max_iterations")
+
+    def _accept(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
+                lin: Linearization | None, factor: Factor | None, iterations: int) -> StepOutcome:
+        if self.need_converged_factor and self.refactor:
+            # the sensitivity solve needs S at the converged state, not at the previous
+            # iterate (method.md §4)
+            lin, factor = self._linearize_and_factor(t, s, params, coeffs)
+        return StepOutcome(s, lin, factor, iterations)
+
+    def _force_scale(self, z: np.ndarray) -> float:
+        """Magnitude of the terms S z that make up the residual: max|S| · max|z|."""
+        return self._smax * float(np.max(np.abs(z.real))) if z.size else 0.0
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
         """Say where a non-finite residual comes from: an overflowing (diverging) coordinate,
@@ -163,14 +174,14 @@ class StepSolver:
         return (f"{head}: first in the equation of {where}; check the parameters of the elements "
                 "acting there, the initial conditions and the time step")
 
-    def _converged(self, z: np.ndarray, dz: np.ndarray, relax: float = 1.0) -> bool:
+    def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
         st = self.settings
         ok = True
         for k in self._present:
             b = self._blocks[k]
             zn = _real_norm(z[b])
             self._scales[k] = max(self._scales[k], zn)
-            if _real_norm(dz[b]) > relax * st.rtol * max(zn, self._scales[k]) + st.atol:
+            if _real_norm(dz[b]) > st.rtol * max(zn, self._scales[k]) + st.atol:
                 ok = False
         return ok
 
