@@ -31,7 +31,7 @@ from ..base import Linearization, Model, Output, ParameterTable, StepState, Trai
 from .bodies import BodyDef, BodyParams, Ctx, MBParams, inertial_forces
 from .forces import ForceElement
 from .hydraulics import HydraulicCylinder
-from .joints import Equation, Joint, NormEq
+from .joints import DotBlock, Equation, Joint, NormEq
 from .rotations import from_axis_angle
 
 Array = np.ndarray
@@ -78,6 +78,10 @@ class MultibodyModel(Model):
         for b in bodies:
             self.eqs.append(NormEq(b.index))
             self.eq_owner.append(f"{b.name}.normalization")
+        plain = [i for i, eq in enumerate(self.eqs) if DotBlock.accepts(eq)]
+        self._block_rows = np.array(plain, dtype=int)
+        self._block = DotBlock([self.eqs[i] for i in plain]) if plain else None   # type: ignore[misc]
+        self._other_rows = [i for i in range(len(self.eqs)) if i not in set(plain)]
         n_q = 7 * len(bodies)
         n_p = 2 * len(cylinders)
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p)
@@ -120,7 +124,16 @@ class MultibodyModel(Model):
     # ------------------------------------------------------------------ residual
     def constraint_values(self, ctx: Ctx, eqs: list[Equation] | None = None
                           ) -> tuple[Array, Array, Array]:
-        """Φ, Φ̇, Φ̈ (n_eq, k) for the batch in ctx."""
+        """Φ, Φ̇, Φ̈ (n_eq, k) for the batch in ctx (default: the model's Φ, block-evaluated)."""
+        if eqs is None and self._block is not None:
+            dt = np.result_type(ctx.q, ctx.qd, ctx.qdd, ctx.params.pv, float)
+            out = [np.empty((len(self.eqs), ctx.k), dt) for _ in range(3)]
+            for o, v in zip(out, self._block.evaluate(ctx)):
+                o[self._block_rows] = v
+            for i in self._other_rows:
+                for o, v in zip(out, self.eqs[i].evaluate(ctx)):
+                    o[i] = v[0]
+            return out[0], out[1], out[2]
         vals = [eq.evaluate(ctx) for eq in (self.eqs if eqs is None else eqs)]
         if not vals:
             z = np.zeros((0, ctx.k))
@@ -146,8 +159,11 @@ class MultibodyModel(Model):
         ctx = Ctx(q, qd, qdd, params, t)
         R1 = np.zeros((self.traits.n_q, k), dt)
         inertial_forces(ctx, len(self.bodies), R1)
-        for i, eq in enumerate(self.eqs):
-            eq.push(ctx, lam[i:i + 1])
+        lam = np.broadcast_to(lam, (lam.shape[0], k))
+        if self._block is not None:
+            self._block.push(ctx, lam[self._block_rows])
+        for i in self._other_rows:
+            self.eqs[i].push(ctx, lam[i:i + 1])
         ctx.flush(R1)
         R1 = R1 - self.generalized_forces(ctx, p)
         phi, phid, phidd = self.constraint_values(ctx)
