@@ -14,8 +14,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import NonFiniteError
-from .integrators.newmark import Newmark, Prediction
+from .errors import ConvergenceError, NonFiniteError
+from .integrators.newmark import Aux, Newmark, Prediction
 from .models.base import Model, StepState
 from .responses import ResponseSet, ResponseValue
 from .sensitivity import DesignPartials, initial_state_gradient, pseudo_load
@@ -43,6 +43,8 @@ class RunPlan:
         converged state: exact, one more factorization per step for nonlinear models).
     history : which state histories to store (subset of q, qd, qdd, lam, p, pd).
     sensitivity_history : store the sensitivity histories of the same fields.
+    max_step_cuts : how often a step whose Newton iteration fails is halved before the run
+        stops (responses and histories keep the regular grid; the sub-steps are internal).
     """
 
     t0: float
@@ -55,6 +57,7 @@ class RunPlan:
     sensitivity_matrix: str = "reuse"
     history: tuple[str, ...] = ("q", "qd", "qdd")
     sensitivity_history: bool = False
+    max_step_cuts: int = 6
 
     @property
     def n_steps(self) -> int:
@@ -122,7 +125,8 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     m = np.size(x)
     solver = StepSolver(model, plan.newton, counters, newton=not tr.linear,
                         refactor=not tr.constant_matrices,
-                        need_converged_factor=sens and plan.sensitivity_matrix == "converged")
+                        need_converged_factor=sens and plan.sensitivity_matrix == "converged",
+                        sensitivities=sens)
     labels = model.dof_labels()
     n_steps = plan.n_steps
 
@@ -179,22 +183,33 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
     last = 0
     t = plan.t0
-    for i in range(1, n_steps + 1):
-        h = plan.step_size(i)
-        t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
-        coeffs = scheme.coefficients(h)
+    def take_step(i: int, t_prev: float, h: float, cuts: int, s: StepState, aux: Aux,
+                  ds: StepState | None, daux: Aux | None
+                  ) -> tuple[StepState, Aux, StepState | None, Aux | None]:
+        """Advance from t_prev by h (s); on Newton failure, halve the step (up to
+        plan.max_step_cuts times) — primal and sensitivities follow the steps taken."""
+        t = t_prev + h
         pred = scheme.predict(s, aux, h)
         z_guess = np.concatenate([s.qdd, s.lam, s.pd])
 
-        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray,
-                    _h: float = h) -> StepState:
-            return scheme.correct(pr, qdd, lam, pd, _h)
+        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
+            return scheme.correct(pr, qdd, lam, pd, h)
 
-        out = solver.solve_step(t, i, pred, z_guess, params, coeffs, correct)
+        try:
+            out = solver.solve_step(t, i, pred, z_guess, params, scheme.coefficients(h), correct)
+        except ConvergenceError as exc:
+            if cuts >= plan.max_step_cuts:
+                if plan.max_step_cuts:
+                    exc.args = (f"{exc.args[0]} (after {cuts} step cuts down to Δt = {h:.3g} s)",)
+                raise
+            counters.step_cuts += 1
+            half = 0.5 * h
+            s, aux, ds, daux = take_step(i, t_prev, half, cuts + 1, s, aux, ds, daux)
+            return take_step(i, t_prev + half, half, cuts + 1, s, aux, ds, daux)
         s_new = out.state
         _check_finite(s_new, t, i, labels)
         model.check_state(t, s_new, params)
-        aux = scheme.advance(pred, s_new)
+        aux_new = scheme.advance(pred, s_new)
         if partials is not None and ds is not None and daux is not None:
             dpred = scheme.predict(ds, daux, h)
             P = pseudo_load(model, t, s_new, out.lin, dpred.q, dpred.qd, dpred.p, partials)
@@ -203,6 +218,12 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
             dz = solver.solve_sensitivity(out.factor, P)
             ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
             daux = scheme.advance(dpred, ds)
+        return s_new, aux_new, ds, daux
+
+    for i in range(1, n_steps + 1):
+        h = plan.step_size(i)
+        t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
+        s_new, aux, ds, daux = take_step(i, t_prev, h, 0, s, aux, ds, daux)
         s = s_new
         counters.steps += 1
         record(i, t, s, ds)

@@ -19,11 +19,14 @@ def test_no_sensitivities_no_sensitivity_work():
     assert off["sensitivity_residual_evaluations"] == 0
     assert off["solve_columns"] == off["solves"]            # only vector right-hand sides
     assert on["sensitivity_residual_evaluations"] == (on["steps"] + 1) * 5   # m + 1 = 5 per step (forward)
-    # sensitivities reuse the Newton factorization: no extra factorization at all
-    assert on["factorizations"] == off["factorizations"]
+    # sensitivities reuse the last Newton factorization; only a step accepted on a round-off
+    # residual (its factor one full correction old) is factorized again: at most one per step
+    assert on["factorizations"] - off["factorizations"] <= on["steps"] + 1
     exact = dynsens.run_case(dynsens.load_case(CASES / "duffing_chain.yaml", [
         "integrator.t_end=0.2", "sensitivity.matrix=converged"])).counters
     assert exact["factorizations"] - off["factorizations"] <= exact["steps"] + 1
+    lin_on = dynsens.run_case(dynsens.load_case(CASES / "sdof_step.yaml", ["integrator.t_end=0.2"])).counters
+    assert lin_on["factorizations"] == 2        # linear: never more than the primal run's two
 
 
 def test_only_requested_histories_are_stored():

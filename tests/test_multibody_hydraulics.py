@@ -60,7 +60,10 @@ def test_static_initial_state():
 def test_event_sensitivities_match_complex_step_of_whole_run():
     """Event time, stroke/pressure at the event (interpolated, total derivative), KS of the
     pivot force, initial angle, and the state / multiplier / pressure sensitivities at the
-    event step: all within 1e-9 relative of complex step of the whole simulation."""
+    event step, against complex step of the whole simulation.
+
+    Stated tolerance 1e-9 relative (complex-step partials; the agreement is ~1e-12 when every
+    Newton solve is converged to round-off).  A modelling error shows up at 1e-3 or more."""
     case = dynsens.load_case(CASE, overrides=FAST + ["output.sensitivity_history=true",
                                                      "output.history=all"])
     res = dynsens.run_case(case)

@@ -231,7 +231,7 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
 def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                 ) -> tuple[Newmark | None, RunPlan | None, str]:
     ok = check_keys(spec, "integrator", ("scheme", "beta", "gamma", "alpha", "rho_inf", "dt", "t0", "t_end",
-                                        "solver", "event_location"), pc, required=("dt", "t_end"))
+                                        "solver", "event_location", "max_step_cuts"), pc, required=("dt", "t_end"))
     if sens is None:
         sens = {}
     ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
@@ -297,6 +297,10 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     sh = output.get("sensitivity_history", False)
     if not isinstance(sh, bool):
         pc.add("output.sensitivity_history", f"expected true or false, found {sh!r}")
+    cuts = spec.get("max_step_cuts", 6)
+    if isinstance(cuts, bool) or not isinstance(cuts, int) or not 0 <= cuts <= 30:
+        pc.add("integrator.max_step_cuts", f"expected an integer in [0, 30], found {cuts!r}")
+        cuts = 6
     loc = spec.get("event_location", "interpolate")
     if loc not in ("interpolate", "step"):
         pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
@@ -304,7 +308,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
         return scheme, None, str(loc)
     plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
                    partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
-                   history=tuple(hist), sensitivity_history=bool(sh))
+                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts)
     return scheme, plan, str(loc)
 
 

@@ -39,6 +39,7 @@ class Counters:
     solve_columns: int = 0
     sensitivity_residual_evaluations: int = 0
     output_evaluations: int = 0
+    step_cuts: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, int]:

@@ -23,11 +23,16 @@ from ..models.base import Linearization, Model, StepState
 from .linalg import Counters, Factor, SingularMatrixError
 
 
+# Componentwise backward error below which a residual is round-off (≈ 500 ε).
+ROUNDOFF = 1e-13
+
+
 @dataclass(frozen=True)
 class NewtonSettings:
     """Newton tolerances: converged when, for every block b of z (q̈, λ, ṗ),
     ‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol, scale_b being the largest ‖z_b‖ seen so far
-    in the run (so the test is relative to the problem's own magnitudes, in any units)."""
+    in the run (so the test is relative to the problem's own magnitudes, in any units); a
+    block that has been zero throughout is measured against ‖z‖."""
 
     rtol: float = 1e-10
     atol: float = 0.0
@@ -64,24 +69,27 @@ class StepSolver:
     newton : whether Newton iterations are needed (False for linear models: one solve).
     refactor : whether S changes during the run (False for constant matrices: factor once
         per distinct coefficient triple).
-    need_converged_factor : factor S at the converged state for the sensitivity solve.
+    need_converged_factor : always factor S at the converged state for the sensitivity solve
+        (``sensitivity.matrix: converged``).
+    sensitivities : sensitivities follow each step (a stale factor must then be renewed).
     """
 
     def __init__(self, model: Model, settings: NewtonSettings, counters: Counters, *,
-                 newton: bool, refactor: bool, need_converged_factor: bool):
+                 newton: bool, refactor: bool, need_converged_factor: bool, sensitivities: bool = False):
         self.model = model
         self.settings = settings
         self.counters = counters
         self.newton = newton
         self.refactor = refactor
         self.need_converged_factor = need_converged_factor
+        self.sensitivities = sensitivities
         t = model.traits
         self._blocks = [slice(0, t.n_q), slice(t.n_q, t.n_q + t.n_lam),
                         slice(t.n_q + t.n_lam, t.n_z)]
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._scales = np.zeros(3)
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
-        self._smax = 0.0
+        self._abs_S: Any = None
 
     def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         b = self._blocks
@@ -94,7 +102,7 @@ class StepSolver:
         self.counters.linearizations += 1
         lin = self.model.linearize(t, s, params)
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
-        self._smax = float(abs(S).max().real) if S.shape[0] else 0.0
+        self._abs_S = abs(S.real)
         factor = Factor(S, self.counters)
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
@@ -120,10 +128,10 @@ class StepSolver:
             history.append(rnorm)
             if not np.isfinite(rnorm):
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
-            if it > 1 and rnorm <= st.rtol * self._force_scale(z):
-                # the residual is at the round-off level of the terms it is made of (this
-                # catches unknowns that are zero, e.g. accelerations of a static start)
-                return self._accept(t, s, params, coeffs, lin, factor, it - 1)
+            if it > 1 and self._at_roundoff(R, z):
+                # each residual entry is within round-off of the terms that make it up (Oettli-
+                # Prager backward error): no correction can improve z, whatever the conditioning
+                return self._accept(t, s, params, coeffs, lin, factor, it - 1, fresh=False)
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:
@@ -140,7 +148,7 @@ class StepSolver:
                 return StepOutcome(s, lin, factor, it)
             if self._converged(z, dz):
                 s = correct(pred, *self._split(z))
-                return self._accept(t, s, params, coeffs, lin, factor, it)
+                return self._accept(t, s, params, coeffs, lin, factor, it, fresh=True)
         raise ConvergenceError(
             "Newton-Raphson did not converge", t=t, step=step, iterations=st.max_iterations,
             residual_history=history,
@@ -148,16 +156,22 @@ class StepSolver:
                  "or raise solver.max_iterations")
 
     def _accept(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
-                lin: Linearization | None, factor: Factor | None, iterations: int) -> StepOutcome:
-        if self.need_converged_factor and self.refactor:
-            # the sensitivity solve needs S at the converged state, not at the previous
-            # iterate (method.md §4)
+                lin: Linearization | None, factor: Factor | None, iterations: int,
+                fresh: bool) -> StepOutcome:
+        """Converged at s.  The sensitivity solve needs S at the converged state (method.md §4):
+        in ``reuse`` mode the last factor serves when it is ``fresh`` (its iterate is one
+        correction within the tolerance away from s); otherwise, and always in ``converged``
+        mode, S is factorized again at s."""
+        if self.sensitivities and self.refactor and (self.need_converged_factor or not fresh):
             lin, factor = self._linearize_and_factor(t, s, params, coeffs)
         return StepOutcome(s, lin, factor, iterations)
 
-    def _force_scale(self, z: np.ndarray) -> float:
-        """Magnitude of the terms S z that make up the residual: max|S| · max|z|."""
-        return self._smax * float(np.max(np.abs(z.real))) if z.size else 0.0
+    def _at_roundoff(self, R: np.ndarray, z: np.ndarray) -> bool:
+        """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix."""
+        if self._abs_S is None:
+            return False
+        terms = self._abs_S @ np.abs(z.real)
+        return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
         """Say where a non-finite residual comes from: an overflowing (diverging) coordinate,
@@ -177,11 +191,15 @@ class StepSolver:
     def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
         st = self.settings
         ok = True
+        z_all = _real_norm(z)
         for k in self._present:
             b = self._blocks[k]
             zn = _real_norm(z[b])
             self._scales[k] = max(self._scales[k], zn)
-            if _real_norm(dz[b]) > st.rtol * max(zn, self._scales[k]) + st.atol:
+            # a block that has been exactly zero so far (accelerations of a static start) has
+            # no scale of its own: measure its correction against the whole unknown vector
+            ref = max(zn, self._scales[k]) if self._scales[k] > 0 else z_all
+            if _real_norm(dz[b]) > st.rtol * ref + st.atol:
                 ok = False
         return ok
 

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .rotations import E_mul, T_G, point_tensor
+from .rotations import E_mul, T_G, point_tensor, rmatmul
 
 GROUND = -1
 Array = np.ndarray
@@ -270,12 +270,12 @@ class Diff(Term):
 def _jt_apply(Ts: Array, p: Array, f: Array) -> Array:
     """g (4, k) = Σ_{a,l} Ts[a,k,l] p_l f_a, i.e. ½ ∂(A(p)s·f)/∂p."""
     fp = (f[:, None, :] * p[None, :, :]).reshape(12, -1)
-    return Ts.transpose(1, 0, 2).reshape(4, 12) @ fp
+    return rmatmul(Ts.transpose(1, 0, 2).reshape(4, 12), fp)
 
 
 def _quad_kin(Ts: Array, L: Array) -> Array:
     """Stacked [A(p)s, 2Q(p,ṗ)s, 2Q(p,p̈)s + 2Q(ṗ,ṗ)s] (3, 3, k) for L = [p, ṗ, p̈] (3, 4, k)."""
-    tmp = (Ts.transpose(0, 2, 1).reshape(12, 4) @ L[:2]).reshape(2, 1, 3, 4, -1)   # [i, ., a, l, n]
+    tmp = rmatmul(Ts.transpose(0, 2, 1).reshape(12, 4), L[:2]).reshape(2, 1, 3, 4, -1)   # [i, ., a, l, n]
     W = (tmp * L[None, :, None]).sum(3)                                            # [i, j, a, n]
     return np.stack([W[0, 0], 2.0 * W[1, 0], 2.0 * (W[0, 2] + W[1, 1])])
 

@@ -315,8 +315,13 @@ def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
     a = Assembly()
     if not check_keys(spec, path, ("hold", "distances", "time", "tolerance"), rd.problems):
         return a
-    a.t0 = float(spec.get("time", 0.0))
-    a.tol = float(spec.get("tolerance", 1e-12))
+    for key, default in (("time", 0.0), ("tolerance", 1e-12)):
+        v = spec.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (key == "tolerance" and v <= 0):
+            rd.problems.add(f"{path}.{key}", f"expected a {'positive ' if key == 'tolerance' else ''}"
+                                             f"number, found {v!r}")
+    a.t0 = float(spec["time"]) if isinstance(spec.get("time"), (int, float)) else 0.0
+    a.tol = float(spec["tolerance"]) if isinstance(spec.get("tolerance"), (int, float)) else 1e-12
     one = const_coef(1.0)
     for i, h in enumerate(spec.get("hold", []) or []):
         hp = f"{path}.hold[{i}]"

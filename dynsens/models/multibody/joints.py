@@ -41,6 +41,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .bodies import GROUND, Const, Ctx, Diff, Direction, MBParams, Point, Term
+from .rotations import rmatmul
 
 Array = np.ndarray
 # a time coefficient: (t, params) -> (value, first derivative, second derivative)
@@ -201,6 +202,7 @@ class DotBlock:
         self.Sb = np.zeros((n_t, n_e))
         self.Sa[self.ia, np.arange(n_e)] = 1.0
         self.Sb[self.ib, np.arange(n_e)] = 1.0
+        self.S = np.hstack([self.Sa, self.Sb])
         self.active = [i for i, t in enumerate(terms) if t.bodies and any(b != GROUND for b in t.bodies)]
 
     @staticmethod
@@ -228,7 +230,7 @@ class DotBlock:
         n_e = lam.shape[0]
         fa = (lam[:, None, :] * B[:, 0]).reshape(n_e, -1)
         fb = (lam[:, None, :] * A[:, 0]).reshape(n_e, -1)
-        F = (self.Sa @ fa + self.Sb @ fb).reshape(len(self.terms), 3, k)
+        F = rmatmul(self.S, np.concatenate([fa, fb])).reshape(len(self.terms), 3, k)
         for i in self.active:
             ctx.push(self.terms[i], F[i])
 

@@ -26,7 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...errors import ModelError, ProblemCollector
+from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .bodies import BodyDef, BodyParams, Ctx, MBParams, inertial_forces
 from .forces import ForceElement
@@ -271,6 +271,3 @@ class MultibodyModel(Model):
         """Resolve a quantity spec (see :mod:`.outputs`)."""
         from .outputs import resolve_output
         return resolve_output(self, spec, path, problems)
-
-    def fail(self, msg: str) -> None:
-        raise ModelError(msg)

@@ -133,6 +133,14 @@ def perpendicular_pair(w: Array) -> tuple[Array, Array]:
     return u, v
 
 
+def rmatmul(A: Array, X: Array) -> Array:
+    """A @ X for a real A and a real or complex X (complex matmul with mixed types is very
+    slow in numpy, so the real and imaginary parts are multiplied separately)."""
+    if np.iscomplexobj(X):
+        return (A @ X.real) + 1j * (A @ X.imag)
+    return A @ X
+
+
 def _tensors() -> tuple[Array, Array, Array]:
     """Constant tensors of the bilinear forms: Q(a,b)_ab = T[a,b,k,l] a_k b_l,
     G(a) b = Gt[i,k,l] a_k b_l, E(a) b = Et[i,k,l] a_k b_l."""
