@@ -43,7 +43,7 @@ class ResponseValue:
     gradient: np.ndarray | None
     unit: str = ""
     missing: str | None = None
-    kind: str = ""
+    kind: str = ""   # "fixed_time": gradient with the event time held fixed (not what FD measures)
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -118,12 +118,13 @@ class ValueAt(Response):
         self._last = smp
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
+        kind = "fixed_time" if self.fixed_time else ""
         if self.event is not None:
             if self.event not in ctx.events:
                 return ResponseValue(np.nan, None, self.unit, missing=f"event '{self.event}' never fired")
             assert self._last is not None
             v, g = self._pick(self._last)
-            return ResponseValue(v, g, self.unit)
+            return ResponseValue(v, g, self.unit, kind=kind)
         if self.time is not None:
             if self._hit is None:
                 return ResponseValue(np.nan, None, self.unit,
@@ -131,7 +132,7 @@ class ValueAt(Response):
             return ResponseValue(self._hit[0], self._hit[1], self.unit)
         assert self._last is not None
         v, g = self._pick(self._last)
-        return ResponseValue(v, g, self.unit)
+        return ResponseValue(v, g, self.unit, kind=kind)
 
 
 class KSAggregate(Response):

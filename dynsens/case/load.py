@@ -128,7 +128,7 @@ def load_case_text(text: str, source: str = "<string>", overrides: list[str] | t
 def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tuple[str, ...] = (),
                    text: str | None = None) -> Case:
     """Validate a case given as a mapping (as scripts build them)."""
-    raw = copy.deepcopy(raw)
+    raw = _plain(copy.deepcopy(raw))
     if overrides:
         apply_overrides(raw, list(overrides), source)
         text = None
@@ -174,6 +174,20 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                 _make_responses=lambda: ResponseSet(outputs, factory(), ev),
                 response_names=rnames, event_names=tuple(e.name for e in events),
                 optimization=optimization)
+
+
+def _plain(node: Any) -> Any:
+    """The mapping with numpy scalars and arrays turned into plain Python (scripts build cases
+    with numpy; the case text stored with the results must be plain YAML)."""
+    if isinstance(node, dict):
+        return {k: _plain(v) for k, v in node.items()}
+    if isinstance(node, (list, tuple)):
+        return [_plain(v) for v in node]
+    if isinstance(node, np.ndarray):
+        return _plain(node.tolist())
+    if isinstance(node, np.generic):
+        return node.item()
+    return node
 
 
 def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:

@@ -104,14 +104,31 @@ class SpringDamper(ForceElement):
     c: int
     free_length: str
 
+    n_pressures = 0
+
+    def constants(self, prm: Any) -> Array:
+        """[k, k3, c, L0] for one parameter set (complex-safe)."""
+        pv = prm.pv
+        return np.array([pv[self.k], pv[self.k3], pv[self.c], prm.scal[self.free_length]])
+
+    def law(self, L: Array, Ld: Array, p: Array, t: float, pv: Array, c: Array) -> tuple:
+        """Push force P = −F (tension F positive) and its partials for length L and rate L̇
+        (arrays of any shape; c the :meth:`constants` with the same leading shape + (4,)).
+
+        Returns (P, P_L, P_L̇, P_p, h, h_L, h_L̇, h_p) in the form of
+        :meth:`.hydraulics.HydraulicCylinder.law` (a spring has no pressure states).
+        """
+        k, k3, cd, L0 = (c[..., i] for i in range(4))
+        e = L - L0
+        F = k * e + k3 * e * e * e + cd * Ld
+        return -F, -(k + 3.0 * k3 * e * e), -cd + 0 * L, [], [], [], [], []
+
     def state(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(L, L̇, F) each (1, k): length, rate and tension force."""
         dv, dd, _ = self.d.kin(ctx)
         L = np.sqrt(dot(dv, dv))
         Ld = dot(dv, dd) / L
-        pv = ctx.params.pv
-        e = L - ctx.params.scal[self.free_length]
-        F = pv[self.k] * e + pv[self.k3] * e * e * e + pv[self.c] * Ld
+        F = -self.law(L, Ld, np.zeros(0), ctx.t, ctx.params.pv, self.constants(ctx.params))[0]
         return L, Ld, F
 
     def add(self, ctx: Ctx, out: Array) -> None:

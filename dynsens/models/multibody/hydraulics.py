@@ -52,8 +52,47 @@ class HydraulicCylinder:
     initial: Any = "static"     # "static" or (i_p1, i_p2) parameter indices
     initial_p2: int = -1
 
+    n_pressures = 2
+
     def areas(self, prm: Any) -> tuple[Any, Any]:
         return prm.scal[self.name + ".A1"], prm.scal[self.name + ".A2"]
+
+    def constants(self, prm: Any) -> Array:
+        """[A1, A2, L0, s_max, K, V_h1, V_h2, G_T, p_T, d_HA] for one parameter set."""
+        pv, ix = prm.pv, self.idx
+        return np.array([*self.areas(prm)] + [pv[ix[k]] for k in (
+            "length_0", "stroke_max", "bulk_modulus", "dead_volume_1", "dead_volume_2",
+            "tank_conductance", "tank_pressure", "damping")])
+
+    @staticmethod
+    def _volumes(s: Array, c: Array) -> tuple[Array, Array]:
+        return c[..., 5] + c[..., 0] * s, c[..., 6] + c[..., 1] * (c[..., 3] - s)
+
+    def law(self, L: Array, Ld: Array, p: Array, t: float, pv: Array, c: Array) -> tuple:
+        """Actuator force F_h, pressure rates h1, h2 and their exact partials.
+
+        Parameters
+        ----------
+        L, Ld : distance |AB| (length) and its rate (length/s), any shape.
+        p : pressures [p1, p2] (pressure), shape (..., 2).
+        t : time (s); pv : parameter vector(s); c : :meth:`constants`, shape (..., 10).
+
+        Returns
+        -------
+        (P, P_L, P_L̇, P_p, h, h_L, h_L̇, h_p): the push force P = F_h (force), its partials
+        by L, L̇ and [p1, p2] (a list), the rates h = [h1, h2] (pressure/s) and their partials
+        (lists; h_p[i][j] = ∂h_i/∂p_j).
+        """
+        A1, A2, L0, K, G, pT, dmp = (c[..., i] for i in (0, 1, 2, 4, 7, 8, 9))
+        V1, V2 = self._volumes(L - L0, c)
+        p1, p2 = p[..., 0], p[..., 1]
+        QP = pv[..., self.idx["pump_flow"]] * self.pump.value(t, pv)
+        h1 = K / V1 * (QP - A1 * Ld)
+        h2 = K / V2 * (A2 * Ld - G * (p2 - pT))
+        zero = 0 * L
+        return (p1 * A1 - p2 * A2 - dmp * Ld, zero, -dmp + zero, [A1 + zero, -A2 + zero],
+                [h1, h2], [-A1 * h1 / V1, A2 * h2 / V2], [-K * A1 / V1, K * A2 / V2],
+                [[zero, zero], [zero, -K * G / V2]])
 
     def kinematics(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(s, ṡ, ê): stroke (1, k), stroke rate (1, k), unit axis A→B (3, k)."""
@@ -64,39 +103,27 @@ class HydraulicCylinder:
 
     def volumes(self, s: Array, prm: Any) -> tuple[Array, Array]:
         """Chamber volumes V1, V2 (length³) for stroke s."""
-        pv = prm.pv
-        A1, A2 = self.areas(prm)
-        return (pv[self.idx["dead_volume_1"]] + A1 * s,
-                pv[self.idx["dead_volume_2"]] + A2 * (pv[self.idx["stroke_max"]] - s))
+        return self._volumes(s, self.constants(prm))
+
+    def _law_at(self, ctx: Ctx, p: Array) -> tuple:
+        s, sd, _ = self.kinematics(ctx)
+        j = self.p_index
+        L = s + ctx.params.pv[self.idx["length_0"]]
+        return self.law(L, sd, p[j:j + 2].T, ctx.t, ctx.params.pv, self.constants(ctx.params))
 
     def force(self, ctx: Ctx, p: Array) -> Array:
         """F_h (1, k), force unit, for pressures p (n_p, k)."""
-        s, sd, _ = self.kinematics(ctx)
-        A1, A2 = self.areas(ctx.params)
-        j = self.p_index
-        return p[j:j + 1] * A1 - p[j + 1:j + 2] * A2 - ctx.params.pv[self.idx["damping"]] * sd
+        return self._law_at(ctx, p)[0]
 
     def add(self, ctx: Ctx, p: Array, out: Array) -> None:
         """Generalized force of the actuator pair into out (n_q, k)."""
         _, _, e = self.kinematics(ctx)
         self.d.apply(ctx, self.force(ctx, p) * e, out)
 
-    def pump_flow(self, t: float, prm: Any) -> Any:
-        """Q_P(t) (length³/s)."""
-        return prm.pv[self.idx["pump_flow"]] * self.pump.value(t, prm.pv)
-
     def rates(self, ctx: Ctx, p: Array) -> tuple[Array, Array]:
         """h1, h2 (1, k): pressure rates (pressure/s)."""
-        prm = ctx.params
-        pv = prm.pv
-        s, sd, _ = self.kinematics(ctx)
-        V1, V2 = self.volumes(s, prm)
-        A1, A2 = self.areas(prm)
-        K = pv[self.idx["bulk_modulus"]]
-        j = self.p_index
-        h1 = K / V1 * (self.pump_flow(ctx.t, prm) - A1 * sd)
-        h2 = K / V2 * (A2 * sd - pv[self.idx["tank_conductance"]] * (p[j + 1:j + 2] - pv[self.idx["tank_pressure"]]))
-        return h1, h2
+        h = self._law_at(ctx, p)[4]
+        return h[0], h[1]
 
     def check(self, ctx: Ctx, t: float) -> None:
         """Raise ModelError when a chamber volume is not positive."""

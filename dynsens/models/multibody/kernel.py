@@ -1,0 +1,279 @@
+r"""Vectorized kinematics of all vector terms, dot products and normalisations (the hot path).
+
+The building blocks of :mod:`.bodies` and :mod:`.joints` define the model term by term;
+this module evaluates all of them at once for a state, with few numpy calls:
+
+* *primitives*: the distinct points and body-fixed directions on moving bodies.  With
+  ``Ts`` the point tensor of the body vector s̄ (:func:`.rotations.point_tensor`) and
+  ``C(a) = Ts·a`` (3×4, linear in a), a primitive's value, velocity and acceleration are
+  ``C(p)p (+ r)``, ``2C(p)ṗ (+ ṙ)`` and ``2C(p)p̈ + 2C(ṗ)ṗ (+ r̈)``; their Jacobians with
+  respect to p are ``2C(p)``, ``2C(ṗ)``, ``2C(p̈)`` (exact: A(p)s̄ is quadratic in p);
+* *sides*: every vector term (a point separation, a constant...) is a fixed linear
+  combination ``M`` of primitives plus a design-dependent constant;
+* *products* ``x = a·b`` of two sides, with ẋ, ẍ and the rows ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q (the
+  constraint equations' terms first, then one ``d·d`` per axial force element).
+
+Arrays carry a leading batch axis B: states (B or 1) and parameter sets (B or 1)
+broadcast, so perturbed designs (design partials, output gradients) take one call.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .bodies import GROUND, Const, Diff, Direction, MBParams, Point, Term
+from .joints import ONE, DotEq, Equation, NormEq
+from .rotations import point_tensor, rmatmul
+
+Array = np.ndarray
+
+
+class Layout:
+    """Index structure of the model's terms, built once per model.
+
+    Parameters
+    ----------
+    n_bodies : number of moving bodies.
+    eqs : the model's equations (:class:`DotEq` and :class:`NormEq`), in λ order.
+    axial : the axial force elements (springs, cylinders; each with a point separation ``d``).
+    points : points at which point forces act.
+    """
+
+    def __init__(self, n_bodies: int, eqs: list[Equation], axial: list[Any], points: list[Point]):
+        self.n_b, self.n_q, self.n_eq = n_bodies, 7 * n_bodies, len(eqs)
+        self.prims: list[Term] = []
+        self._pid: dict[tuple[Any, ...], int] = {}
+        sides: list[tuple[dict[int, float], list[tuple[str, float]]]] = []
+        self.coefs: list[tuple[int, Any]] = []           # (product, coefficient) when not ONE
+        self.shifts: list[tuple[int, Any]] = []          # (equation, shift)
+        prod_eq, norm_eq, norm_body = [], [], []
+        for e, eq in enumerate(eqs):
+            if isinstance(eq, NormEq):
+                norm_eq.append(e)
+                norm_body.append(eq.body)
+            elif isinstance(eq, DotEq):
+                for coef, a, b in eq.terms:
+                    if coef is not ONE:
+                        self.coefs.append((len(prod_eq), coef))
+                    prod_eq.append(e)
+                    sides += [self._side(a), self._side(b)]
+                if eq.shift is not None:
+                    self.shifts.append((e, eq.shift))
+            else:  # pragma: no cover - all equations are DotEq or NormEq
+                raise TypeError(f"unsupported equation {type(eq).__name__}")
+        self.n_cp = len(prod_eq)
+        self.axial = axial
+        for el in axial:
+            sides += [self._side(el.d), self._side(el.d)]
+        self.point_prim = [self._side(P)[0] for P in points]
+        self.point_prim = [next(iter(m)) if m else -1 for m in self.point_prim]
+        n_t, n_p = len(self.prims), len(sides) // 2
+        self.n_t, self.n_prod = n_t, n_p
+        self.MA, self.MB = np.zeros((n_p, n_t)), np.zeros((n_p, n_t))
+        for i, (lin, _) in enumerate(sides):
+            M = self.MA if i % 2 == 0 else self.MB
+            for j, c in lin.items():
+                M[i // 2, j] += c
+        self.const_keys = [(i // 2, i % 2, key, sg) for i, (_, cs) in enumerate(sides) for key, sg in cs]
+        self.S = np.zeros((self.n_eq, self.n_cp))
+        self.S[prod_eq, np.arange(self.n_cp)] = 1.0
+        self.norm_eq, self.norm_body = np.array(norm_eq, int), np.array(norm_body, int)
+        self.pb = np.array([t.body for t in self.prims], int)              # type: ignore[attr-defined]
+        self.is_point = np.array([isinstance(t, Point) for t in self.prims], float)
+        self._scatter()
+
+    def _side(self, term: Term) -> tuple[dict[int, float], list[tuple[str, float]]]:
+        """term = Σ_j lin[j] prim_j + Σ sign·vec[key]."""
+        lin: dict[int, float] = {}
+        const: list[tuple[str, float]] = []
+
+        def walk(t: Term, sign: float) -> None:
+            if isinstance(t, Diff):
+                walk(t.a, sign)
+                walk(t.b, -sign)
+            elif isinstance(t, (Point, Direction)) and t.body != GROUND:
+                key = (type(t).__name__, t.body, t.key)
+                if key not in self._pid:
+                    self._pid[key] = len(self.prims)
+                    self.prims.append(t)
+                j = self._pid[key]
+                lin[j] = lin.get(j, 0.0) + sign
+            elif isinstance(t, (Point, Direction, Const)):
+                const.append((t.key, sign))
+            else:  # pragma: no cover
+                raise TypeError(f"unsupported term {type(t).__name__}")
+        walk(term, 1.0)
+        return lin, const
+
+    def _scatter(self) -> None:
+        """Index arrays placing primitive blocks into (n_q,)-long rows."""
+        n_q, n_t = self.n_q, self.n_t
+        pcol = 7 * self.pb[:, None] + 3 + np.arange(4)[None, :]             # (n_t, 4)
+        rcol = 7 * self.pb[:, None] + np.arange(3)[None, :]                 # (n_t, 3)
+        # generalized force of primitive forces f (n_t, 3): R1 += Gf @ [f·is_point, 2C(p)ᵀf]
+        self.Gf = np.zeros((n_q, n_t * 7))
+        for j in range(n_t):
+            if self.is_point[j]:
+                self.Gf[rcol[j], 7 * j + np.arange(3)] = 1.0
+            self.Gf[pcol[j], 7 * j + 3 + np.arange(4)] = 1.0
+        # Jacobian rows K (n_t, 3 levels, 3, n_q): identity on r (points, level 0) and
+        # the flat positions of the p-blocks
+        base = np.zeros((n_t, 3, 3, n_q))
+        for j in range(n_t):
+            if self.is_point[j]:
+                base[j, 0, np.arange(3), rcol[j]] = 1.0
+        self.K_base = base
+        jj, lev, a, k = np.meshgrid(np.arange(n_t), np.arange(3), np.arange(3), np.arange(4), indexing="ij")
+        self.K_idx = np.ravel_multi_index((jj, lev, a, pcol[jj, k]), base.shape) if n_t else \
+            np.zeros((0, 3, 3, 4), int)
+        self.H_idx = (np.broadcast_to(pcol[:, :, None], (n_t, 4, 4)),
+                      np.broadcast_to(pcol[:, None, :], (n_t, 4, 4)))
+        bcol = 7 * self.norm_body[:, None] + 3 + np.arange(4)[None, :]       # (n_norm, 4)
+        self.norm_cols = bcol
+
+
+@dataclass
+class KParams:
+    """Design-dependent arrays of the kernel for B parameter sets (leading axis B)."""
+
+    Ts: Array              # (B, n_t, 12, 4) point tensors, rows (a, k)
+    Ts4: Array             # (B, n_t, 3, 4, 4) the same
+    cA: Array              # (B, n_prod, 3) constant parts of the sides
+    cB: Array
+    mass: Array            # (B, n_b)
+    J: Array               # (B, n_b, 3, 3) inertia tensors, body axes
+    pv: Array              # (B, n_pv)
+    ec: list[Array]        # per axial element: its constants (B, n_c)
+    prms: list[MBParams]
+
+    @property
+    def B(self) -> int:
+        return self.pv.shape[0]
+
+
+def kernel_params(lay: Layout, prm: MBParams) -> KParams:
+    """KParams (B = 1) of one parameter set, cached on ``prm``."""
+    hit = prm.ts.get("__kernel__")
+    if hit is not None:
+        return hit  # type: ignore[return-value]
+    dt = np.result_type(prm.pv, float)
+    Ts4 = np.array([point_tensor(prm.vec[t.key]) for t in lay.prims], dt).reshape(lay.n_t, 3, 4, 4)  # type: ignore[attr-defined]
+    c = np.zeros((2, lay.n_prod, 3), dt)
+    for p, side, key, sg in lay.const_keys:
+        c[side, p] += sg * np.asarray(prm.vec[key]).reshape(3)
+    bs = prm.bodies
+    kp = KParams(Ts4.reshape(1, lay.n_t, 12, 4), Ts4[None], c[0][None], c[1][None],
+                 np.array([b.mass for b in bs], dt)[None], np.array([b.inertia for b in bs], dt)[None],
+                 np.asarray(prm.pv)[None], [np.asarray(el.constants(prm))[None] for el in lay.axial],
+                 [prm])
+    prm.ts["__kernel__"] = kp  # type: ignore[assignment]
+    return kp
+
+
+def stack_kernel_params(kps: list[KParams]) -> KParams:
+    """Concatenate parameter sets along the batch axis."""
+    def cat(name: str) -> Array:
+        return np.concatenate([getattr(k, name) for k in kps])
+    ec = [np.concatenate([k.ec[i] for k in kps]) for i in range(len(kps[0].ec))]
+    return KParams(cat("Ts"), cat("Ts4"), cat("cA"), cat("cB"), cat("mass"), cat("J"), cat("pv"),
+                   ec, [p for k in kps for p in k.prms])
+
+
+class Kin:
+    """Kinematics of all primitives and products at states q, q̇, q̈ (each (Bs, n_q))."""
+
+    def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array):
+        self.lay, self.kp = lay, kp
+        Bs, n_t = q.shape[0], lay.n_t
+        Qs = np.stack([q, qd, qdd], axis=1).reshape(Bs, 3, lay.n_b, 7)
+        self.Lp = Qs[..., 3:]                                        # (Bs, 3, n_b, 4)
+        Lg = self.Lp[:, :, lay.pb]                                   # (Bs, 3, n_t, 4)
+        LgT = Lg.transpose(0, 2, 3, 1)                               # (Bs, n_t, 4, 3)
+        C = (kp.Ts @ LgT).reshape(-1, n_t, 3, 4, 3)                  # C_i[a, k] (B, n_t, a, k, i)
+        self.C = C
+        X = C[..., 0] @ LgT                                          # C(p) [p, ṗ, p̈]
+        Y = np.sum(C[..., 1] * Lg[:, 1, :, None, :], axis=-1)        # C(ṗ) ṗ
+        PV = np.stack([X[..., 0], 2.0 * X[..., 1], 2.0 * (X[..., 2] + Y)], axis=2)
+        self.PV = PV + (Qs[..., :3][:, :, lay.pb] * lay.is_point[:, None]).transpose(0, 2, 1, 3)
+        B = self.PV.shape[0]
+        flat = self.PV.reshape(B, n_t, 9)
+        self.AV = rmatmul(lay.MA, flat).reshape(B, lay.n_prod, 3, 3)
+        self.BV = rmatmul(lay.MB, flat).reshape(B, lay.n_prod, 3, 3)
+        self.AV[:, :, 0] += kp.cA
+        self.BV[:, :, 0] += kp.cB
+        Vd = self.AV @ self.BV.transpose(0, 1, 3, 2)                 # A_l·B_m
+        self.X = np.stack([Vd[..., 0, 0], Vd[..., 1, 0] + Vd[..., 0, 1],
+                           Vd[..., 2, 0] + 2.0 * Vd[..., 1, 1] + Vd[..., 0, 2]], axis=-1)
+        Pn = self.Lp[:, :, lay.norm_body]                            # (Bs, 3, n_norm, 4)
+        self.N = np.stack([np.sum(Pn[:, 0] * Pn[:, 0], -1), 2.0 * np.sum(Pn[:, 0] * Pn[:, 1], -1),
+                           2.0 * np.sum(Pn[:, 0] * Pn[:, 2] + Pn[:, 1] * Pn[:, 1], -1)], axis=-1)
+        self._rows: tuple[Array, ...] | None = None
+
+    def prim_forces(self, w: Array) -> Array:
+        """f (B, n_t, 3) on the primitives from weights w (B, n_prod) of the products:
+        Σ_p w_p ∂x_p/∂(primitive values)."""
+        lay = self.lay
+        fa = w[..., None] * self.BV[:, :, 0]
+        fb = w[..., None] * self.AV[:, :, 0]
+        return rmatmul(lay.MA.T, fa) + rmatmul(lay.MB.T, fb)
+
+    def generalized(self, f: Array) -> Array:
+        """(B, n_q) Σ_j (∂prim_j/∂q)ᵀ f_j for primitive forces f (B, n_t, 3)."""
+        Cp = self.C[..., 0]                                          # (B, n_t, 3, 4)
+        g = 2.0 * np.sum(Cp * f[..., None], axis=2)                  # (B, n_t, 4)
+        v = np.concatenate([f * self.lay.is_point[:, None], g], axis=-1).reshape(f.shape[0], -1)
+        return rmatmul(self.lay.Gf, v.T).T
+
+    def rows(self) -> tuple[Array, Array, Array, Array, Array]:
+        """(K0, Jx, Dx, Ax, AK0/BK0) of the first batch entry: ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q (n_prod, n_q)
+        (also ∂ẋ/∂q̇ = Jx, ∂ẍ/∂q̇ = 2Dx, ∂ẍ/∂q̈ = Jx), and the sides' value Jacobians."""
+        if self._rows is None:
+            lay = self.lay
+            K = lay.K_base.copy()
+            K.reshape(-1)[lay.K_idx] = 2.0 * self.C[0].transpose(0, 3, 1, 2)
+            K = K.astype(np.result_type(K, self.C), copy=False)
+            Kf = K.reshape(lay.n_t, -1)
+            AK = rmatmul(lay.MA, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
+            BK = rmatmul(lay.MB, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
+            G = np.einsum("pla,pman->plmn", self.BV[0], AK) + np.einsum("pla,pman->plmn", self.AV[0], BK)
+            Jx = G[:, 0, 0]
+            Dx = G[:, 0, 1] + G[:, 1, 0]
+            Ax = G[:, 0, 2] + 2.0 * G[:, 1, 1] + G[:, 2, 0]
+            self._rows = (Jx, Dx, Ax, AK[:, 0], BK[:, 0])
+        return self._rows  # type: ignore[return-value]
+
+    def hessian(self, w: Array, f: Array) -> Array:
+        """Σ_p w_p ∂²x_p/∂q² (n_q, n_q) for weights w (n_prod,), given f = prim_forces(w)
+        (plus any constant primitive forces, whose second derivatives are included too)."""
+        lay = self.lay
+        _, _, _, AK0, BK0 = self.rows()
+        n_q = lay.n_q
+        X = (AK0 * w[:, None, None]).reshape(-1, n_q).T @ BK0.reshape(-1, n_q)
+        H = X + X.T
+        Hj = 2.0 * np.einsum("ja,jakl->jkl", f, self.kp.Ts4[0])
+        np.add.at(H, lay.H_idx, Hj)
+        return H
+
+
+class KinCache:
+    """The last few :class:`Kin` by state content and parameter identity (residual and
+    linearize, outputs and monitors are evaluated at the same states)."""
+
+    def __init__(self, lay: Layout, size: int = 4):
+        self.lay, self.size = lay, size
+        self._items: list[tuple[tuple[Any, ...], Kin]] = []
+
+    def get(self, kp: KParams, q: Array, qd: Array, qdd: Array) -> Kin:
+        """Kin at states (each (n_q,) or (Bs, n_q)) for parameters kp."""
+        q, qd, qdd = (np.atleast_2d(v) for v in (q, qd, qdd))
+        key = (id(kp), q.shape, q.dtype.char, qd.dtype.char, qdd.dtype.char,
+               q.tobytes(), qd.tobytes(), qdd.tobytes())
+        for k, kin in self._items:
+            if k == key and kin.kp is kp:
+                return kin
+        kin = Kin(self.lay, kp, q, qd, qdd)
+        self._items.insert(0, (key, kin))
+        del self._items[self.size:]
+        return kin
