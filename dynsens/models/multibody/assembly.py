@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ...errors import CaseError, ModelError
+from ..base import StepState
 from .bodies import Ctx, MBParams
 from .rotations import ET_mul
 
@@ -230,9 +231,9 @@ def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
     for c in static:
         # the piston-side pressure force p1 A1 of a static cylinder is the unknown
         p_tmp[c.p_index] = 0.0
-    zero_lam = np.zeros((model.traits.n_lam, 1))
-    R1 = model.residual_columns(t0, q[:, None], qd[:, None], np.zeros((n_q, 1)), zero_lam, p_tmp,
-                              np.zeros_like(p_tmp), params)[:n_q, 0]
+    st = StepState(q, qd, np.zeros(n_q), np.zeros(model.traits.n_lam), p_tmp[:, 0],
+                   np.zeros(p_tmp.shape[0]))
+    R1 = model.residual(t0, st, params)[:n_q]
     cols = [jacobian_rows(model.eqs, q, params, t0).T]
     for c in static:
         _, _, e = c.kinematics(ctx)

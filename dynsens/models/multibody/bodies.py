@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .rotations import E_mul, T_G, point_tensor, rmatmul
+from .rotations import E_mul, point_tensor, rmatmul
 
 GROUND = -1
 Array = np.ndarray
@@ -278,20 +278,6 @@ def _quad_kin(Ts: Array, L: Array) -> Array:
     tmp = rmatmul(Ts.transpose(0, 2, 1).reshape(12, 4), L[:2]).reshape(2, 1, 3, 4, -1)   # [i, ., a, l, n]
     W = (tmp * L[None, :, None]).sum(3)                                            # [i, j, a, n]
     return np.stack([W[0, 0], 2.0 * W[1, 0], 2.0 * (W[0, 2] + W[1, 1])])
-
-
-def inertial_forces(ctx: Ctx, n_bodies: int, out: Array) -> None:
-    """out (n_q, k) += M(q) q̈ − Q_v(q, q̇) for all bodies (Euler-parameter form)."""
-    for i, bp in enumerate(ctx.params.bodies):
-        r, rd, rdd, p, pd, pdd = ctx.body(i)
-        a = 7 * i
-        J = bp.inertia
-        out[a:a + 3] += bp.mass * rdd
-        # w = [G(p) p̈, G(ṗ) p]
-        w = np.einsum("ikl,jkn,jln->jin", T_G, np.stack([p, pd]), np.stack([pdd, p]))
-        Jw = np.einsum("ab,jbn->jan", J, w)
-        out[a + 3:a + 7] += np.einsum("ikl,jkn,jin->jln", T_G, np.stack([p, pd]),
-                                      np.stack([4.0 * Jw[0], -8.0 * Jw[1]])).sum(0)
 
 
 def angular_velocity(p: Array, pd: Array) -> Array:

@@ -125,13 +125,11 @@ class HydraulicCylinder:
         h = self._law_at(ctx, p)[4]
         return h[0], h[1]
 
-    def check(self, ctx: Ctx, t: float) -> None:
-        """Raise ModelError when a chamber volume is not positive."""
-        s, _, _ = self.kinematics(ctx)
-        V1, V2 = self.volumes(s, ctx.params)
-        prm = ctx.params
+    def check(self, s: Any, prm: Any, t: float) -> None:
+        """Raise ModelError when a chamber volume is not positive at stroke s (length)."""
+        V1, V2 = self.volumes(np.reshape(s, (1, 1)), prm)
         A1, A2 = self.areas(prm)
-        sr = float(np.real(s[0, 0]))
+        sr = float(np.real(s))
         if np.real(V1[0, 0]) <= 0.0:
             lim = -np.real(prm.pv[self.idx["dead_volume_1"]] / A1)
             raise ModelError(

@@ -41,7 +41,6 @@ from typing import Any, Callable
 import numpy as np
 
 from .bodies import GROUND, Const, Ctx, Diff, Direction, MBParams, Point, Term
-from .rotations import rmatmul
 
 Array = np.ndarray
 # a time coefficient: (t, params) -> (value, first derivative, second derivative)
@@ -56,7 +55,7 @@ def const_coef(value: float) -> Coef:
 
 
 def ONE(t: float, prm: Any) -> tuple[float, float, float]:
-    """The unit coefficient (recognised by :class:`DotBlock`)."""
+    """The unit coefficient (recognised by :class:`.kernel.Layout`: no per-step evaluation)."""
     return 1.0, 0.0, 0.0
 
 
@@ -174,65 +173,6 @@ class NormEq(Equation):
     def push(self, ctx: Ctx, lam: Array) -> None:
         """Applied directly (no shared terms)."""
         ctx.pending.append((self, lam))
-
-
-class DotBlock:
-    """All plain equations a·b = 0 (one term, unit coefficient, no shift) evaluated together.
-
-    The distinct terms are stacked once per call; Φ, Φ̇, Φ̈ of all equations follow from
-    one batched product, and J_Φᵀλ is accumulated per distinct term (incidence matrices)
-    before each term's transposed Jacobian is applied once.  Same equations as
-    :class:`DotEq`, fewer Python-level operations.
-    """
-
-    def __init__(self, eqs: list[DotEq]):
-        terms: list[Term] = []
-        index: dict[int, int] = {}
-
-        def idx(t: Term) -> int:
-            if id(t) not in index:
-                index[id(t)] = len(terms)
-                terms.append(t)
-            return index[id(t)]
-        self.ia = np.array([idx(e.terms[0][1]) for e in eqs], dtype=int)
-        self.ib = np.array([idx(e.terms[0][2]) for e in eqs], dtype=int)
-        self.terms = terms
-        n_t, n_e = len(terms), len(eqs)
-        self.Sa = np.zeros((n_t, n_e))
-        self.Sb = np.zeros((n_t, n_e))
-        self.Sa[self.ia, np.arange(n_e)] = 1.0
-        self.Sb[self.ib, np.arange(n_e)] = 1.0
-        self.S = np.hstack([self.Sa, self.Sb])
-        self.active = [i for i, t in enumerate(terms) if t.bodies and any(b != GROUND for b in t.bodies)]
-
-    @staticmethod
-    def accepts(eq: Equation) -> bool:
-        return isinstance(eq, DotEq) and len(eq.terms) == 1 and eq.terms[0][0] is ONE and eq.shift is None
-
-    def _ab(self, ctx: Ctx) -> tuple[Array, Array]:
-        key = id(self)
-        hit = ctx.cache.get(key)
-        if hit is None:
-            K = np.stack([t.kin(ctx) for t in self.terms])          # (n_t, 3, 3, k)
-            hit = (K[self.ia], K[self.ib])
-            ctx.cache[key] = hit
-        return hit
-
-    def evaluate(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        A, B = self._ab(ctx)
-        D = (A[:, :, None] * B[:, None]).sum(3)                      # (n_e, 3, 3, k)
-        return D[:, 0, 0], D[:, 1, 0] + D[:, 0, 1], D[:, 2, 0] + 2.0 * D[:, 1, 1] + D[:, 0, 2]
-
-    def push(self, ctx: Ctx, lam: Array) -> None:
-        """Accumulate J_Φᵀλ for the block's multipliers lam (n_e, k)."""
-        A, B = self._ab(ctx)
-        k = A.shape[-1]
-        n_e = lam.shape[0]
-        fa = (lam[:, None, :] * B[:, 0]).reshape(n_e, -1)
-        fb = (lam[:, None, :] * A[:, 0]).reshape(n_e, -1)
-        F = rmatmul(self.S, np.concatenate([fa, fb])).reshape(len(self.terms), 3, k)
-        for i in self.active:
-            ctx.push(self.terms[i], F[i])
 
 
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "driving")

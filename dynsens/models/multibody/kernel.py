@@ -187,11 +187,13 @@ class Kin:
     def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array):
         self.lay, self.kp = lay, kp
         Bs, n_t = q.shape[0], lay.n_t
+        self.q, self.qd = q, qd
         Qs = np.stack([q, qd, qdd], axis=1).reshape(Bs, 3, lay.n_b, 7)
         self.Lp = Qs[..., 3:]                                        # (Bs, 3, n_b, 4)
+        self.Lr = Qs[..., :3]                                        # (Bs, 3, n_b, 3)
         Lg = self.Lp[:, :, lay.pb]                                   # (Bs, 3, n_t, 4)
         LgT = Lg.transpose(0, 2, 3, 1)                               # (Bs, n_t, 4, 3)
-        C = (kp.Ts @ LgT).reshape(-1, n_t, 3, 4, 3)                  # C_i[a, k] (B, n_t, a, k, i)
+        C = (kp.Ts @ LgT).reshape(max(Bs, kp.B), n_t, 3, 4, 3)                  # C_i[a, k] (B, n_t, a, k, i)
         self.C = C
         X = C[..., 0] @ LgT                                          # C(p) [p, ṗ, p̈]
         Y = np.sum(C[..., 1] * Lg[:, 1, :, None, :], axis=-1)        # C(ṗ) ṗ
@@ -231,10 +233,9 @@ class Kin:
         (also ∂ẋ/∂q̇ = Jx, ∂ẍ/∂q̇ = 2Dx, ∂ẍ/∂q̈ = Jx), and the sides' value Jacobians."""
         if self._rows is None:
             lay = self.lay
-            K = lay.K_base.copy()
+            K = lay.K_base.astype(np.result_type(lay.K_base, self.C))
             K.reshape(-1)[lay.K_idx] = 2.0 * self.C[0].transpose(0, 3, 1, 2)
-            K = K.astype(np.result_type(K, self.C), copy=False)
-            Kf = K.reshape(lay.n_t, -1)
+            Kf = K.reshape(lay.n_t, 9 * lay.n_q)
             AK = rmatmul(lay.MA, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
             BK = rmatmul(lay.MB, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
             G = np.einsum("pla,pman->plmn", self.BV[0], AK) + np.einsum("pla,pman->plmn", self.AV[0], BK)

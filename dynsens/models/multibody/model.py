@@ -14,10 +14,11 @@ Unknowns per step ``z = [q̈; λ; ṗ]`` (method.md §1), residual blocks
   plain index-1 form) and c_s (``constraint_scale``, default 1) scales row 2.  Both are
   part of the residual, so the sensitivities are consistent with them.
 
-``linearize`` returns the exact partial derivatives, computed in one batched call of
-the (complex-safe) residual: by complex step (step 1e-30) when state and parameters are
-real, by central differences when they are complex (a complex-step-of-the-whole-run
-verification, where only Newton uses the matrix).
+The residual, its exact (analytic) linearization and the design partials are evaluated
+by the vectorized kernel (:mod:`.kernel`, :mod:`.residual`); the term-by-term building
+blocks define the same equations for the assembly, the outputs and the tests.  Kinematics
+are cached by state, so residual, linearization, outputs and monitors at one state share
+them.
 """
 from __future__ import annotations
 
@@ -28,10 +29,12 @@ import numpy as np
 
 from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
-from .bodies import BodyDef, BodyParams, Ctx, MBParams, inertial_forces
-from .forces import ForceElement
+from .bodies import BodyDef, BodyParams, Ctx, MBParams
+from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
-from .joints import DotBlock, Equation, Joint, NormEq
+from .joints import Equation, Joint, NormEq
+from .kernel import KinCache, KParams, Kin, Layout, kernel_params, stack_kernel_params
+from .residual import Evaluation
 from .rotations import from_axis_angle
 
 Array = np.ndarray
@@ -78,14 +81,25 @@ class MultibodyModel(Model):
         for b in bodies:
             self.eqs.append(NormEq(b.index))
             self.eq_owner.append(f"{b.name}.normalization")
-        plain = [i for i, eq in enumerate(self.eqs) if DotBlock.accepts(eq)]
-        self._block_rows = np.array(plain, dtype=int)
-        self._block = DotBlock([self.eqs[i] for i in plain]) if plain else None   # type: ignore[misc]
-        self._other_rows = [i for i in range(len(self.eqs)) if i not in set(plain)]
         n_q = 7 * len(bodies)
         n_p = 2 * len(cylinders)
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p)
         self._ic_cache: tuple[Any, Any] | None = None
+        grav = [f for f in forces if isinstance(f, Gravity)]
+        self.gravity = grav[0] if grav else None
+        self.point_forces = [f for f in forces if isinstance(f, PointForce) and f.frame == "global"]
+        axial: list[Any] = [f for f in forces if isinstance(f, SpringDamper)] + list(cylinders)
+        self.other_forces = [f for f in forces if not isinstance(f, (Gravity, SpringDamper))
+                             and f not in self.point_forces]
+        self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
+        self._kin = KinCache(self.layout)
+        self._eval: tuple[tuple[Any, ...], Evaluation] | None = None
+        self._stacked: tuple[int, KParams] | None = None
+        lay = self.layout
+        self._cf0 = np.zeros((1, lay.n_cp, 3))
+        self._cf0[..., 0] = 1.0
+        self._shift0 = np.zeros((1, lay.n_eq, 3))
+        self._shift0[0, lay.norm_eq, 0] = 1.0
 
     # ------------------------------------------------------------------ parameters
     def parameters(self, x: Array) -> MBParams:
@@ -124,117 +138,79 @@ class MultibodyModel(Model):
     # ------------------------------------------------------------------ residual
     def constraint_values(self, ctx: Ctx, eqs: list[Equation] | None = None
                           ) -> tuple[Array, Array, Array]:
-        """Φ, Φ̇, Φ̈ (n_eq, k) for the batch in ctx (default: the model's Φ, block-evaluated)."""
-        if eqs is None and self._block is not None:
-            dt = np.result_type(ctx.q, ctx.qd, ctx.qdd, ctx.params.pv, float)
-            out = [np.empty((len(self.eqs), ctx.k), dt) for _ in range(3)]
-            for o, v in zip(out, self._block.evaluate(ctx)):
-                o[self._block_rows] = v
-            for i in self._other_rows:
-                for o, v in zip(out, self.eqs[i].evaluate(ctx)):
-                    o[i] = v[0]
-            return out[0], out[1], out[2]
+        """Φ, Φ̇, Φ̈ (n_eq, k) of ``eqs`` (default: the model's) for the batch in ctx, term by term."""
         vals = [eq.evaluate(ctx) for eq in (self.eqs if eqs is None else eqs)]
         if not vals:
             z = np.zeros((0, ctx.k))
             return z, z, z
         return tuple(np.concatenate([v[i] for v in vals]) for i in range(3))  # type: ignore[return-value]
 
-    def generalized_forces(self, ctx: Ctx, p: Array) -> Array:
-        """Q_ext (n_q, k): applied forces and cylinder forces."""
-        dt = np.result_type(ctx.q, ctx.qd, ctx.params.pv, p, float)
-        Q = np.zeros((self.traits.n_q, ctx.k), dt)
-        for el in self.forces:
-            el.add(ctx, Q)
-        for cyl in self.cylinders:
-            cyl.add(ctx, p, Q)
-        return Q
+    def coefficients(self, t: float, kp: KParams) -> tuple[Array, Array]:
+        """Time coefficients (c, ċ, c̈) of the constraint products (B, n_cp, 3) and the shifts
+        (s, ṡ, s̈) of the equations (B, n_eq, 3) (1 for the normalisations) at time t (s)."""
+        lay = self.layout
+        if not lay.coefs and not lay.shifts:
+            return self._cf0, self._shift0
+        dt = np.result_type(kp.pv, float)
+        cf = np.repeat(self._cf0, kp.B, axis=0).astype(dt)
+        shift = np.repeat(self._shift0, kp.B, axis=0).astype(dt)
+        for b, prm in enumerate(kp.prms):
+            for i, coef in lay.coefs:
+                cf[b, i] = coef(t, prm)
+            for e, sh in lay.shifts:
+                shift[b, e] = sh(t, prm)
+        return cf, shift
 
-    def residual_columns(self, t: float, q: Array, qd: Array, qdd: Array, lam: Array, p: Array,
-                       pd: Array, params: MBParams) -> Array:
-        """F_R (n_z, k) for a batch of states (each argument (n, k) or (n, 1))."""
-        k = max(a.shape[1] for a in (q, qd, qdd, lam, p, pd))
-        dt = np.result_type(q, qd, qdd, lam, p, pd, params.pv, float)
-        q, qd, qdd = (np.broadcast_to(a, (a.shape[0], k)) for a in (q, qd, qdd))
-        ctx = Ctx(q, qd, qdd, params, t)
-        R1 = np.zeros((self.traits.n_q, k), dt)
-        inertial_forces(ctx, len(self.bodies), R1)
-        lam = np.broadcast_to(lam, (lam.shape[0], k))
-        if self._block is not None:
-            self._block.push(ctx, lam[self._block_rows])
-        for i in self._other_rows:
-            self.eqs[i].push(ctx, lam[i:i + 1])
-        ctx.flush(R1)
-        R1 = R1 - self.generalized_forces(ctx, p)
-        phi, phid, phidd = self.constraint_values(ctx)
-        R2 = self.scale * (phidd + 2.0 * self.alpha * phid + self.beta ** 2 * phi)
-        R3 = np.zeros((self.traits.n_p, k), dt) + pd
-        for cyl in self.cylinders:
-            h1, h2 = cyl.rates(ctx, p)
-            j = cyl.p_index
-            R3[j:j + 1] -= h1
-            R3[j + 1:j + 2] -= h2
-        return np.concatenate([R1, R2 * np.ones((1, k)), R3])
+    def kinematics(self, s: StepState, params: MBParams | KParams) -> Kin:
+        """Kernel kinematics at s (leaves (n,) or (B, n)) for one or stacked parameter sets."""
+        kp = params if isinstance(params, KParams) else kernel_params(self.layout, params)
+        return self._kin.get(kp, s.q, s.qd, s.qdd)
+
+    def _evaluation(self, t: float, s: StepState, params: MBParams | KParams) -> Evaluation:
+        kin = self.kinematics(s, params)
+        lam, p, pd = (np.atleast_2d(v) for v in (s.lam, s.p, s.pd))
+        key = (id(kin), t, lam.tobytes(), p.tobytes(), pd.tobytes(), lam.dtype.char, p.dtype.char)
+        if self._eval is not None and self._eval[0] == key and self._eval[1].kin is kin:
+            return self._eval[1]
+        ev = Evaluation(self, kin, t, lam, p, pd)
+        self._eval = (key, ev)
+        return ev
 
     def residual(self, t: float, s: StepState, params: MBParams) -> Array:
         """F_R (n_z,) at time t (s) and state s."""
-        return self.residual_columns(t, *(v[:, None] for v in s), params)[:, 0]
+        return self._evaluation(t, s, params).residual()[0]
+
+    def stack_parameters(self, params_list: list[MBParams]) -> KParams:
+        """The kernel parameters of all sets stacked along a leading batch axis (cached on the list)."""
+        if self._stacked is None or self._stacked[0] != id(params_list):
+            self._stacked = (id(params_list), stack_kernel_params(
+                [kernel_params(self.layout, p) for p in params_list]))
+        return self._stacked[1]
+
+    def residual_batch(self, t: float, s: StepState, params_list: list[MBParams]) -> Array:
+        """F_R (n_z, B) at one state for B parameter sets, one vectorized evaluation."""
+        return self._evaluation(t, s, self.stack_parameters(params_list)).residual().T
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
-        """Exact ∂F_R/∂(z, q, q̇, p) (complex step; central differences for complex states)."""
-        tr = self.traits
-        n_q, n_lam, n_p, n_z = tr.n_q, tr.n_lam, tr.n_p, tr.n_z
-        sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)        # q, qd, qdd, lam, p, pd
-        # columns: z = (qdd, lam, pd), then q, qd, p
-        order = [2, 3, 5, 0, 1, 4]
-        k = sum(sizes[i] for i in order)
-        offs: dict[int, int] = {}
-        c = 0
-        for i in order:
-            offs[i] = c
-            c += sizes[i]
-        base = list(s)
-        real = not any(np.iscomplexobj(v) for v in base) and not np.iscomplexobj(params.pv)
-
-        def batch(step: complex | Array) -> list[Array]:
-            out = []
-            for i, v in enumerate(base):
-                E = np.zeros((sizes[i], k), dtype=complex if real else float)
-                idx = np.arange(sizes[i])
-                E[idx, offs[i] + idx] = step if np.isscalar(step) else step[i]
-                out.append(v[:, None] + E)
-            return out
-
-        if real:
-            h = 1e-30
-            D = np.imag(self.residual_columns(t, *batch(1j * h), params)) / h
-        else:
-            steps = [1e-7 * (1.0 + np.abs(np.real(v))) for v in base]
-            Rp = self.residual_columns(t, *batch(steps), params)
-            Rm = self.residual_columns(t, *batch([-x for x in steps]), params)
-            hcol = np.concatenate([steps[i] for i in order])
-            D = (Rp - Rm) / (2.0 * hcol[None, :])
-        R_z = D[:, :n_z]
-        R_q = D[:, n_z:n_z + n_q]
-        R_qd = D[:, n_z + n_q:n_z + 2 * n_q]
-        R_p = D[:, n_z + 2 * n_q:] if n_p else None
-        return Linearization(R_z, R_q, R_qd, R_p)
+        """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`)."""
+        return self._evaluation(t, s, params).linearization()
 
     # ------------------------------------------------------------------ diagnostics
     def check_state(self, t: float, s: StepState, params: MBParams) -> None:
         """Raise ModelError when a cylinder chamber volume is not positive."""
         if not self.cylinders:
             return
-        ctx = Ctx(s.q[:, None], s.qd[:, None], s.qdd[:, None], params, t)
+        X = self.kinematics(s, params).X[0]
+        lay = self.layout
         for cyl in self.cylinders:
-            cyl.check(ctx, t)
+            i = lay.n_cp + lay.axial.index(cyl)
+            cyl.check(np.sqrt(X[i, 0]) - params.pv[cyl.idx["length_0"]], params, t)
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
         """‖Φ‖ and ‖Φ̇‖ (real parts) at one step."""
-        ctx = Ctx(s.q[:, None], s.qd[:, None], s.qdd[:, None], params, t)
-        phi, phid, _ = self.constraint_values(ctx)
-        return {"constraint_position": float(np.linalg.norm(np.real(phi))),
-                "constraint_velocity": float(np.linalg.norm(np.real(phid)))}
+        Phi = self._evaluation(t, s, params).Phi[0]
+        return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
+                "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
 
     def dof_labels(self) -> list[str]:
         """'body.x', 'body.y', 'body.z', 'body.e0' ... 'body.e3' per moving body."""

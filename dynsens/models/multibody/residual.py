@@ -1,0 +1,235 @@
+r"""The residual F_R and its exact linearization from the kernel's kinematics.
+
+Blocks (see :mod:`.model`): R1 = M q̈ − Q_v + J_Φᵀλ − Q_ext, R2 = c_s(Φ̈ + 2αΦ̇ + β²Φ),
+R3 = ṗ − h.  Every constraint row is a sum of products ``c_k(t) x_k`` (:mod:`.kernel`) or an
+Euler-parameter normalisation; axial force elements (springs, cylinders) act through the
+product ``x = d·d`` of their point separation, ``L = √x``, ``L̇ = ẋ/(2L)``, so that
+``Q_ext = J_dᵀ d P/L = ½ P/L ∂x/∂q`` with the push force P(L, L̇, p, t) of the element's
+``law``.  J_Φᵀλ, the axial forces and point forces are all *primitive forces* f
+(:meth:`.kernel.Kin.prim_forces`), whose second derivatives give the geometric stiffness.
+
+Inertia (per body, Euler parameters): R1_r = m r̈,
+R1_p = 4 G(p)ᵀJ'G(p) p̈ − 8 G(ṗ)ᵀJ'G(ṗ) p, with G(a)b = T_G[:, k, l] a_k b_l bilinear, so
+∂(G(a)ᵀv)/∂a = Σ_i v_i T_G[i]ᵀ and ∂(G(a)b)/∂a = T_G·b are constant tensors.
+
+Force elements without a law here (body-frame point forces, torques) are evaluated through
+:mod:`.forces` and differentiated by complex step (central differences for complex data).
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..base import Linearization
+from .bodies import Ctx
+from .kernel import KParams, Kin
+from .rotations import T_G, rmatmul
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import MultibodyModel
+
+Array = np.ndarray
+
+
+def _G(a: Array) -> Array:
+    """G(a) (..., 3, 4) for quaternions a (..., 4)."""
+    return np.einsum("ikl,...k->...il", T_G, a)
+
+
+def _Gb(b: Array) -> Array:
+    """∂(G(a) b)/∂a (..., 3, 4) for b (..., 4)."""
+    return np.einsum("ikl,...l->...ik", T_G, b)
+
+
+def _GTv(v: Array) -> Array:
+    """∂(G(a)ᵀ v)/∂a (..., 4, 4) for v (..., 3)."""
+    return np.einsum("ikl,...i->...lk", T_G, v)
+
+
+class Evaluation:
+    """Residual pieces at one (batched) state; :meth:`residual` and :meth:`linearization`.
+
+    Parameters
+    ----------
+    model : the multibody model (layout, settings, force elements).
+    kin : kinematics at (q, q̇, q̈) for the parameter sets kp.
+    t : time (s); lam (Bs, n_λ), p (Bs, n_p), pd (Bs, n_p): multipliers, pressures, rates.
+    """
+
+    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
+        self.model, self.kin, self.kp, self.t = model, kin, kin.kp, t
+        self.lam, self.p, self.pd = lam, p, pd
+        lay = model.layout
+        kp = self.kp
+        cf, shift = model.coefficients(t, kp)
+        self.cf = cf
+        Xc = kin.X[:, :lay.n_cp]
+        c, cd, cdd = cf[..., 0], cf[..., 1], cf[..., 2]
+        x, xd, xdd = Xc[..., 0], Xc[..., 1], Xc[..., 2]
+        rows = np.stack([c * x, cd * x + c * xd, cdd * x + 2.0 * cd * xd + c * xdd], axis=-1)
+        Phi = rmatmul(lay.S, rows) - shift
+        Phi[:, lay.norm_eq] += kin.N
+        self.Phi = Phi
+        lam_r = rmatmul(lay.S.T, lam.T).T
+        B = kin.X.shape[0]
+        w = np.zeros((B, lay.n_prod), np.result_type(kin.X, lam, p, float))
+        w[:, :lay.n_cp] = c * lam_r
+        self.laws = []
+        for i, el in enumerate(lay.axial):
+            xi = kin.X[:, lay.n_cp + i]
+            L = np.sqrt(xi[..., 0])
+            Ld = xi[..., 1] / (2.0 * L)
+            j = getattr(el, "p_index", 0)
+            law = el.law(L, Ld, p[..., j:j + el.n_pressures], t, kp.pv, kp.ec[i])
+            self.laws.append((L, Ld, law))
+            w[:, lay.n_cp + i] = -0.5 * law[0] / L
+        self.w = w
+        f = kin.prim_forces(w)
+        for pf, j in zip(model.point_forces, lay.point_prim):
+            if j >= 0:
+                val = np.asarray(pf.fn.value(t, kp.pv))
+                f[:, j] -= np.stack([kp.pv[:, i] for i in pf.idx], -1) * (val[..., None] if val.ndim else val)
+        self.f = f
+
+    def residual(self) -> Array:
+        """F_R (B, n_z)."""
+        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
+        Lp = kin.Lp
+        p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
+        J = kp.J
+        w1 = np.einsum("...ij,...j->...i", J, (_G(p) @ pdd[..., None])[..., 0])
+        w2 = np.einsum("...ij,...j->...i", J, (_G(pd_) @ p[..., None])[..., 0])
+        Rp = 4.0 * (np.swapaxes(_G(p), -1, -2) @ w1[..., None])[..., 0] \
+            - 8.0 * (np.swapaxes(_G(pd_), -1, -2) @ w2[..., None])[..., 0]
+        Rr = kp.mass[..., None] * kin.Lr[:, 2]
+        if m.gravity is not None:
+            g = np.stack([kp.pv[:, i] for i in m.gravity.idx], -1)
+            Rr = Rr - kp.mass[..., None] * g[:, None, :]
+        Rp = Rp.astype(np.result_type(Rp, self.lam), copy=False)
+        Rp[:, lay.norm_body] += 2.0 * self.lam[..., lay.norm_eq, None] * p[:, lay.norm_body]
+        B = max(Rr.shape[0], Rp.shape[0])
+        R1 = np.concatenate([np.broadcast_to(Rr, (B,) + Rr.shape[1:]),
+                             np.broadcast_to(Rp, (B,) + Rp.shape[1:])], axis=-1).reshape(B, lay.n_q)
+        R1 = R1 + kin.generalized(self.f)
+        if m.other_forces:
+            R1 = R1 - other_forces_q(m, self.t, kin.q, kin.qd, kp.prms)
+        Phi = self.Phi
+        R2 = m.scale * (Phi[..., 2] + 2.0 * m.alpha * Phi[..., 1] + m.beta ** 2 * Phi[..., 0])
+        R3 = np.zeros((B, m.traits.n_p), np.result_type(self.pd, self.w)) + self.pd
+        for el, (_, _, law) in zip(lay.axial, self.laws):
+            for i, h in enumerate(law[4]):
+                R3[:, el.p_index + i] -= h
+        return np.concatenate([R1, np.broadcast_to(R2, (B, R2.shape[-1])), R3], axis=-1)
+
+    def linearization(self) -> Linearization:
+        """Exact ∂F_R/∂(z, q, q̇, p) of the first batch entry."""
+        m, kin, lay = self.model, self.kin, self.model.layout
+        tr = m.traits
+        n_q, n_lam, n_p = tr.n_q, tr.n_lam, tr.n_p
+        dt = np.result_type(kin.PV, self.lam, self.p, self.f)
+        Jx, Dx, Ax, _, _ = kin.rows()
+        cf = self.cf[0]
+        c, cd, cdd = cf[:, 0], cf[:, 1], cf[:, 2]
+        Jc, Dc, Ac = Jx[:lay.n_cp], Dx[:lay.n_cp], Ax[:lay.n_cp]
+        a, b2 = m.alpha, m.beta ** 2
+
+        def eq_rows(kJ: Array, kD: Array, kA: Array, nJ: float, nD: float, nA: float) -> Array:
+            out = rmatmul(lay.S, kJ[:, None] * Jc + kD[:, None] * Dc + kA[:, None] * Ac).astype(dt)
+            Lp = kin.Lp[0][:, lay.norm_body]                        # (3, n_norm, 4)
+            blk = 2.0 * (nJ * Lp[0] + nD * Lp[1] + nA * Lp[2])
+            out[lay.norm_eq[:, None], lay.norm_cols] += blk
+            return out
+
+        JPhi = eq_rows(c, 0 * c, 0 * c, 1.0, 0.0, 0.0)
+        R2_q = m.scale * eq_rows(cdd + 2 * a * cd + b2 * c, 2 * cd + 2 * a * c, c, b2, 2 * a, 1.0)
+        R2_qd = m.scale * eq_rows(2 * cd + 2 * a * c, 2 * c, 0 * c, 2 * a, 2.0, 0.0)
+        # R1
+        H = kin.hessian(self.w[0], self.f[0])
+        lam_n = self.lam[0, lay.norm_eq]
+        for col, ln in zip(lay.norm_cols, lam_n):
+            H[col, col] += 2.0 * ln
+        R1_q, R1_qd, R1_qdd = self._inertia_blocks(dt)
+        R1_q = R1_q + H
+        R3_q = np.zeros((n_p, n_q), dt)
+        R3_qd = np.zeros((n_p, n_q), dt)
+        R1_p = np.zeros((n_q, n_p), dt)
+        R3_p = np.zeros((n_p, n_p), dt)
+        for i, (el, (L, Ld, law)) in enumerate(zip(lay.axial, self.laws)):
+            L, Ld = L[0], Ld[0]
+            P, P_L, P_Ld, P_p, h, h_L, h_Ld, h_p = law
+            jx, dx = Jx[lay.n_cp + i], Dx[lay.n_cp + i]
+            dL = jx / (2.0 * L)
+            dLd = dx / (2.0 * L) - (Ld / L) * dL
+            w_L = -0.5 * (P_L[0] / L - P[0] / (L * L))
+            w_Ld = -0.5 * P_Ld[0] / L
+            R1_q += np.outer(jx, w_L * dL + w_Ld * dLd)
+            R1_qd += np.outer(jx, w_Ld * dL)
+            j = getattr(el, "p_index", 0)
+            for k, Pk in enumerate(P_p):
+                R1_p[:, j + k] += -0.5 * Pk[0] / L * jx
+            for r in range(len(h)):
+                R3_q[j + r] -= h_L[r][0] * dL + h_Ld[r][0] * dLd
+                R3_qd[j + r] -= h_Ld[r][0] * dL
+                for k in range(len(h_p[r])):
+                    R3_p[j + r, j + k] -= h_p[r][k][0]
+        if m.other_forces:
+            Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
+            R1_q -= Kq
+            R1_qd -= Kqd
+        n_z = tr.n_z
+        R_z = np.zeros((n_z, n_z), dt)
+        R_z[:n_q, :n_q] = R1_qdd
+        R_z[:n_q, n_q:n_q + n_lam] = JPhi.T
+        R_z[n_q:n_q + n_lam, :n_q] = m.scale * JPhi
+        R_z[n_q + n_lam:, n_q + n_lam:] = np.eye(n_p)
+        return Linearization(R_z, np.concatenate([R1_q, R2_q, R3_q]),
+                             np.concatenate([R1_qd, R2_qd, R3_qd]),
+                             np.concatenate([R1_p, np.zeros((n_lam, n_p)), R3_p]) if n_p else None)
+
+    def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
+        """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""
+        kin, kp, lay = self.kin, self.kp, self.model.layout
+        n_q, n_b = lay.n_q, lay.n_b
+        p, pd_, pdd = kin.Lp[0, 0], kin.Lp[0, 1], kin.Lp[0, 2]          # (n_b, 4)
+        J = kp.J[0]
+        Gp, Gpd = _G(p), _G(pd_)
+        w1 = np.einsum("bij,bj->bi", J, np.einsum("bil,bl->bi", Gp, pdd))
+        w2 = np.einsum("bij,bj->bi", J, np.einsum("bil,bl->bi", Gpd, p))
+        GpT, GpdT = np.swapaxes(Gp, 1, 2), np.swapaxes(Gpd, 1, 2)
+        Mpp = 4.0 * GpT @ J @ Gp
+        Kpp = 4.0 * (_GTv(w1) + GpT @ J @ _Gb(pdd)) - 8.0 * GpdT @ J @ Gpd
+        Cpp = -8.0 * (_GTv(w2) + GpdT @ J @ _Gb(p))
+        out = [np.zeros((n_q, n_q), dt) for _ in range(3)]
+        for b in range(n_b):
+            r, q = slice(7 * b, 7 * b + 3), slice(7 * b + 3, 7 * b + 7)
+            out[2][r, r] = kp.mass[0, b] * np.eye(3)
+            out[2][q, q] = Mpp[b]
+            out[0][q, q] = Kpp[b]
+            out[1][q, q] = Cpp[b]
+        return out[0], out[1], out[2]
+
+
+def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms: list[Any]) -> Array:
+    """Q_ext (B, n_q) of the elements without a law here, one Ctx per batch entry (q, qd (B, n_q))."""
+    B = max(q.shape[0], len(prms))
+    dt = np.result_type(q, qd, *(p.pv for p in prms), float)
+    out = np.zeros((B, model.traits.n_q), dt)
+    for b in range(B):
+        qb, qdb = q[min(b, q.shape[0] - 1)], qd[min(b, qd.shape[0] - 1)]
+        ctx = Ctx(qb[:, None], qdb[:, None], np.zeros((qb.shape[0], 1)), prms[min(b, len(prms) - 1)], t)
+        o = out[b][:, None].copy()
+        for el in model.other_forces:
+            el.add(ctx, o)
+        out[b] = o[:, 0]
+    return out
+
+
+def other_forces_jacobians(model: "MultibodyModel", t: float, q: Array, qd: Array, prm: Any
+                           ) -> tuple[Array, Array]:
+    """∂Q_ext/∂q and ∂Q_ext/∂q̇ (n_q, n_q) of the elements without a law here."""
+    from .assembly import _jac
+    real = not (np.iscomplexobj(q) or np.iscomplexobj(qd) or np.iscomplexobj(prm.pv))
+    Kq = _jac(lambda qb: other_forces_q(model, t, qb.T, qd[None], [prm]).T, q, real)
+    Kqd = _jac(lambda qb: other_forces_q(model, t, q[None], qb.T, [prm]).T, qd, real)
+    return Kq, Kqd
