@@ -14,7 +14,10 @@ Spec forms (``quantity:`` in a case):
 * ``{element: CYL, kind: stroke | stroke_rate | pressure_1 | pressure_2 | force | volume_1 |
   volume_2}`` for hydraulic cylinders, ``{element: SPRING, kind: length | length_rate | force}``.
 
-All functions are complex-safe.
+All functions are complex-safe.  Quantities that are linear in the state and independent of
+the design are declared ``linear``; joint reaction forces, body angles and angular
+velocities, cylinder and spring quantities are ``batched`` (evaluated from the kernel's
+kinematics for all gradient directions in one call).
 """
 from __future__ import annotations
 
@@ -42,6 +45,62 @@ SPRING_KINDS = ("length", "length_rate", "force")
 
 def _ctx(s: StepState, params: Any, t: float) -> Ctx:
     return Ctx(s.q[:, None], s.qd[:, None], s.qdd[:, None], params, t)
+
+
+def _kin(model: "MultibodyModel", s: StepState, prm: Any) -> tuple[Any, Any, bool]:
+    """(kinematics, multipliers (B, n_λ), batched) for a plain or a batched state."""
+    return model.kinematics(s, prm), np.atleast_2d(s.lam), s.q.ndim == 2
+
+
+def _out(v: Any, batched: bool) -> Any:
+    """(B, k) for a batched call, (k,) otherwise, from v (B, k)."""
+    return v if batched else v[0]
+
+
+def _reaction(model: "MultibodyModel", jt: Any) -> Callable[[float, StepState, Any], Any]:
+    """f (3,) (or (B, 3)): force of joint jt on body_2 (body_1 when body_2 is the ground),
+    −(∂Φ_J/∂r)ᵀλ_J, from the products of the joint's equations (batched)."""
+    lay = model.layout
+    prods = np.flatnonzero(lay.S[list(jt.rows)].any(axis=0))
+    eq_of = np.argmax(lay.S[:, prods], axis=0)
+    sign, b = (-1.0, jt.body_2) if jt.body_2 != GROUND else (1.0, jt.body_1)
+    on_b = (lay.pb == b) * lay.is_point
+    ma, mb = lay.MA[prods] @ on_b, lay.MB[prods] @ on_b
+
+    def fn(t: float, s: StepState, prm: Any) -> Any:
+        kin, lam, batched = _kin(model, s, prm)
+        c = model.coefficients(t, kin.kp)[0][:, prods, 0]
+        w = sign * lam[:, eq_of] * c
+        f = np.einsum("bp,bpa->ba", w * ma, kin.BV[:, prods, 0]) + \
+            np.einsum("bp,bpa->ba", w * mb, kin.AV[:, prods, 0])
+        return _out(f, batched)
+    return fn
+
+
+def _axial(model: "MultibodyModel", el: Any, kind: str) -> Callable[[float, StepState, Any], Any]:
+    """A spring's or cylinder's quantity (1,) (or (B, 1)) from the kernel (batched)."""
+    lay = model.layout
+    i = lay.axial.index(el)
+
+    def fn(t: float, s: StepState, prm: Any) -> Any:
+        kin, _, batched = _kin(model, s, prm)
+        x = kin.X[:, lay.n_cp + i]
+        L = np.sqrt(x[:, 0])
+        Ld = x[:, 1] / (2.0 * L)
+        c = kin.kp.ec[i]
+        if kind in ("length", "length_rate"):
+            v = L if kind == "length" else Ld
+        elif kind in ("stroke", "stroke_rate", "volume_1", "volume_2"):
+            st = L - c[:, 2]
+            v = {"stroke": st, "stroke_rate": Ld}.get(kind)
+            if v is None:
+                v = el._volumes(st, c)[0 if kind == "volume_1" else 1]
+        else:
+            j = getattr(el, "p_index", 0)
+            P = el.law(L, Ld, np.atleast_2d(s.p)[:, j:j + el.n_pressures], t, kin.kp.pv, c)[0]
+            v = P if kind == "force" and el in model.cylinders else -P
+        return _out(v[:, None], batched)
+    return fn
 
 
 def _joint_load(model: "MultibodyModel", jt: Any, t: float, s: StepState, params: Any
@@ -94,24 +153,30 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             return None
         if kind == "multipliers":
             rows = np.array(jt.rows)
-            return Output(lambda t, s, prm: s.lam[rows], tuple(f"{name}.{lab}" for lab in jt.labels))
+            return Output(lambda t, s, prm: s.lam[rows], tuple(f"{name}.{lab}" for lab in jt.labels),
+                          linear=True)
         if jt.kind == "driving" and kind != "multipliers":
             problems.add(f"{path}.kind", "a driving constraint has only 'multipliers'")
             return None
 
+        labels = {"reaction_force": ("Fx", "Fy", "Fz"), "reaction_force_norm": ("F",),
+                  "reaction_moment": ("Mx", "My", "Mz"), "reaction_force_joint_frame": ("Fu", "Fv", "Fw")}
+        labs = tuple(f"{name}.{c}" for c in labels[kind])
+        if kind in ("reaction_force", "reaction_force_norm"):
+            force = _reaction(model, jt)
+
+            def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
+                f = force(t, s, prm)
+                return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
+            return Output(rfn, labs, batched=True)
+
         def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
             f, n, ctx = _joint_load(model, _jt, t, s, prm)
-            if _k == "reaction_force":
-                return f
-            if _k == "reaction_force_norm":
-                return np.atleast_1d(np.sqrt(np.sum(f * f)))
             if _k == "reaction_moment":
                 return n
             u, v, w = (d.kin(ctx)[0][:, 0] for d in _jt.frame_1)
             return np.array([np.sum(u * f), np.sum(v * f), np.sum(w * f)])
-        labels = {"reaction_force": ("Fx", "Fy", "Fz"), "reaction_force_norm": ("F",),
-                  "reaction_moment": ("Mx", "My", "Mz"), "reaction_force_joint_frame": ("Fu", "Fv", "Fw")}
-        return Output(fn, tuple(f"{name}.{c}" for c in labels[kind]))
+        return Output(fn, labs)
     if head == "body":
         body = next((b for b in model.bodies if b.name == name), None)
         if body is None:
@@ -125,23 +190,24 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             return None
         a = 7 * body.index
 
-        def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
-            if _k == "position":
-                return s.q[a:a + 3]
-            if _k == "velocity":
-                return s.qd[a:a + 3]
-            if _k == "acceleration":
-                return s.qdd[a:a + 3]
-            p = s.q[a + 3:a + 7].reshape(4, 1)
-            if _k == "angle_z":
-                xa = rotate(p, np.array([[1.0], [0.0], [0.0]]))[:, 0]
-                return np.atleast_1d(atan2_cs(xa[1], xa[0]))
-            w = angular_velocity(p, s.qd[a + 3:a + 7].reshape(4, 1))[:, 0]
-            return w if _k == "angular_velocity" else w[2:3]
         labs = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
                 "acceleration": ("ax", "ay", "az"), "angle_z": ("angle_z",),
                 "angular_velocity": ("wx", "wy", "wz"), "angular_velocity_z": ("wz",)}[kind]
-        return Output(fn, tuple(f"{name}.{c}" for c in labs), "rad" if kind == "angle_z" else "")
+        labels = tuple(f"{name}.{c}" for c in labs)
+        if kind in ("position", "velocity", "acceleration"):
+            field = {"position": "q", "velocity": "qd", "acceleration": "qdd"}[kind]
+            return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], labels, linear=True)
+
+        def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
+            p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
+            if _k == "angle_z":
+                xa = rotate(p, np.array([[1.0], [0.0], [0.0]]))
+                v = atan2_cs(xa[1:2], xa[0:1])
+            else:
+                v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
+                v = v if _k == "angular_velocity" else v[2:3]
+            return v.T if s.q.ndim == 2 else v[:, 0]
+        return Output(fn, labels, "rad" if kind == "angle_z" else "", batched=True)
     if head == "marker":
         from .spec import Reader
         if not isinstance(name, str) or "." not in name:
@@ -170,30 +236,16 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
                                          f"(known: {', '.join(CYL_KINDS)})")
             return None
 
-        def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
-            ctx = _ctx(s, prm, t)
-            j = cyl.p_index
-            if _k == "pressure_1":
-                return s.p[j:j + 1]
-            if _k == "pressure_2":
-                return s.p[j + 1:j + 2]
-            if _k == "force":
-                return cyl.force(ctx, s.p[:, None])[:, 0]
-            sv, sd, _ = cyl.kinematics(ctx)
-            if _k == "stroke":
-                return sv[:, 0]
-            if _k == "stroke_rate":
-                return sd[:, 0]
-            V1, V2 = cyl.volumes(sv, prm)
-            return (V1 if _k == "volume_1" else V2)[:, 0]
-        return Output(fn, (f"{name}.{kind}",))
+        if kind in ("pressure_1", "pressure_2"):
+            j = cyl.p_index + (kind == "pressure_2")
+            return Output(lambda t, s, prm: s.p[j:j + 1], (f"{name}.{kind}",), linear=True)
+        return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True)
     if name in springs:
         spr = springs[name]
         if kind not in SPRING_KINDS:
             problems.add(f"{path}.kind", f"unknown spring quantity {kind!r}{did_you_mean(kind, SPRING_KINDS)}")
             return None
-        i = SPRING_KINDS.index(kind)
-        return Output(lambda t, s, prm: spr.state(_ctx(s, prm, t))[i][:, 0], (f"{name}.{kind}",))
+        return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True)
     allnames = list(cyls) + list(springs)
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")

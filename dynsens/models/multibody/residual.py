@@ -62,15 +62,9 @@ class Evaluation:
         self.lam, self.p, self.pd = lam, p, pd
         lay = model.layout
         kp = self.kp
-        cf, shift = model.coefficients(t, kp)
+        self.Phi, cf = model.constraint_levels(t, kin)
         self.cf = cf
-        Xc = kin.X[:, :lay.n_cp]
-        c, cd, cdd = cf[..., 0], cf[..., 1], cf[..., 2]
-        x, xd, xdd = Xc[..., 0], Xc[..., 1], Xc[..., 2]
-        rows = np.stack([c * x, cd * x + c * xd, cdd * x + 2.0 * cd * xd + c * xdd], axis=-1)
-        Phi = rmatmul(lay.S, rows) - shift
-        Phi[:, lay.norm_eq] += kin.N
-        self.Phi = Phi
+        c = cf[..., 0]
         lam_r = rmatmul(lay.S.T, lam.T).T
         B = kin.X.shape[0]
         w = np.zeros((B, lay.n_prod), np.result_type(kin.X, lam, p, float))
