@@ -19,7 +19,6 @@ from typing import Any, Callable, Literal
 
 import numpy as np
 
-from .errors import DynsensError
 from .models.base import Model, StepState
 
 PartialsMethod = Literal["forward", "central", "complex"]
@@ -80,7 +79,6 @@ class DesignPartials:
             self._col = np.arange(m)
             self._coef = 1j * h
         self._stacked = model.stack_parameters(self._batch)
-        self._groups: ColumnGroups | None = None
 
     def _combine(self, F: np.ndarray) -> np.ndarray:
         """Difference quotients (k, m) from the values (k, B) of the batch entries."""
@@ -92,27 +90,8 @@ class DesignPartials:
         return np.imag(F) / self.h
 
     def residual_partials(self, t: float, s: StepState) -> np.ndarray:
-        """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation.
-
-        When design variables touch disjoint sets of residual rows (per-element variables),
-        they are perturbed together, one batch entry per group (see :class:`ColumnGroups`).
-        """
-        if self._groups is None:
-            self._groups = ColumnGroups.detect(self, t, s)
-        g = self._groups
-        if not g.useful:
-            return self._combine(self.model.residual_batch(t, s, self._batch))
-        F = self.model.residual_batch(t, s, g.batch)
-        k = g.n_groups
-        if self.method == "forward":
-            D = F[:, 1:] - F[:, :1]
-        elif self.method == "central":
-            D = (F[:, :k] - F[:, k:]) / 2.0
-        else:
-            D = np.imag(F)
-        P = np.zeros((F.shape[0], self.m))
-        P[g.rows, g.cols] = D[g.rows, g.group_of[g.cols]] / self.h[g.cols]
-        return P
+        """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation."""
+        return self._combine(self.model.residual_batch(t, s, self._batch))
 
     def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,
               batched: bool = False) -> np.ndarray:
@@ -131,9 +110,8 @@ class DesignPartials:
 
     @property
     def evaluations_per_call(self) -> int:
-        """Residual evaluations one ∂_x F_R call costs (fewer when the design is grouped)."""
-        k = self._groups.n_groups if self._groups is not None and self._groups.useful else self.m
-        return {"forward": k + 1, "central": 2 * k, "complex": k}[self.method]
+        """Function evaluations one partial-derivative call costs."""
+        return {"forward": self.m + 1, "central": 2 * self.m, "complex": self.m}[self.method]
 
     def of(self, fn: Callable[[Any], np.ndarray], base: np.ndarray | None = None) -> np.ndarray:
         """∂fn/∂x (k, m) for fn(params) -> (k,); ``base`` = fn(params0) if already known."""
@@ -178,63 +156,3 @@ def pseudo_load(model: Model, t: float, s: StepState, lin: Any, dq_pred: np.ndar
     P = partials.residual_partials(t, s)
     state_part = lin.state_product(dq_pred, dqd_pred, dp_pred) if lin is not None else None
     return P if state_part is None else P + state_part
-
-
-class ColumnGroups:
-    """Design variables grouped so that each group touches disjoint residual rows.
-
-    The sparsity pattern of ∂F_R/∂x is found once per run by setting one design variable at a
-    time to NaN and seeing which residual entries turn NaN (NaN propagates through any
-    arithmetic, so a row that may depend on x_j is caught whatever the state).  A greedy
-    colouring of the columns then lets all variables of a group be perturbed in one residual
-    evaluation: for a chain with one stiffness per spring, 3 evaluations instead of m.
-    Models that cannot evaluate NaN designs simply get no grouping.
-    """
-
-    def __init__(self, rows_per_col: list[np.ndarray] | None, partials: "DesignPartials"):
-        self.useful = False
-        if rows_per_col is None:
-            return
-        m = len(rows_per_col)
-        group_of = np.full(m, -1)
-        row_groups: dict[int, set[int]] = {}
-        for j, rows in enumerate(rows_per_col):
-            taken = set().union(*(row_groups.get(int(r), set()) for r in rows)) if len(rows) else set()
-            g = next(k for k in range(m + 1) if k not in taken)
-            group_of[j] = g
-            for r in rows:
-                row_groups.setdefault(int(r), set()).add(g)
-        self.n_groups = int(group_of.max()) + 1 if m else 0
-        self.useful = self.n_groups <= m // 2
-        if not self.useful:
-            return
-        self.group_of = group_of
-        self.rows = np.concatenate(rows_per_col)
-        self.cols = np.concatenate([np.full(len(r), j) for j, r in enumerate(rows_per_col)])
-        model, x, h = partials.model, partials.x, partials.h
-        steps = [np.where(group_of == g, h, 0.0) for g in range(self.n_groups)]
-        if partials.method == "forward":
-            self.batch = [partials.params0] + [model.parameters(x + d) for d in steps]
-        elif partials.method == "central":
-            self.batch = [model.parameters(x + d) for d in steps] + [model.parameters(x - d) for d in steps]
-        else:
-            self.batch = [model.parameters(x + 1j * d) for d in steps]
-
-    @classmethod
-    def detect(cls, partials: "DesignPartials", t: float, s: StepState) -> "ColumnGroups":
-        """Find the pattern at time t (s) and state s; no grouping when it cannot be found."""
-        model, x = partials.model, partials.x
-        if partials.m < 4:
-            return cls(None, partials)
-        rows = []
-        with np.errstate(all="ignore"):
-            try:
-                if not np.all(np.isfinite(model.residual(t, s, partials.params0))):
-                    return cls(None, partials)
-                for j in range(partials.m):
-                    xn = x.copy()
-                    xn[j] = np.nan
-                    rows.append(np.flatnonzero(np.isnan(model.residual(t, s, model.parameters(xn)))))
-            except (ArithmeticError, ValueError, TypeError, IndexError, np.linalg.LinAlgError, DynsensError):
-                return cls(None, partials)  # the model cannot evaluate a NaN design: no grouping
-        return cls(rows, partials)

@@ -48,21 +48,3 @@ def test_initial_state_sensitivity():
     res = dynsens.run_case(case)
     ref = complex_step_gradients(case)
     assert rel_err(res.responses["q_end"].gradient, ref["q_end"]) < 1e-10
-
-
-def test_per_element_design_variables_are_grouped():
-    """30 spring stiffnesses as design variables: ∂F_R/∂x is found with 3 grouped residual
-    evaluations per step instead of 30, and the gradients stay exact."""
-    from scripts_path import duffing_chain
-    d = duffing_chain(30, t_end=0.3)
-    d["design"]["variables"] = [{"name": f"k_{i + 1}", "value": 1000.0 * (1 + 0.01 * i), "lower": 100.0,
-                                 "upper": 1e4} for i in range(30)]
-    for el in d["model"]["elements"]:
-        el.update({"spring": {"k": "k_" + el["name"][1:], "k3": 1e6}, "mass": {"mass": 1.0},
-                   "damper": {"c": 2.0}}[el["type"]])
-    case = dynsens.load_case_dict(d, overrides=["sensitivity.partials=complex"])
-    res = dynsens.run_case(case)
-    assert res.counters["sensitivity_residual_evaluations"] <= 3 * (res.counters["steps"] + 1) + 30
-    ref = complex_step_gradients(case)
-    for name, r in res.responses.items():
-        assert rel_err(r.gradient, ref[name]) < 1e-10
