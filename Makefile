@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test example reproduce-table1 bench cases clean
+.PHONY: setup test example reproduce-table1 report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,8 +27,21 @@ example: $(STAMP)
 reproduce-table1: $(STAMP)
 	$(PY) scripts/reproduce_table1.py
 
+# work-precision study of the shipped cases -> results/convergence/ (tables and plots)
+report: $(STAMP)
+	$(VENV)/bin/dynsens convergence cases/sdof_step.yaml --dt 0.02,0.01,0.005,0.0025,0.00125 -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/duffing_chain.yaml --set integrator.t_end=1 --dt 0.004,0.002,0.001,0.0005 -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/truss_impact.yaml --dt 4e-4,2e-4,1e-4,5e-5 -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/hydraulic_lever.yaml --dt 0.008,0.004,0.002,0.001 -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/tyrolean_weir.yaml --dt 0.004,0.002,0.001,0.0005 --methods ddm-forward,ddm-complex,fd-forward,cs -o results/convergence
+	$(PY) scripts/extreme_report.py > results/extreme.md
+
 bench: $(STAMP)
-	$(PY) scripts/bench_sensitivity_cost.py
+	$(PY) scripts/bench_sensitivity_cost.py cases/duffing_chain.yaml cases/sdof_step.yaml cases/truss_impact.yaml cases/slider_crank.yaml cases/tyrolean_weir.yaml
+
+bench-peers: $(STAMP)
+	$(VENV)/bin/pip install --quiet ".[peers]"
+	$(PY) scripts/bench_peers.py
 
 cases: $(STAMP)
 	$(PY) scripts/make_cases.py
