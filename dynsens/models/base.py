@@ -284,6 +284,10 @@ class Model(ABC):
     def check_state(self, t: float, s: StepState, params: Any) -> None:
         """Raise ModelError when the state leaves the model's range of validity."""
 
+    def diagnose_singular(self, t: float, s: StepState, params: Any) -> str:
+        """Explain a singular iteration matrix at (t, s), e.g. which joints lost rank ('' if unknown)."""
+        return ""
+
     def monitors(self, t: float, s: StepState, params: Any) -> dict[str, float]:
         """Scalar per-step diagnostics stored with the results (e.g. constraint drift)."""
         return {}

@@ -135,11 +135,13 @@ class StepSolver:
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:
+                why = self.model.diagnose_singular(t, s, params)
                 raise ConvergenceError(
-                    f"singular iteration matrix ({exc})", t=t, step=step, iterations=it,
-                    residual_history=history,
-                    hint="check for redundant constraints, zero masses or unsupported "
-                         "(rigid-body) degrees of freedom") from None
+                    f"singular iteration matrix ({exc}{'; ' + why if why else ''})", t=t, step=step,
+                    iterations=it, residual_history=history,
+                    hint="a mechanism at a singular (e.g. dead-centre) configuration, redundant "
+                         "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
+                         "change the geometry or the joint set") from None
             dz = factor.solve(-R)
             z = z + dz
             self.counters.newton_iterations += 1
