@@ -229,8 +229,9 @@ class Kin:
         return rmatmul(self.lay.Gf, v.T).T
 
     def rows(self) -> tuple[Array, Array, Array, Array, Array]:
-        """(K0, Jx, Dx, Ax, AK0/BK0) of the first batch entry: ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q (n_prod, n_q)
-        (also ∂ẋ/∂q̇ = Jx, ∂ẍ/∂q̇ = 2Dx, ∂ẍ/∂q̈ = Jx), and the sides' value Jacobians."""
+        """(Jx, Dx, Ax, AK0, BK0) of the first batch entry: ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q (n_prod, n_q)
+        (also ∂ẋ/∂q̇ = Jx, ∂ẍ/∂q̇ = 2Dx, ∂ẍ/∂q̈ = Jx), and the sides' value Jacobians
+        ∂a/∂q, ∂b/∂q (n_prod, 3, n_q)."""
         if self._rows is None:
             lay = self.lay
             K = lay.K_base.astype(np.result_type(lay.K_base, self.C))

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..base import Linearization
 from .bodies import Ctx
-from .kernel import KParams, Kin
+from .kernel import Kin
 from .rotations import T_G, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
