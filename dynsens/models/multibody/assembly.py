@@ -119,21 +119,37 @@ def _F_matrix(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) ->
     return K
 
 
-def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str) -> None:
-    """CaseError naming the equations (joints) involved when J (n_eq, n_q) is rank-deficient."""
+def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = None
+                        ) -> tuple[int, list[str], list[str]] | None:
+    """(rank, equations, joints) when J (n_eq, n_q) is rank-deficient, else None.
+
+    Singular values ≤ rel_tol·σ_max count as zero (default: round-off, 1e3·ε·max(shape));
+    the equations named are those with a visible share (> 1e-6) in the left null vectors.
+    """
     if J.shape[0] == 0:
-        return
+        return None
     U, sv, _ = np.linalg.svd(np.real(J), full_matrices=True)
-    tol = max(J.shape) * np.finfo(float).eps * 1e3 * (sv[0] if sv.size else 1.0)
+    rel = max(J.shape) * np.finfo(float).eps * 1e3 if rel_tol is None else rel_tol
+    tol = rel * (sv[0] if sv.size else 1.0)
     svf = np.concatenate([sv, np.zeros(J.shape[0] - sv.size)])
     null = np.flatnonzero(svf <= tol)
     if null.size == 0:
-        return
+        return None
     involved = sorted({labels[i] for j in null for i in np.flatnonzero(np.abs(U[:, j]) > 1e-6)})
     joints = sorted({lab.split(".")[0] for lab in involved})
+    return J.shape[0] - null.size, involved, joints
+
+
+def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str) -> None:
+    """CaseError naming the equations (joints) involved when J (n_eq, n_q) is rank-deficient."""
+    dep = dependent_equations(J, labels)
+    if dep is None:
+        return
+    rank, involved, joints = dep
+    n_red = J.shape[0] - rank
     raise CaseError(
-        f"{where}: the constraint Jacobian has rank {J.shape[0] - null.size} < {J.shape[0]} "
-        f"({null.size} redundant equation{'s' if null.size > 1 else ''}); linearly dependent "
+        f"{where}: the constraint Jacobian has rank {rank} < {J.shape[0]} "
+        f"({n_red} redundant equation{'s' if n_red > 1 else ''}); linearly dependent "
         f"equations: {', '.join(involved)} (joints/conditions: {', '.join(joints)}). "
         "A closed loop whose joint axes are all parallel is over-constrained in 3D: replace one "
         "revolute by a planar_pin (or a spherical/cylindrical joint), or drop a hold/distance.")

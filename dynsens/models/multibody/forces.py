@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..timefunctions import TimeFunction
+from .actuators import AxialElement
 from .bodies import GROUND, Ctx, Diff, Point
 from .rotations import ET_mul, GT_mul, dot, rotate
 
@@ -91,7 +92,7 @@ class Torque(ForceElement):
 
 
 @dataclass(eq=False)
-class SpringDamper(ForceElement):
+class SpringDamper(ForceElement, AxialElement):
     """Point-to-point spring-damper; parameters k, k3, c, L0 by parameter index.
 
     ``free_length`` is a key of params.scal (the free length L0, length unit).

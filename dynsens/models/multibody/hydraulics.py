@@ -26,6 +26,7 @@ import numpy as np
 
 from ...errors import ModelError
 from ..timefunctions import TimeFunction
+from .actuators import AxialElement
 from .bodies import Ctx, Diff
 from .rotations import dot
 
@@ -37,8 +38,8 @@ CYLINDER_PARAMS = ("area_1", "area_2", "length_0", "stroke_max", "bulk_modulus",
 
 
 @dataclass(eq=False)
-class HydraulicCylinder:
-    """One cylinder; ``p_index`` is the position of p1 in the first-order state (p2 follows).
+class HydraulicCylinder(AxialElement):
+    """One cylinder, an :class:`.actuators.AxialElement` with two states; ``p_index`` is the position of p1 in the first-order state (p2 follows).
 
     ``idx`` maps the names of :data:`CYLINDER_PARAMS` to parameter-vector indices
     (areas are stored derived in params.scal under ``name + '.A1'`` / ``'.A2'``).

@@ -29,6 +29,14 @@ from .rotations import point_tensor, rmatmul
 
 Array = np.ndarray
 
+# ROW_LEVELS[T, l, m]: x, ẋ, ẍ (T = 0, 1, 2) of a product from its sides' levels l, m
+# (x = a·b, ẋ = ȧ·b + a·ḃ, ẍ = ä·b + 2ȧ·ḃ + a·b̈)
+ROW_LEVELS = np.zeros((3, 3, 3))
+ROW_LEVELS[0, 0, 0] = 1.0
+ROW_LEVELS[1, 0, 1] = ROW_LEVELS[1, 1, 0] = 1.0
+ROW_LEVELS[2, 0, 2] = ROW_LEVELS[2, 2, 0] = 1.0
+ROW_LEVELS[2, 1, 1] = 2.0
+
 
 class Layout:
     """Index structure of the model's terms, built once per model.
@@ -71,7 +79,8 @@ class Layout:
         self.point_prim = [next(iter(m)) if m else -1 for m in self.point_prim]
         n_t, n_p = len(self.prims), len(sides) // 2
         self.n_t, self.n_prod = n_t, n_p
-        self.MA, self.MB = np.zeros((n_p, n_t)), np.zeros((n_p, n_t))
+        self.MAB = np.zeros((2 * n_p, n_t))                # [MA; MB]: sides from primitives
+        self.MA, self.MB = self.MAB[:n_p], self.MAB[n_p:]
         for i, (lin, _) in enumerate(sides):
             M = self.MA if i % 2 == 0 else self.MB
             for j, c in lin.items():
@@ -131,6 +140,12 @@ class Layout:
         self.H_idx = (np.broadcast_to(pcol[:, :, None], (n_t, 4, 4)),
                       np.broadcast_to(pcol[:, None, :], (n_t, 4, 4)))
         bcol = 7 * self.norm_body[:, None] + 3 + np.arange(4)[None, :]       # (n_norm, 4)
+        # per-body blocks of (n_q, n_q) matrices: the r diagonals and the (4, 4) p-blocks
+        rdiag = (7 * np.arange(self.n_b)[:, None] + np.arange(3)).reshape(-1)
+        self.r_diag = (rdiag, rdiag)
+        pblk = 7 * np.arange(self.n_b)[:, None] + 3 + np.arange(4)                # (n_b, 4)
+        self.p_blocks = (np.broadcast_to(pblk[:, :, None], (self.n_b, 4, 4)),
+                         np.broadcast_to(pblk[:, None, :], (self.n_b, 4, 4)))
         self.norm_cols = bcol
 
 
@@ -201,8 +216,8 @@ class Kin:
         self.PV = PV + (Qs[..., :3][:, :, lay.pb] * lay.is_point[:, None]).transpose(0, 2, 1, 3)
         B = self.PV.shape[0]
         flat = self.PV.reshape(B, n_t, 9)
-        self.AV = rmatmul(lay.MA, flat).reshape(B, lay.n_prod, 3, 3)
-        self.BV = rmatmul(lay.MB, flat).reshape(B, lay.n_prod, 3, 3)
+        self.ABV = rmatmul(lay.MAB, flat).reshape(B, 2, lay.n_prod, 3, 3)   # both sides, one matmul
+        self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
         self.AV[:, :, 0] += kp.cA
         self.BV[:, :, 0] += kp.cB
         Vd = self.AV @ self.BV.transpose(0, 1, 3, 2)                 # A_l·B_m
@@ -216,10 +231,9 @@ class Kin:
     def prim_forces(self, w: Array) -> Array:
         """f (B, n_t, 3) on the primitives from weights w (B, n_prod) of the products:
         Σ_p w_p ∂x_p/∂(primitive values)."""
-        lay = self.lay
-        fa = w[..., None] * self.BV[:, :, 0]
-        fb = w[..., None] * self.AV[:, :, 0]
-        return rmatmul(lay.MA.T, fa) + rmatmul(lay.MB.T, fb)
+        # side a is pulled by w·b and side b by w·a: swap the sides, one matmul with [MA; MB]ᵀ
+        fab = w[:, None, :, None] * self.ABV[:, ::-1, :, 0]
+        return rmatmul(self.lay.MAB.T, fab.reshape(fab.shape[0], -1, 3))
 
     def generalized(self, f: Array) -> Array:
         """(B, n_q) Σ_j (∂prim_j/∂q)ᵀ f_j for primitive forces f (B, n_t, 3)."""
@@ -236,14 +250,15 @@ class Kin:
             lay = self.lay
             K = lay.K_base.astype(np.result_type(lay.K_base, self.C))
             K.reshape(-1)[lay.K_idx] = 2.0 * self.C[0].transpose(0, 3, 1, 2)
-            Kf = K.reshape(lay.n_t, 9 * lay.n_q)
-            AK = rmatmul(lay.MA, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
-            BK = rmatmul(lay.MB, Kf).reshape(lay.n_prod, 3, 3, lay.n_q)
-            G = np.einsum("pla,pman->plmn", self.BV[0], AK) + np.einsum("pla,pman->plmn", self.AV[0], BK)
-            Jx = G[:, 0, 0]
-            Dx = G[:, 0, 1] + G[:, 1, 0]
-            Ax = G[:, 0, 2] + 2.0 * G[:, 1, 1] + G[:, 2, 0]
-            self._rows = (Jx, Dx, Ax, AK[:, 0], BK[:, 0])
+            # both sides at once: ABK[s, p, m, a, n] = ∂(side s)_a at level m / ∂q_n
+            ABK = rmatmul(lay.MAB, K.reshape(lay.n_t, 9 * lay.n_q)).reshape(2, lay.n_prod, 3, 3, lay.n_q)
+            # x-level T of product p = Σ CT[T, l, m] (b_l·∂a_m + a_l·∂b_m): one batched matmul
+            # over p instead of two (n_prod, 3, 3, n_q) einsums
+            Vo = np.stack([self.BV[0], self.AV[0]])                  # (2, p, l, a)
+            E = np.einsum("Tlm,spla->pTsma", ROW_LEVELS, Vo).reshape(lay.n_prod, 3, 18)
+            G = E @ ABK.transpose(1, 0, 2, 3, 4).reshape(lay.n_prod, 18, lay.n_q)
+            self.xrows = G                                           # (n_prod, 3, n_q)
+            self._rows = (G[:, 0], G[:, 1], G[:, 2], ABK[0, :, 0], ABK[1, :, 0])
         return self._rows  # type: ignore[return-value]
 
     def hessian(self, w: Array, f: Array) -> Array:

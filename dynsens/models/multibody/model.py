@@ -82,7 +82,7 @@ class MultibodyModel(Model):
             self.eqs.append(NormEq(b.index))
             self.eq_owner.append(f"{b.name}.normalization")
         n_q = 7 * len(bodies)
-        n_p = 2 * len(cylinders)
+        n_p = sum(c.n_pressures for c in cylinders)     # actuators' first-order states
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p)
         self._ic_cache: tuple[Any, Any] | None = None
         grav = [f for f in forces if isinstance(f, Gravity)]
@@ -100,6 +100,15 @@ class MultibodyModel(Model):
         self._cf0[..., 0] = 1.0
         self._shift0 = np.zeros((1, lay.n_eq, 3))
         self._shift0[0, lay.norm_eq, 0] = 1.0
+        # rows of J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o) as combinations of the product rows ∂x, ∂ẋ, ∂ẍ/∂q
+        # (r) with weights linear in the coefficient levels (c, ċ, c̈) (i): eq_row_weights[o, r, i];
+        # the normalisations' rows are 2p·(p, ṗ, p̈ weighted by norm_row_weights[o])
+        a, b2 = alpha, beta ** 2
+        self.eq_row_weights = np.array([
+            [[1, 0, 0], [0, 0, 0], [0, 0, 0]],
+            [[b2, 2 * a, 1], [2 * a, 2, 0], [1, 0, 0]],
+            [[2 * a, 2, 0], [2, 0, 0], [0, 0, 0]]], float)
+        self.norm_row_weights = np.array([[1, 0, 0], [b2, 2 * a, 1], [2 * a, 2, 0]], float)
 
     # ------------------------------------------------------------------ parameters
     def parameters(self, x: Array) -> MBParams:
@@ -217,6 +226,26 @@ class MultibodyModel(Model):
         for cyl in self.cylinders:
             i = lay.n_cp + lay.axial.index(cyl)
             cyl.check(np.sqrt(X[i, 0]) - params.pv[cyl.idx["length_0"]], params, t)
+
+    def diagnose_singular(self, t: float, s: StepState, params: MBParams) -> str:
+        """Name the joints whose equations became linearly dependent at (t, s) (a dead-centre
+        or change-point configuration), from the rank of J_Φ; '' when J_Φ has full rank.
+
+        The iteration matrix is judged singular at a pivot ratio of 1e-14; J_Φ at the same
+        iterate is rank-deficient to the looser 1e-9·σ_max (it is met one Newton correction
+        away from the singular configuration itself).
+        """
+        from .assembly import dependent_equations, jacobian_rows
+        J = jacobian_rows(self.eqs, np.real(s.q), params, t)
+        dep = dependent_equations(J, self.eq_owner, rel_tol=1e-9)
+        if dep is None:
+            return ""
+        rank, involved, owners = dep
+        names = {jt.name for jt in self.joints}
+        joints = [o for o in owners if o in names] or owners   # not the normalisations' bodies
+        return (f"joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} lose rank: the "
+                f"constraint Jacobian has rank {rank} < {J.shape[0]} (dependent equations "
+                f"{', '.join(involved)})")
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
         """‖Φ‖ and ‖Φ̇‖ (real parts) at one step."""

@@ -32,19 +32,26 @@ if TYPE_CHECKING:  # pragma: no cover
 Array = np.ndarray
 
 
+# The bilinear G as plain matrices, so that each evaluation is one matmul (faster than einsum
+# for these tiny operands): G(a) = a @ _TG_A, ∂(G(a)b)/∂a = b @ _TG_B, ∂(G(a)ᵀv)/∂a = v @ _TG_V
+_TG_A = np.ascontiguousarray(T_G.transpose(1, 0, 2).reshape(4, 12))     # [k, (i, l)]
+_TG_B = np.ascontiguousarray(T_G.transpose(2, 0, 1).reshape(4, 12))     # [l, (i, k)]
+_TG_V = np.ascontiguousarray(T_G.transpose(0, 2, 1).reshape(3, 16))     # [i, (l, k)]
+
+
 def _G(a: Array) -> Array:
     """G(a) (..., 3, 4) for quaternions a (..., 4)."""
-    return np.einsum("ikl,...k->...il", T_G, a)
+    return (a @ _TG_A).reshape(a.shape[:-1] + (3, 4))
 
 
 def _Gb(b: Array) -> Array:
     """∂(G(a) b)/∂a (..., 3, 4) for b (..., 4)."""
-    return np.einsum("ikl,...l->...ik", T_G, b)
+    return (b @ _TG_B).reshape(b.shape[:-1] + (3, 4))
 
 
 def _GTv(v: Array) -> Array:
     """∂(G(a)ᵀ v)/∂a (..., 4, 4) for v (..., 3)."""
-    return np.einsum("ikl,...i->...lk", T_G, v)
+    return (v @ _TG_V).reshape(v.shape[:-1] + (4, 4))
 
 
 class Evaluation:
@@ -74,7 +81,7 @@ class Evaluation:
             xi = kin.X[:, lay.n_cp + i]
             L = np.sqrt(xi[..., 0])
             Ld = xi[..., 1] / (2.0 * L)
-            j = getattr(el, "p_index", 0)
+            j = el.p_index
             law = el.law(L, Ld, p[..., j:j + el.n_pressures], t, kp.pv, kp.ec[i])
             self.laws.append((L, Ld, law))
             w[:, lay.n_cp + i] = -0.5 * law[0] / L
@@ -92,10 +99,10 @@ class Evaluation:
         Lp = kin.Lp
         p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
         J = kp.J
-        w1 = np.einsum("...ij,...j->...i", J, (_G(p) @ pdd[..., None])[..., 0])
-        w2 = np.einsum("...ij,...j->...i", J, (_G(pd_) @ p[..., None])[..., 0])
-        Rp = 4.0 * (np.swapaxes(_G(p), -1, -2) @ w1[..., None])[..., 0] \
-            - 8.0 * (np.swapaxes(_G(pd_), -1, -2) @ w2[..., None])[..., 0]
+        Gp, Gpd = _G(p), _G(pd_)
+        w1 = J @ (Gp @ pdd[..., None])                              # J'G(p)p̈, (..., 3, 1)
+        w2 = J @ (Gpd @ p[..., None])
+        Rp = 4.0 * (np.swapaxes(Gp, -1, -2) @ w1)[..., 0] - 8.0 * (np.swapaxes(Gpd, -1, -2) @ w2)[..., 0]
         Rr = kp.mass[..., None] * kin.Lr[:, 2]
         if m.gravity is not None:
             g = np.stack([kp.pv[:, i] for i in m.gravity.idx], -1)
@@ -123,21 +130,15 @@ class Evaluation:
         n_q, n_lam, n_p = tr.n_q, tr.n_lam, tr.n_p
         dt = np.result_type(kin.PV, self.lam, self.p, self.f)
         Jx, Dx, Ax, _, _ = kin.rows()
-        cf = self.cf[0]
-        c, cd, cdd = cf[:, 0], cf[:, 1], cf[:, 2]
-        Jc, Dc, Ac = Jx[:lay.n_cp], Dx[:lay.n_cp], Ax[:lay.n_cp]
-        a, b2 = m.alpha, m.beta ** 2
-
-        def eq_rows(kJ: Array, kD: Array, kA: Array, nJ: float, nD: float, nA: float) -> Array:
-            out = rmatmul(lay.S, kJ[:, None] * Jc + kD[:, None] * Dc + kA[:, None] * Ac).astype(dt)
-            Lp = kin.Lp[0][:, lay.norm_body]                        # (3, n_norm, 4)
-            blk = 2.0 * (nJ * Lp[0] + nD * Lp[1] + nA * Lp[2])
-            out[lay.norm_eq[:, None], lay.norm_cols] += blk
-            return out
-
-        JPhi = eq_rows(c, 0 * c, 0 * c, 1.0, 0.0, 0.0)
-        R2_q = m.scale * eq_rows(cdd + 2 * a * cd + b2 * c, 2 * cd + 2 * a * c, c, b2, 2 * a, 1.0)
-        R2_qd = m.scale * eq_rows(2 * cd + 2 * a * c, 2 * c, 0 * c, 2 * a, 2.0, 0.0)
+        # rows of J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows (r = Jx, Dx, Ax):
+        # weights linear in the coefficients (c, ċ, c̈), one matmul each for all equations
+        kk = m.eq_row_weights @ self.cf[0].T                         # (o, r, n_cp)
+        M = (kk.transpose(2, 0, 1) @ kin.xrows[:lay.n_cp]).transpose(1, 0, 2)   # (o, n_cp, n_q)
+        rows = rmatmul(lay.S, M).astype(dt, copy=False)
+        Lp = kin.Lp[0][:, lay.norm_body].reshape(3, -1)              # normalisations: 2 p·(levels)
+        blk = (2.0 * m.norm_row_weights @ Lp).reshape(3, -1, 4)
+        rows[:, lay.norm_eq[:, None], lay.norm_cols] += blk
+        JPhi, R2_q, R2_qd = rows[0], m.scale * rows[1], m.scale * rows[2]
         # R1
         H = kin.hessian(self.w[0], self.f[0])
         lam_n = self.lam[0, lay.norm_eq]
@@ -159,7 +160,7 @@ class Evaluation:
             w_Ld = -0.5 * P_Ld[0] / L
             R1_q += np.outer(jx, w_L * dL + w_Ld * dLd)
             R1_qd += np.outer(jx, w_Ld * dL)
-            j = getattr(el, "p_index", 0)
+            j = el.p_index
             for k, Pk in enumerate(P_p):
                 R1_p[:, j + k] += -0.5 * Pk[0] / L * jx
             for r in range(len(h)):
@@ -184,23 +185,21 @@ class Evaluation:
     def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
         """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""
         kin, kp, lay = self.kin, self.kp, self.model.layout
-        n_q, n_b = lay.n_q, lay.n_b
+        n_q = lay.n_q
         p, pd_, pdd = kin.Lp[0, 0], kin.Lp[0, 1], kin.Lp[0, 2]          # (n_b, 4)
         J = kp.J[0]
         Gp, Gpd = _G(p), _G(pd_)
-        w1 = np.einsum("bij,bj->bi", J, np.einsum("bil,bl->bi", Gp, pdd))
-        w2 = np.einsum("bij,bj->bi", J, np.einsum("bil,bl->bi", Gpd, p))
+        w1 = (J @ (Gp @ pdd[..., None]))[..., 0]
+        w2 = (J @ (Gpd @ p[..., None]))[..., 0]
         GpT, GpdT = np.swapaxes(Gp, 1, 2), np.swapaxes(Gpd, 1, 2)
-        Mpp = 4.0 * GpT @ J @ Gp
-        Kpp = 4.0 * (_GTv(w1) + GpT @ J @ _Gb(pdd)) - 8.0 * GpdT @ J @ Gpd
+        JGp, JGpd = J @ Gp, J @ Gpd
+        Mpp = 4.0 * GpT @ JGp
+        Kpp = 4.0 * (_GTv(w1) + GpT @ J @ _Gb(pdd)) - 8.0 * GpdT @ JGpd
         Cpp = -8.0 * (_GTv(w2) + GpdT @ J @ _Gb(p))
-        out = [np.zeros((n_q, n_q), dt) for _ in range(3)]
-        for b in range(n_b):
-            r, q = slice(7 * b, 7 * b + 3), slice(7 * b + 3, 7 * b + 7)
-            out[2][r, r] = kp.mass[0, b] * np.eye(3)
-            out[2][q, q] = Mpp[b]
-            out[0][q, q] = Kpp[b]
-            out[1][q, q] = Cpp[b]
+        # scatter the per-body blocks with precomputed indices (no per-body Python loop)
+        out = np.zeros((3, n_q, n_q), dt)
+        out[2][lay.r_diag] = np.repeat(kp.mass[0], 3)
+        out[:, lay.p_blocks[0], lay.p_blocks[1]] = np.stack([Kpp, Cpp, Mpp])
         return out[0], out[1], out[2]
 
 
