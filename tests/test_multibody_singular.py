@@ -7,6 +7,8 @@ equations of O and lift become linearly dependent.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -80,3 +82,16 @@ def test_passing_near_the_dead_centre_runs_through(tmp_path):
     assert res.status == "completed" and res.counters["step_cuts"] == 0
     # index-1 drift of the position constraints stays below 1e-4 m over the 1.5 s
     assert np.max(res.monitors["constraint_position"]) < 1e-4
+
+
+def test_run_through_the_dead_centre_does_not_report_success():
+    """Driving the link linearly over the top of its circle (y = 0.5 t passes y = 0.5 m at
+    t = 1 s) cannot be followed; step cutting must not turn that into a 'successful' run with
+    a large constraint drift: the drift guard stops it with an explanation."""
+    text = CASE.replace("amplitude: AMP, frequency: 0.25", "rate: 0.5")
+    case = dynsens.case.load.load_case_text(text, "link_linear.yaml")
+    with pytest.raises((ConvergenceError, dynsens.errors.ModelError)) as info:
+        dynsens.run_case(case)
+    msg = str(info.value)
+    assert re.search(r"t = (0\.9|1\.0)", msg), msg
+    assert "singular" in msg or "dead-centre" in msg, msg

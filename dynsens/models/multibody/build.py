@@ -24,7 +24,7 @@ from .rotations import rotate, atan2_cs
 from .spec import Reader
 
 TOP_KEYS = ("type", "units", "gravity", "bodies", "joints", "forces", "initial", "stabilization",
-            "constraint_scale")
+            "constraint_scale", "drift_limit")
 JOINT_KEYS = ("name", "type", "body_1", "body_2", "point", "marker_1", "marker_2", "axis")
 DRIVER_KEYS = ("name", "type", "joint", "body", "coordinate", "offset", "rate", "amplitude",
                "frequency", "phase")
@@ -68,12 +68,19 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     if not isinstance(scale, (int, float)) or scale <= 0:
         problems.add(f"{path}.constraint_scale", f"expected a number > 0, found {scale!r}")
         scale = 1.0
+    drift_limit = spec.get("drift_limit")
+    if drift_limit is not None and (isinstance(drift_limit, bool) or not isinstance(drift_limit, (int, float))
+                                    or drift_limit <= 0):
+        problems.add(f"{path}.drift_limit", f"expected a length > 0 (bound on ‖Φ‖), found {drift_limit!r}")
+        drift_limit = None
     if not rd.bodies:
         problems.add(f"{path}.bodies", "no moving body")
     if len(problems.problems) > n0:
         return None
-    return MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
-                          rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
+    model = MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
+                           rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
+    model.drift_limit = None if drift_limit is None else float(drift_limit)
+    return model
 
 
 def _joints(rd: Reader, spec: Any, path: str) -> list[Joint]:

@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...errors import ProblemCollector
+from ...errors import ModelError, ProblemCollector
 from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
@@ -247,10 +247,27 @@ class MultibodyModel(Model):
                 f"constraint Jacobian has rank {rank} < {J.shape[0]} (dependent equations "
                 f"{', '.join(involved)})")
 
+    drift_limit: float | None = None
+
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
-        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step."""
+        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step.
+
+        Raises ModelError when ‖Φ‖ exceeds ``model.drift_limit`` (default 1e-2 × the size of
+        the mechanism, the largest marker/joint vector): a run that drifts that far (e.g. one
+        that stepped through a dead-centre configuration) must not report success."""
         Phi = self.constraint_levels(t, self.kinematics(s, params))[0][0]
-        return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
+        drift = float(np.linalg.norm(np.real(Phi[:, 0])))
+        limit = self.drift_limit
+        if limit is None:
+            size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
+            limit = 1e-2 * (size if size > 0 else 1.0)
+        if drift > limit:
+            raise ModelError(
+                f"constraint drift ‖Φ‖ = {drift:.3g} exceeds {limit:.3g} at t = {t:.6g} s: the mechanism has "
+                "probably passed through a singular (dead-centre) configuration, or the time step is too "
+                "large for the index-1 form; reduce integrator.dt, add model.stabilization, or set "
+                "model.drift_limit")
+        return {"constraint_position": drift,
                 "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
 
     def dof_labels(self) -> list[str]:
