@@ -20,6 +20,7 @@ from click.testing import CliRunner
 
 import dynsens.cli.optimize as cli_opt
 import dynsens.optimize as opt
+import dynsens.optimize.problem as opt_problem
 from dynsens.case.load import load_case, load_case_dict
 from dynsens.cli.main import cli
 from dynsens.errors import ConvergenceError, ModelError
@@ -135,7 +136,7 @@ def test_interrupted_run_keeps_history_and_resume_finishes(tmp_path: Path, monke
 
 
 def _failing_run_case(monkeypatch, fail_calls: set[int], how: str):  # type: ignore[no-untyped-def]
-    real = opt.run_case
+    real = opt_problem.run_case
     calls = [0]
 
     def run_case(case, x, **kw):  # type: ignore[no-untyped-def]
@@ -150,7 +151,7 @@ def _failing_run_case(monkeypatch, fail_calls: set[int], how: str):  # type: ign
             res.responses["q_ks"] = ResponseValue(np.nan, None, "m", missing="event 'E1' never fired")
             return res
         return real(case, x, **kw)
-    monkeypatch.setattr(opt, "run_case", run_case)
+    monkeypatch.setattr(opt_problem, "run_case", run_case)
     return calls
 
 

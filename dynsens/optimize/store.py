@@ -1,0 +1,125 @@
+"""The optimization file: rows appended per iteration, start attributes, the stored optimum."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+import h5py
+import numpy as np
+
+from ..case.load import Case
+from ..io.hdf5 import append_rows, atomic_h5, write_design, write_header
+from ..simulation import run_case
+from .jobs import StartOutcome
+from .problem import FEAS_TOL, SIM_ERRORS, ConstraintTerm, ScaledProblem
+
+# --------------------------------------------------------------------------------------
+# the output file (written only by the calling process)
+# --------------------------------------------------------------------------------------
+def _str(v: str) -> np.ndarray:
+    return np.array(v, dtype=h5py.string_dtype())
+
+
+def _start_group(k: int) -> str:
+    return f"optimization/start_{k}"
+
+
+def _write_row(path: Path, msg: dict[str, Any]) -> None:
+    group = f"{_start_group(msg['start'])}/{'history' if msg['kind'] == 'iteration' else 'evaluations'}"
+    rows = {}
+    for k, v in msg["row"].items():
+        if v is None:
+            continue
+        rows[k] = _str(v) if isinstance(v, str) else np.asarray(v, dtype=float if k not in
+                                                                ("iteration", "segment", "n_sim", "failed")
+                                                                else None)
+    if msg["kind"] == "evaluation":
+        rows["failed"] = np.asarray(bool(msg["row"]["failed"]))
+    else:
+        rows["failed"] = np.asarray(int(msg["row"]["failed"]))
+    append_rows(path, group, rows)
+
+
+def _set_attrs(path: Path, group: str, attrs: Mapping[str, Any]) -> None:
+    with h5py.File(path, "a") as f:
+        g = f.require_group(group) if group else f
+        for k, v in attrs.items():
+            g.attrs[k] = v
+        f.flush()
+
+
+def set_status(path: str | Path, status: str, message: str) -> None:
+    """Root ``status``/``message`` of an optimization file (e.g. ``interrupted`` after Ctrl-C)."""
+    _set_attrs(Path(path), "", {"status": status, "message": message})
+
+
+def _outcome_attrs(o: StartOutcome) -> dict[str, Any]:
+    return {"finished": True, "success": o.success, "status": o.status, "message": o.message, "nit": o.nit,
+            "nfev": o.n_sim, "n_failed": o.n_failed, "x_opt": o.x, "f_opt": o.f, "g_opt": o.g,
+            "responses_opt": o.responses, "max_violation": o.max_violation, "feasible": o.feasible,
+            "wall_time": o.wall_time, "slsqp_nit": o.slsqp_nit}
+
+
+def _outcome_from_file(f: h5py.File, k: int) -> StartOutcome:
+    a = f[_start_group(k)].attrs
+    return StartOutcome(k, a["x_start"], a["x_opt"], float(a["f_opt"]), a["g_opt"], a["responses_opt"],
+                        float(a["max_violation"]), bool(a["feasible"]), bool(a["success"]), int(a["status"]),
+                        str(a["message"]), int(a["nit"]), int(a["nfev"]), int(a["n_failed"]),
+                        float(a["wall_time"]), slsqp_nit=int(a.get("slsqp_nit", 0)))
+
+
+def _init_file(path: Path, case: Case, x_ref: np.ndarray, overwrite: bool) -> None:
+    with atomic_h5(path, overwrite) as f:
+        write_header(f, case.text, case.source, "running", "")
+        write_design(f, case.design_names, x_ref, case.lower, case.upper)
+        f["design"].create_dataset("x0", data=x_ref)
+        f.create_group("optimization")
+
+
+def _problem_attrs(problem: ScaledProblem) -> dict[str, Any]:
+    return {"objective": problem.objective, "f_ref": problem.f_ref,
+            "constraints": json.dumps([c.__dict__ for c in problem.constraints]),
+            "constraint_labels": json.dumps(list(problem.constraint_labels)),
+            "response_names": json.dumps(list(problem.response_names)),
+            "g_scale": np.array([c.divisor for c in problem.constraints], dtype=float),
+            "feas_tol": FEAS_TOL}
+
+
+def _problem_from_file(f: h5py.File, case: Case) -> ScaledProblem:
+    a = f["optimization"].attrs
+    terms = tuple(ConstraintTerm(**c) for c in json.loads(a["constraints"]))
+    return ScaledProblem(case.design_names, case.lower, case.upper, case.scale, str(a["objective"]),
+                         float(a["f_ref"]), terms, tuple(json.loads(a["response_names"])))
+
+
+def _store_optimum(path: Path, case: Case, x: np.ndarray) -> None:
+    hist = tuple(case.plan.history) or ("q",)
+    try:
+        r = run_case(case, x, sensitivities=False, history=hist)
+    except SIM_ERRORS:
+        return
+    with h5py.File(path, "a") as f:
+        if "optimization/optimum" in f:
+            del f["optimization/optimum"]
+        g = f.create_group("optimization/optimum")
+        g.create_dataset("x", data=np.asarray(x, dtype=float))
+        g.create_dataset("time", data=r.time)
+        st = g.create_group("state")
+        for k, v in r.history.items():
+            st.create_dataset(k, data=v, compression="gzip" if v.size > 10000 else None)
+        st.attrs["q_labels"] = np.array(r.labels.get("q", []), dtype=h5py.string_dtype())
+        rg = g.create_group("responses")
+        for n, rv in r.responses.items():
+            rg.attrs[n] = float(np.real(rv.value)) if not rv.missing else np.nan
+        f.flush()
+
+
+def read_history(path: str | Path, start: int = 0) -> dict[str, np.ndarray]:
+    """The per-iteration history of one start as numpy arrays (strings decoded)."""
+    with h5py.File(path, "r") as f:
+        h = f[f"{_start_group(start)}/history"]
+        out = {k: v[()] for k, v in h.items()}
+    if "message" in out:
+        out["message"] = np.array([m.decode() if isinstance(m, bytes) else m for m in out["message"]], dtype=object)
+    return out
