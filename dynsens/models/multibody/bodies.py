@@ -182,30 +182,11 @@ class Term:
         return ()
 
 
-@dataclass(eq=False)
-class Point(Term):
-    """Point fixed in body ``body`` at body-frame offset params.vec[key] from the COM."""
-
-    body: int
-    key: str
-
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        if self.body == GROUND:
-            s = ctx.params.vec[self.key]
-            z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
-            return s + z, z, z
-        return ctx.rstack(self.body) + _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
-
-    def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
-        if self.body == GROUND:
-            return
-        a = 7 * self.body
-        out[a:a + 3] += f
-        out[a + 3:a + 7] += 2.0 * _jt_apply(ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
-
-    @property
-    def bodies(self) -> tuple[int, ...]:
-        return (self.body,)
+def _constant_kin(ctx: Ctx, key: str) -> tuple[Array, Array, Array]:
+    """A global vector params.vec[key] that does not move: value, zero rate, zero acceleration."""
+    s = ctx.params.vec[key]
+    z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
+    return s + z, z, z
 
 
 @dataclass(eq=False)
@@ -217,20 +198,37 @@ class Direction(Term):
 
     def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         if self.body == GROUND:
-            s = ctx.params.vec[self.key]
-            z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
-            return s + z, z, z
+            return _constant_kin(ctx, self.key)
         return _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
 
-    def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
-        if self.body == GROUND:
-            return
+    def _apply_rotation(self, ctx: Ctx, f: Array, out: Array) -> int:
+        """Add the Euler-parameter part of the generalized force; returns the body's offset in q."""
         a = 7 * self.body
         out[a + 3:a + 7] += 2.0 * _jt_apply(ctx.ts(self.key), ctx.q[a + 3:a + 7], f)
+        return a
+
+    def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
+        if self.body != GROUND:
+            self._apply_rotation(ctx, f, out)
 
     @property
     def bodies(self) -> tuple[int, ...]:
         return (self.body,)
+
+
+@dataclass(eq=False)
+class Point(Direction):
+    """Point fixed in body ``body`` at body-frame offset params.vec[key] from the COM."""
+
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+        if self.body == GROUND:
+            return _constant_kin(ctx, self.key)
+        return ctx.rstack(self.body) + _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
+
+    def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
+        if self.body != GROUND:
+            a = self._apply_rotation(ctx, f, out)
+            out[a:a + 3] += f
 
 
 @dataclass(eq=False)
@@ -240,9 +238,7 @@ class Const(Term):
     key: str
 
     def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
-        s = ctx.params.vec[self.key]
-        z = np.zeros((3, ctx.k), np.result_type(s, ctx.q))
-        return s + z, z, z
+        return _constant_kin(ctx, self.key)
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
         return
