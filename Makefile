@@ -30,6 +30,8 @@ reproduce-table1: $(STAMP)
 # work-precision study of the shipped cases -> results/convergence/ (tables and plots)
 report: $(STAMP)
 	$(VENV)/bin/dynsens convergence cases/sdof_step.yaml --dt 0.02,0.01,0.005,0.0025,0.00125 -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/sdof_step.yaml --set name=sdof_step_generalized_alpha --set integrator.scheme=generalized_alpha --set integrator.rho_inf=0.6 --dt 0.02,0.01,0.005,0.0025,0.00125 --methods ddm-forward,ddm-complex -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/sdof_step.yaml --set name=sdof_step_gamma_0.6 --set integrator.gamma=0.6 --set integrator.beta=0.3025 --dt 0.02,0.01,0.005,0.0025,0.00125 --methods ddm-forward,ddm-complex -o results/convergence
 	$(VENV)/bin/dynsens convergence cases/duffing_chain.yaml --set integrator.t_end=1 --dt 0.004,0.002,0.001,0.0005 -o results/convergence
 	$(VENV)/bin/dynsens convergence cases/truss_impact.yaml --dt 4e-4,2e-4,1e-4,5e-5 -o results/convergence
 	$(VENV)/bin/dynsens convergence cases/hydraulic_lever.yaml --dt 0.008,0.004,0.002,0.001 -o results/convergence
