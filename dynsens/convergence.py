@@ -137,9 +137,10 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path) -> list[Path]:
     files.append(csv_path)
     lines = [f"# Work-precision study: `{case.name}` (scheme {case.scheme.name}, order {case.scheme.order})", "",
              "Relative errors against the reference (finest Δt, complex-step partials, Richardson-extrapolated).", ""]
+    first = rows[0].method
     for n in names:
-        lines += [f"## {n}", "", f"Observed order (value, ddm-complex): {observed_order(rows, n):.2f}; "
-                  f"gradient: {observed_order(rows, n, what='gradient'):.2f}", "",
+        lines += [f"## {n}", "", f"Observed order (value, {first}): {observed_order(rows, n, first):.2f}; "
+                  f"gradient: {observed_order(rows, n, first, what='gradient'):.2f}", "",
                   "| Δt [s] | method | wall time [s] | value error | gradient error |", "|---|---|---|---|---|"]
         for r in rows:
             lines.append(f"| {r.dt:g} | {r.method} | {r.wall_time:.3f} | {r.value_error[n]:.2e} | "

@@ -9,7 +9,6 @@ from __future__ import annotations
 import copy
 import json
 import re
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -138,7 +137,6 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
     design, declared = _design(raw.get("design", {"variables": []}), pc)
-    names = tuple(v.name for v in design)
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
@@ -267,11 +265,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                                     f"(known: {', '.join(SCHEMES)})")
     elif beta is not None and gamma is not None:
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("default")
-                alpha = _number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
-                rho = _number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
-                scheme = make_scheme(str(scheme_name), beta, gamma, alpha=alpha, rho_inf=rho)
+            alpha = _number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
+            rho = _number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
+            scheme = make_scheme(str(scheme_name), beta, gamma, alpha=alpha, rho_inf=rho)
         except ValueError as exc:
             pc.add("integrator", str(exc))
     solver = spec.get("solver", {}) or {}
