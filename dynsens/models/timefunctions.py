@@ -6,13 +6,13 @@ so evaluation takes the model's parameter vector and is complex-safe in it.
 """
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..errors import ProblemCollector
+from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
 
 KINDS = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
@@ -92,17 +92,10 @@ def build_time_function(spec: Any, path: str, table: ParameterTable,
         return None
     kind = spec.get("type")
     if kind not in KINDS:
-        close = difflib.get_close_matches(str(kind), KINDS, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        problems.add(f"{path}.type", f"unknown time function {kind!r}{hint} (known: {', '.join(KINDS)})")
+        problems.add(f"{path}.type", f"unknown time function {kind!r}{did_you_mean(kind, KINDS)} "
+                                     f"(known: {', '.join(KINDS)})")
         return None
-    allowed = _KEYS[kind] | {"type"}
-    for key in spec:
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            problems.add(f"{path}.{key}", f"unknown key for a '{kind}' function{hint} "
-                                          f"(allowed: {', '.join(sorted(allowed))})")
+    check_keys(spec, path, _KEYS[kind] | {"type"}, problems)
     if kind == "constant":
         return TimeFunction(kind, ())
     if kind == "step":
