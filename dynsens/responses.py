@@ -97,7 +97,6 @@ class ValueAt(Response):
         self.fixed_time = fixed_time
         self._prev: Sample | None = None
         self._hit: tuple[Any, np.ndarray | None] | None = None
-        self._last: Sample | None = None
 
     def _pick(self, smp: Sample) -> tuple[Any, np.ndarray | None]:
         g = smp.grad_fixed if self.fixed_time else smp.grad
@@ -114,24 +113,23 @@ class ValueAt(Response):
                 v0, g0 = self._pick(self._prev)
                 v1, g1 = self._pick(smp)
                 self._hit = (v0 + w * (v1 - v0), None if g0 is None else g0 + w * (g1 - g0))
-        self._prev = smp
-        self._last = smp
+        self._prev = smp          # the latest sample: the end (or event) value when the run stops
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         kind = "fixed_time" if self.fixed_time else ""
         if self.event is not None:
             if self.event not in ctx.events:
                 return ResponseValue(np.nan, None, self.unit, missing=f"event '{self.event}' never fired")
-            assert self._last is not None
-            v, g = self._pick(self._last)
+            assert self._prev is not None
+            v, g = self._pick(self._prev)
             return ResponseValue(v, g, self.unit, kind=kind)
         if self.time is not None:
             if self._hit is None:
                 return ResponseValue(np.nan, None, self.unit,
                                      missing=f"the run ended before t = {self.time} s")
             return ResponseValue(self._hit[0], self._hit[1], self.unit)
-        assert self._last is not None
-        v, g = self._pick(self._last)
+        assert self._prev is not None
+        v, g = self._pick(self._prev)
         return ResponseValue(v, g, self.unit, kind=kind)
 
 
@@ -302,7 +300,6 @@ class ResponseSet:
         self.responses = responses
         self.events = events
         self._prev: dict[int, Sample] | None = None
-        self._prev_t: Any = None
         self.fired: dict[str, EventRecord] = {}
         self.end_time: Any = None
         self.end_dt_dx: np.ndarray | None = None
@@ -342,7 +339,7 @@ class ResponseSet:
                 fired = best
         if fired is None:
             self._feed(samples)
-            self._prev, self._prev_t = samples, t
+            self._prev = samples
             return False
         ev, theta, e0, e1 = fired
         prev = self._prev
@@ -354,7 +351,7 @@ class ResponseSet:
             de0, de1 = g0[ev.component], g1[ev.component]
             dtheta = -(de0 * (e1 - e0) - e0 * (de1 - de0)) / (e1 - e0) ** 2
         frac = theta if ev.location == "interpolate" else 1.0
-        t_event = self._prev_t + frac * dt
+        t_event = prev[ev.output_id].t + frac * dt
         dt_dx = None if dtheta is None else dt * dtheta
         event_samples = {}
         for oid, smp in samples.items():

@@ -59,7 +59,7 @@ def table(rep, mode: str) -> list[str]:
             "In `interpolate` mode t_F moves smoothly with x: finite differences converge to the "
             "implicit-function ∇g3 and to the total ∇g2; ∇g2_fixed_time (t_F held fixed) is not what "
             "they measure.")
-    lines += ["", note, "", f"Values at x0: " + ", ".join(f"{n} = {rep.values[n]:.6g}" for n in
+    lines += ["", note, "", "Values at x0: " + ", ".join(f"{n} = {rep.values[n]:.6g}" for n in
                                                 ("f", "ks_force", "t_F", "stroke", "opening_angle", "g1", "g2", "g3")
                                                 if n in rep.values),
               f"Primal-only run {rep.primal_wall_time:.1f} s; primal + sensitivities {rep.sa_wall_time:.1f} s; "

@@ -1,5 +1,4 @@
 """The work-precision study reports the schemes' orders and writes its tables and plots."""
-import numpy as np
 import pytest
 from click.testing import CliRunner
 

@@ -148,7 +148,6 @@ def test_force_elements_are_virtual_work():
     model = _build(_spec([], forces))
     prm = model.parameters(np.array([2.0]))
     q, qd, *_ = _random_state(model, 3, normalise=True)
-    zero_p = np.zeros((0, 1))
 
     def Q(elements, qq, qqd=qd, t=0.2):
         ctx = Ctx(qq.reshape(-1, 1), qqd.reshape(-1, 1), np.zeros((qq.size, 1)), prm, t)

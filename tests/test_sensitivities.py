@@ -1,5 +1,4 @@
 """Direct-differentiation gradients of every structural case against complex step of the whole run."""
-import numpy as np
 import pytest
 
 import dynsens

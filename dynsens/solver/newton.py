@@ -89,7 +89,7 @@ class StepSolver:
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._scales = np.zeros(3)
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
-        self._abs_S: Any = None
+        self._S: Any = None  # the last iteration matrix, for the round-off test
 
     def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         b = self._blocks
@@ -102,7 +102,7 @@ class StepSolver:
         self.counters.linearizations += 1
         lin = self.model.linearize(t, s, params)
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
-        self._abs_S = abs(S.real)
+        self._S = S
         factor = Factor(S, self.counters)
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
@@ -170,9 +170,9 @@ class StepSolver:
 
     def _at_roundoff(self, R: np.ndarray, z: np.ndarray) -> bool:
         """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix."""
-        if self._abs_S is None:
+        if self._S is None:
             return False
-        terms = self._abs_S @ np.abs(z.real)
+        terms = abs(self._S.real) @ np.abs(z.real)
         return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
