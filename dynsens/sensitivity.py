@@ -79,6 +79,7 @@ class DesignPartials:
             self._col = np.arange(m)
             self._coef = 1j * h
         self._stacked = model.stack_parameters(self._batch)
+        self._states: tuple[StepState, StepState, StepState] | None = None
 
     def _combine(self, F: np.ndarray) -> np.ndarray:
         """Difference quotients (k, m) from the values (k, B) of the batch entries."""
@@ -101,12 +102,21 @@ class DesignPartials:
         parameters) all directions are evaluated in one call.
         """
         if batched and self._stacked is not None:
-            states = StepState(*(v[None, :] + (dv[:, self._col] * self._coef).T if v.size
-                                 else np.zeros((len(self._batch), 0)) for v, dv in zip(s, ds)))
-            return self._combine(np.asarray(fn(states, self._stacked)).T)
+            return self._combine(np.asarray(fn(self._directions(s, ds), self._stacked)).T)
         cols = [np.asarray(fn(StepState(*(v + c * dv[:, j] for v, dv in zip(s, ds))), prm))
                 for prm, j, c in zip(self._batch, self._col, self._coef)]
         return self._combine(np.stack(cols, axis=-1))
+
+    def _directions(self, s: StepState, ds: StepState) -> StepState:
+        """The batch of states s + coef[b]·∇s[:, col[b]] (leaves (B, n)), built once per (s, ∇s):
+        all outputs of a step share it (and so the model's kinematics of it)."""
+        last = self._states
+        if last is not None and last[0] is s and last[1] is ds:
+            return last[2]
+        states = StepState(*(v[None, :] + (dv[:, self._col] * self._coef).T if v.size
+                             else np.zeros((len(self._batch), 0)) for v, dv in zip(s, ds)))
+        self._states = (s, ds, states)
+        return states
 
     @property
     def evaluations_per_call(self) -> int:

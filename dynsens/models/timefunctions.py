@@ -77,7 +77,8 @@ class TimeFunction:
 
 def _first(v: Any) -> float:
     """Real part of a scalar, or of the first entry of a batch."""
-    return float(np.real(np.ravel(v)[0]))
+    x = v.flat[0] if isinstance(v, np.ndarray) else v
+    return float(x.real)
 
 
 def build_time_function(spec: Any, path: str, table: ParameterTable,

@@ -78,7 +78,7 @@ class Factor:
                 raise SingularMatrixError("matrix has non-finite entries")
             # LAPACK getrf/getrs directly: scipy's lu_factor/lu_solve wrappers cost more
             # than the factorization itself for the small matrices of mechanisms
-            getrf, self._getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (S,))
+            getrf, self._getrs = _lapack(S.dtype)
             lu, piv, info = getrf(S)
             if info > 0:
                 raise SingularMatrixError(f"exactly zero pivot in column {info}")
@@ -106,6 +106,16 @@ class Factor:
             return self._getrs(lu, piv, rhs.real)[0] + 1j * self._getrs(lu, piv, rhs.imag)[0]
         x, info = self._getrs(lu, piv, rhs)
         return x
+
+
+_LAPACK: dict[Any, tuple[Any, Any]] = {}
+
+
+def _lapack(dtype: Any) -> tuple[Any, Any]:
+    """getrf, getrs for a dtype (looked up once: the lookup costs as much as a small solve)."""
+    if dtype not in _LAPACK:
+        _LAPACK[dtype] = tuple(sla.lapack.get_lapack_funcs(("getrf", "getrs"), dtype=dtype))
+    return _LAPACK[dtype]
 
 
 def _diagonal_or_none(S: Any) -> np.ndarray | None:

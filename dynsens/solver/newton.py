@@ -12,6 +12,7 @@ converged state handed back by :func:`solve_step`.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -54,6 +55,9 @@ def _real_norm(v: np.ndarray) -> float:
     if not v.size:
         return 0.0
     r = v.real
+    n = math.sqrt(float(r @ r))
+    if 0.0 < n < 1e150:             # the common case: no overflow or underflow to guard
+        return n
     big = float(np.max(np.abs(r)))
     if big == 0.0 or not np.isfinite(big):
         return big

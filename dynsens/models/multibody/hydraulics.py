@@ -84,16 +84,18 @@ class HydraulicCylinder(AxialElement):
         by L, L̇ and [p1, p2] (a list), the rates h = [h1, h2] (pressure/s) and their partials
         (lists; h_p[i][j] = ∂h_i/∂p_j).
         """
-        A1, A2, L0, K, G, pT, dmp = (c[..., i] for i in (0, 1, 2, 4, 7, 8, 9))
-        V1, V2 = self._volumes(L - L0, c)
+        A1, A2, L0, s_max, K, Vh1, Vh2, G, pT, dmp = np.moveaxis(c, -1, 0)
+        s = L - L0
+        V1, V2 = Vh1 + A1 * s, Vh2 + A2 * (s_max - s)
         p1, p2 = p[..., 0], p[..., 1]
         QP = pv[..., self.idx["pump_flow"]] * self.pump.value(t, pv)
-        h1 = K / V1 * (QP - A1 * Ld)
-        h2 = K / V2 * (A2 * Ld - G * (p2 - pT))
-        zero = 0 * L
+        KV1, KV2 = K / V1, K / V2
+        h1 = KV1 * (QP - A1 * Ld)
+        h2 = KV2 * (A2 * Ld - G * (p2 - pT))
+        zero = np.zeros_like(h1)
         return (p1 * A1 - p2 * A2 - dmp * Ld, zero, -dmp + zero, [A1 + zero, -A2 + zero],
-                [h1, h2], [-A1 * h1 / V1, A2 * h2 / V2], [-K * A1 / V1, K * A2 / V2],
-                [[zero, zero], [zero, -K * G / V2]])
+                [h1, h2], [-A1 * h1 / V1, A2 * h2 / V2], [-A1 * KV1, A2 * KV2],
+                [[zero, zero], [zero, -G * KV2]])
 
     def kinematics(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(s, ṡ, ê): stroke (1, k), stroke rate (1, k), unit axis A→B (3, k)."""
@@ -126,18 +128,22 @@ class HydraulicCylinder(AxialElement):
         h = self._law_at(ctx, p)[4]
         return h[0], h[1]
 
-    def check(self, s: Any, prm: Any, t: float) -> None:
-        """Raise ModelError when a chamber volume is not positive at stroke s (length)."""
-        V1, V2 = self.volumes(np.reshape(s, (1, 1)), prm)
+    def check(self, s: Any, prm: Any, t: float, constants: Array | None = None) -> None:
+        """Raise ModelError when a chamber volume is not positive at stroke s (length);
+        ``constants`` = :meth:`constants` (prm) when already at hand."""
+        c = self.constants(prm) if constants is None else constants
+        V1, V2 = self._volumes(s, c)
+        if np.real(V1) > 0.0 and np.real(V2) > 0.0:
+            return
         A1, A2 = self.areas(prm)
         sr = float(np.real(s))
-        if np.real(V1[0, 0]) <= 0.0:
+        if np.real(V1) <= 0.0:
             lim = -np.real(prm.pv[self.idx["dead_volume_1"]] / A1)
             raise ModelError(
                 f"hydraulic cylinder '{self.name}': piston-side volume V1 <= 0 at t = {t:.6g} s "
                 f"(stroke s = {sr:.6g}, limit s > {lim:.6g}: the cylinder is pushed beyond its "
                 "retracted end)")
-        if np.real(V2[0, 0]) <= 0.0:
+        if np.real(V2) <= 0.0:
             lim = np.real(prm.pv[self.idx["stroke_max"]] + prm.pv[self.idx["dead_volume_2"]] / A2)
             raise ModelError(
                 f"hydraulic cylinder '{self.name}': rod-side volume V2 <= 0 at t = {t:.6g} s "

@@ -25,7 +25,7 @@ import numpy as np
 
 from .bodies import GROUND, Const, Diff, Direction, MBParams, Point, Term
 from .joints import ONE, DotEq, Equation, NormEq
-from .rotations import point_tensor, rmatmul
+from .rotations import matmul_real, point_tensor, rmatmul
 
 Array = np.ndarray
 
@@ -36,6 +36,16 @@ ROW_LEVELS[0, 0, 0] = 1.0
 ROW_LEVELS[1, 0, 1] = ROW_LEVELS[1, 1, 0] = 1.0
 ROW_LEVELS[2, 0, 2] = ROW_LEVELS[2, 2, 0] = 1.0
 ROW_LEVELS[2, 1, 1] = 2.0
+
+
+_LEVEL_FACTORS = np.array([1.0, 2.0, 2.0])
+_ROW_LEVELS_9 = np.ascontiguousarray(ROW_LEVELS.reshape(3, 9).T)
+_ROW_LEVELS_LTM = np.ascontiguousarray(ROW_LEVELS.transpose(1, 0, 2).reshape(3, 9))   # [l, (T, m)]
+
+
+def _levels(V: Array) -> Array:
+    """(x, ẋ, ẍ) (..., 3) of products x = a·b from the level dot products V[..., l, m] = a_l·b_m."""
+    return matmul_real(V.reshape(V.shape[:-2] + (9,)), _ROW_LEVELS_9)
 
 
 class Layout:
@@ -91,6 +101,8 @@ class Layout:
         self.norm_eq, self.norm_body = np.array(norm_eq, int), np.array(norm_body, int)
         self.pb = np.array([t.body for t in self.prims], int)              # type: ignore[attr-defined]
         self.is_point = np.array([isinstance(t, Point) for t in self.prims], float)
+        self.point_idx = np.flatnonzero(self.is_point)
+        self.point_body = self.pb[self.point_idx]
         self._scatter()
 
     def _side(self, term: Term) -> tuple[dict[int, float], list[tuple[str, float]]]:
@@ -203,29 +215,31 @@ class Kin:
         self.lay, self.kp = lay, kp
         Bs, n_t = q.shape[0], lay.n_t
         self.q, self.qd = q, qd
-        Qs = np.stack([q, qd, qdd], axis=1).reshape(Bs, 3, lay.n_b, 7)
+        Qs = np.concatenate((q, qd, qdd), axis=1).reshape(Bs, 3, lay.n_b, 7)
         self.Lp = Qs[..., 3:]                                        # (Bs, 3, n_b, 4)
         self.Lr = Qs[..., :3]                                        # (Bs, 3, n_b, 3)
         Lg = self.Lp[:, :, lay.pb]                                   # (Bs, 3, n_t, 4)
         LgT = Lg.transpose(0, 2, 3, 1)                               # (Bs, n_t, 4, 3)
         C = (kp.Ts @ LgT).reshape(max(Bs, kp.B), n_t, 3, 4, 3)                  # C_i[a, k] (B, n_t, a, k, i)
         self.C = C
-        X = C[..., 0] @ LgT                                          # C(p) [p, ṗ, p̈]
-        Y = np.sum(C[..., 1] * Lg[:, 1, :, None, :], axis=-1)        # C(ṗ) ṗ
-        PV = np.stack([X[..., 0], 2.0 * X[..., 1], 2.0 * (X[..., 2] + Y)], axis=2)
-        self.PV = PV + (Qs[..., :3][:, :, lay.pb] * lay.is_point[:, None]).transpose(0, 2, 1, 3)
-        B = self.PV.shape[0]
-        flat = self.PV.reshape(B, n_t, 9)
+        # levels of A(p)s̄ = C(p)p: value C(p)p, rate 2C(p)ṗ, acceleration 2C(p)p̈ + 2C(ṗ)ṗ
+        X = C[..., 0] @ LgT                                          # C(p) [p, ṗ, p̈] (B, n_t, a, level)
+        X[..., 2] += (C[..., 1] @ Lg[:, 1, :, :, None])[..., 0]      # + C(ṗ) ṗ
+        X *= _LEVEL_FACTORS
+        PV = X.swapaxes(-1, -2)                                      # (B, n_t, level, a)
+        if lay.point_idx.size:                                       # + r, ṙ, r̈ of point primitives
+            PV[:, lay.point_idx] += Qs[:, :, lay.point_body, :3].transpose(0, 2, 1, 3)
+        self.PV = PV
+        B = PV.shape[0]
+        flat = PV.reshape(B, n_t, 9)
         self.ABV = rmatmul(lay.MAB, flat).reshape(B, 2, lay.n_prod, 3, 3)   # both sides, one matmul
         self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
         self.AV[:, :, 0] += kp.cA
         self.BV[:, :, 0] += kp.cB
         Vd = self.AV @ self.BV.transpose(0, 1, 3, 2)                 # A_l·B_m
-        self.X = np.stack([Vd[..., 0, 0], Vd[..., 1, 0] + Vd[..., 0, 1],
-                           Vd[..., 2, 0] + 2.0 * Vd[..., 1, 1] + Vd[..., 0, 2]], axis=-1)
-        Pn = self.Lp[:, :, lay.norm_body]                            # (Bs, 3, n_norm, 4)
-        self.N = np.stack([np.sum(Pn[:, 0] * Pn[:, 0], -1), 2.0 * np.sum(Pn[:, 0] * Pn[:, 1], -1),
-                           2.0 * np.sum(Pn[:, 0] * Pn[:, 2] + Pn[:, 1] * Pn[:, 1], -1)], axis=-1)
+        self.X = _levels(Vd)
+        Pn = self.Lp[:, :, lay.norm_body].transpose(0, 2, 1, 3)      # (Bs, n_norm, level, 4)
+        self.N = _levels(Pn @ Pn.swapaxes(-1, -2))                   # p·p and its rates
         self._rows: tuple[Array, ...] | None = None
 
     def prim_forces(self, w: Array) -> Array:
@@ -238,8 +252,10 @@ class Kin:
     def generalized(self, f: Array) -> Array:
         """(B, n_q) Σ_j (∂prim_j/∂q)ᵀ f_j for primitive forces f (B, n_t, 3)."""
         Cp = self.C[..., 0]                                          # (B, n_t, 3, 4)
-        g = 2.0 * np.sum(Cp * f[..., None], axis=2)                  # (B, n_t, 4)
-        v = np.concatenate([f * self.lay.is_point[:, None], g], axis=-1).reshape(f.shape[0], -1)
+        g = 2.0 * (f[..., None, :] @ Cp)[..., 0, :]                  # (B, n_t, 4)
+        B = max(f.shape[0], g.shape[0])
+        v = np.concatenate([np.broadcast_to(f * self.lay.is_point[:, None], (B,) + f.shape[1:]),
+                            np.broadcast_to(g, (B,) + g.shape[1:])], axis=-1).reshape(B, -1)
         return rmatmul(self.lay.Gf, v.T).T
 
     def rows(self) -> tuple[Array, Array, Array, Array, Array]:
@@ -254,8 +270,9 @@ class Kin:
             ABK = rmatmul(lay.MAB, K.reshape(lay.n_t, 9 * lay.n_q)).reshape(2, lay.n_prod, 3, 3, lay.n_q)
             # x-level T of product p = Σ CT[T, l, m] (b_l·∂a_m + a_l·∂b_m): one batched matmul
             # over p instead of two (n_prod, 3, 3, n_q) einsums
-            Vo = np.stack([self.BV[0], self.AV[0]])                  # (2, p, l, a)
-            E = np.einsum("Tlm,spla->pTsma", ROW_LEVELS, Vo).reshape(lay.n_prod, 3, 18)
+            Vo = self.ABV[0, ::-1].transpose(1, 0, 3, 2)             # (p, s, a, l): sides swapped
+            E = matmul_real(Vo, _ROW_LEVELS_LTM).reshape(lay.n_prod, 2, 3, 3, 3).transpose(0, 3, 1, 4, 2)
+            E = E.reshape(lay.n_prod, 3, 18)                         # (p, T, (s, m, a))
             G = E @ ABK.transpose(1, 0, 2, 3, 4).reshape(lay.n_prod, 18, lay.n_q)
             self.xrows = G                                           # (n_prod, 3, n_q)
             self._rows = (G[:, 0], G[:, 1], G[:, 2], ABK[0, :, 0], ABK[1, :, 0])
@@ -280,17 +297,22 @@ class KinCache:
 
     def __init__(self, lay: Layout, size: int = 4):
         self.lay, self.size = lay, size
-        self._items: list[tuple[tuple[Any, ...], Kin]] = []
+        self._items: list[tuple[tuple[Any, ...], tuple[Array, Array, Array], Kin]] = []
 
     def get(self, kp: KParams, q: Array, qd: Array, qdd: Array) -> Kin:
         """Kin at states (each (n_q,) or (Bs, n_q)) for parameters kp."""
-        q, qd, qdd = (np.atleast_2d(v) for v in (q, qd, qdd))
-        key = (id(kp), q.shape, q.dtype.char, qd.dtype.char, qdd.dtype.char,
-               q.tobytes(), qd.tobytes(), qdd.tobytes())
-        for k, kin in self._items:
+        # the same array objects (the solver's state of this step) first: no hashing; an
+        # entry keeps its arrays alive, so their identities cannot be reused meanwhile
+        for _, src, kin in self._items:
+            if src[0] is q and src[1] is qd and src[2] is qdd and kin.kp is kp:
+                return kin
+        q2, qd2, qdd2 = (v if v.ndim == 2 else v[None] for v in (q, qd, qdd))
+        key = (id(kp), q2.shape, q2.dtype.char, qd2.dtype.char, qdd2.dtype.char,
+               q2.tobytes(), qd2.tobytes(), qdd2.tobytes())
+        for k, _, kin in self._items:
             if k == key and kin.kp is kp:
                 return kin
-        kin = Kin(self.lay, kp, q, qd, qdd)
-        self._items.insert(0, (key, kin))
+        kin = Kin(self.lay, kp, q2, qd2, qdd2)
+        self._items.insert(0, (key, (q, qd, qdd), kin))
         del self._items[self.size:]
         return kin

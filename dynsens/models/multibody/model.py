@@ -93,7 +93,7 @@ class MultibodyModel(Model):
                              and f not in self.point_forces]
         self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
         self._kin = KinCache(self.layout)
-        self._eval: tuple[tuple[Any, ...], Evaluation] | None = None
+        self._eval: tuple[tuple[Any, ...], Evaluation, tuple[Array, Array, Array]] | None = None
         self._stacked: tuple[int, KParams] | None = None
         lay = self.layout
         self._cf0 = np.zeros((1, lay.n_cp, 3))
@@ -174,10 +174,13 @@ class MultibodyModel(Model):
         """(Φ, Φ̇, Φ̈) stacked (B, n_eq, 3) and the product coefficients (B, n_cp, 3) at time t (s)."""
         lay = self.layout
         cf, shift = self.coefficients(t, kin.kp)
-        c, cd, cdd = cf[..., 0], cf[..., 1], cf[..., 2]
         X = kin.X[:, :lay.n_cp]
-        x, xd, xdd = X[..., 0], X[..., 1], X[..., 2]
-        rows = np.stack([c * x, cd * x + c * xd, cdd * x + 2.0 * cd * xd + c * xdd], axis=-1)
+        if cf is self._cf0:           # constant unit coefficients: the rows are the products
+            rows = X
+        else:
+            c, cd, cdd = cf[..., 0], cf[..., 1], cf[..., 2]
+            x, xd, xdd = X[..., 0], X[..., 1], X[..., 2]
+            rows = np.stack([c * x, cd * x + c * xd, cdd * x + 2.0 * cd * xd + c * xdd], axis=-1)
         Phi = rmatmul(lay.S, rows) - shift
         Phi[:, lay.norm_eq] += kin.N
         return Phi, cf
@@ -189,12 +192,16 @@ class MultibodyModel(Model):
 
     def _evaluation(self, t: float, s: StepState, params: MBParams | KParams) -> Evaluation:
         kin = self.kinematics(s, params)
-        lam, p, pd = (np.atleast_2d(v) for v in (s.lam, s.p, s.pd))
+        last = self._eval
+        if last is not None and last[1].kin is kin and last[1].t == t and \
+                last[2][0] is s.lam and last[2][1] is s.p and last[2][2] is s.pd:
+            return last[1]        # the same state objects (residual, then linearize)
+        lam, p, pd = (v if v.ndim == 2 else v[None] for v in (s.lam, s.p, s.pd))
         key = (id(kin), t, lam.tobytes(), p.tobytes(), pd.tobytes(), lam.dtype.char, p.dtype.char)
-        if self._eval is not None and self._eval[0] == key and self._eval[1].kin is kin:
-            return self._eval[1]
+        if last is not None and last[0] == key and last[1].kin is kin:
+            return last[1]
         ev = Evaluation(self, kin, t, lam, p, pd)
-        self._eval = (key, ev)
+        self._eval = (key, ev, (s.lam, s.p, s.pd))
         return ev
 
     def residual(self, t: float, s: StepState, params: MBParams) -> Array:
@@ -221,11 +228,12 @@ class MultibodyModel(Model):
         """Raise ModelError when a cylinder chamber volume is not positive."""
         if not self.cylinders:
             return
-        X = self.kinematics(s, params).X[0]
+        kin = self.kinematics(s, params)
         lay = self.layout
         for cyl in self.cylinders:
-            i = lay.n_cp + lay.axial.index(cyl)
-            cyl.check(np.sqrt(X[i, 0]) - params.pv[cyl.idx["length_0"]], params, t)
+            i = lay.axial.index(cyl)
+            c = kin.kp.ec[i][0]
+            cyl.check(np.sqrt(kin.X[0, lay.n_cp + i, 0]) - c[2], params, t, c)
 
     def diagnose_singular(self, t: float, s: StepState, params: MBParams) -> str:
         """Name the joints whose equations became linearly dependent at (t, s) (a dead-centre
@@ -259,8 +267,10 @@ class MultibodyModel(Model):
         drift = float(np.linalg.norm(np.real(Phi[:, 0])))
         limit = self.drift_limit
         if limit is None:
-            size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
-            limit = 1e-2 * (size if size > 0 else 1.0)
+            limit = params.ts.get("__drift_limit__")
+            if limit is None:
+                size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
+                limit = params.ts["__drift_limit__"] = 1e-2 * (size if size > 0 else 1.0)
         if drift > limit:
             raise ModelError(
                 f"constraint drift ‖Φ‖ = {drift:.3g} exceeds {limit:.3g} at t = {t:.6g} s: the mechanism has "

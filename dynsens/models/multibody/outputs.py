@@ -29,7 +29,7 @@ from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
 from ..base import Output, StepState
 from .bodies import GROUND, Ctx, Point, angular_velocity
-from .rotations import E_mul, atan2_cs, cross, rotate
+from .rotations import E_mul, atan2_cs, cross
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
@@ -65,14 +65,20 @@ def _reaction(model: "MultibodyModel", jt: Any) -> Callable[[float, StepState, A
     eq_of = np.argmax(lay.S[:, prods], axis=0)
     sign, b = (-1.0, jt.body_2) if jt.body_2 != GROUND else (1.0, jt.body_1)
     on_b = (lay.pb == b) * lay.is_point
-    ma, mb = lay.MA[prods] @ on_b, lay.MB[prods] @ on_b
+    # side a of product p pulls with b and vice versa: weights on the swapped sides [b; a]
+    mab = np.concatenate([lay.MA[prods] @ on_b, lay.MB[prods] @ on_b])       # (2 n_p,)
+    swapped = np.concatenate([prods + lay.n_prod, prods])                    # rows of ABV[:, (s, p)]
+    eq_twice = np.concatenate([eq_of, eq_of])
+    prods_twice = np.concatenate([prods, prods])
 
     def fn(t: float, s: StepState, prm: Any) -> Any:
         kin, lam, batched = _kin(model, s, prm)
-        c = model.coefficients(t, kin.kp)[0][:, prods, 0]
-        w = sign * lam[:, eq_of] * c
-        f = np.einsum("bp,bpa->ba", w * ma, kin.BV[:, prods, 0]) + \
-            np.einsum("bp,bpa->ba", w * mb, kin.AV[:, prods, 0])
+        cf = model.coefficients(t, kin.kp)[0]
+        w = (sign * mab) * lam[:, eq_twice]
+        if cf is not model._cf0:
+            w = w * cf[:, prods_twice, 0]
+        sides = kin.ABV[:, :, :, 0].reshape(kin.ABV.shape[0], -1, 3)[:, swapped]   # (B, 2 n_p, 3)
+        f = (w[:, None, :] @ sides)[:, 0]
         return _out(f, batched)
     return fn
 
@@ -201,8 +207,9 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
             p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
             if _k == "angle_z":
-                xa = rotate(p, np.array([[1.0], [0.0], [0.0]]))
-                v = atan2_cs(xa[1:2], xa[0:1])
+                # body x-axis A(p)e_x = (e0² + e1² − e2² − e3², 2(e1e2 + e0e3), ·)
+                v = atan2_cs(2.0 * (p[1:2] * p[2:3] + p[0:1] * p[3:4]),
+                             p[0:1] * p[0:1] + p[1:2] * p[1:2] - p[2:3] * p[2:3] - p[3:4] * p[3:4])
             else:
                 v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
                 v = v if _k == "angular_velocity" else v[2:3]

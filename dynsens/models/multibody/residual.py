@@ -90,7 +90,7 @@ class Evaluation:
         for pf, j in zip(model.point_forces, lay.point_prim):
             if j >= 0:
                 val = np.asarray(pf.fn.value(t, kp.pv))
-                f[:, j] -= np.stack([kp.pv[:, i] for i in pf.idx], -1) * (val[..., None] if val.ndim else val)
+                f[:, j] -= kp.pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
         self.f = f
 
     def residual(self) -> Array:
@@ -105,23 +105,28 @@ class Evaluation:
         Rp = 4.0 * (np.swapaxes(Gp, -1, -2) @ w1)[..., 0] - 8.0 * (np.swapaxes(Gpd, -1, -2) @ w2)[..., 0]
         Rr = kp.mass[..., None] * kin.Lr[:, 2]
         if m.gravity is not None:
-            g = np.stack([kp.pv[:, i] for i in m.gravity.idx], -1)
+            g = kp.pv[:, list(m.gravity.idx)]
             Rr = Rr - kp.mass[..., None] * g[:, None, :]
-        Rp = Rp.astype(np.result_type(Rp, self.lam), copy=False)
-        Rp[:, lay.norm_body] += 2.0 * self.lam[..., lay.norm_eq, None] * p[:, lay.norm_body]
-        B = max(Rr.shape[0], Rp.shape[0])
-        R1 = np.concatenate([np.broadcast_to(Rr, (B,) + Rr.shape[1:]),
-                             np.broadcast_to(Rp, (B,) + Rp.shape[1:])], axis=-1).reshape(B, lay.n_q)
-        R1 = R1 + kin.generalized(self.f)
-        if m.other_forces:
-            R1 = R1 - other_forces_q(m, self.t, kin.q, kin.qd, kp.prms)
         Phi = self.Phi
-        R2 = m.scale * (Phi[..., 2] + 2.0 * m.alpha * Phi[..., 1] + m.beta ** 2 * Phi[..., 0])
-        R3 = np.zeros((B, m.traits.n_p), np.result_type(self.pd, self.w)) + self.pd
+        Q = kin.generalized(self.f)                                  # (B, n_q)
+        B, tr = Q.shape[0], m.traits
+        out = np.zeros((B, tr.n_z), np.result_type(Q, Rr, Rp, self.lam, Phi, self.pd))
+        R1 = out[:, :lay.n_q]
+        R1 += Q
+        R1v = R1.reshape(B, lay.n_b, 7)
+        R1v[..., :3] += Rr
+        R1v[..., 3:] += Rp
+        R1v[:, lay.norm_body, 3:] += 2.0 * self.lam[..., lay.norm_eq, None] * p[:, lay.norm_body]
+        if m.other_forces:
+            R1 -= other_forces_q(m, self.t, kin.q, kin.qd, kp.prms)
+        out[:, lay.n_q:lay.n_q + tr.n_lam] = m.scale * (Phi[..., 2] + 2.0 * m.alpha * Phi[..., 1]
+                                                         + m.beta ** 2 * Phi[..., 0])
+        R3 = out[:, lay.n_q + tr.n_lam:]
+        R3 += self.pd
         for el, (_, _, law) in zip(lay.axial, self.laws):
             for i, h in enumerate(law[4]):
                 R3[:, el.p_index + i] -= h
-        return np.concatenate([R1, np.broadcast_to(R2, (B, R2.shape[-1])), R3], axis=-1)
+        return out
 
     def linearization(self) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p) of the first batch entry."""

@@ -141,6 +141,13 @@ def rmatmul(A: Array, X: Array) -> Array:
     return A @ X
 
 
+def matmul_real(X: Array, A: Array) -> Array:
+    """X @ A for a real A and a real or complex X (see :func:`rmatmul`)."""
+    if np.iscomplexobj(X):
+        return (X.real @ A) + 1j * (X.imag @ A)
+    return X @ A
+
+
 def _tensors() -> tuple[Array, Array, Array]:
     """Constant tensors of the bilinear forms: Q(a,b)_ab = T[a,b,k,l] a_k b_l,
     G(a) b = Gt[i,k,l] a_k b_l, E(a) b = Et[i,k,l] a_k b_l."""
