@@ -164,7 +164,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     shist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0], m)) for f in hist_fields} if store_sens else {}
     mon_names = list(model.monitors(plan.t0, s, params))
     mons = {k: np.empty(n_steps + 1) for k in mon_names}
-    total = partials.total if partials is not None else None
+    total = partials.value_and_total if partials is not None else None
 
     def record(k: int, t: float, st: StepState, dst: StepState | None) -> None:
         times[k] = t

@@ -305,17 +305,20 @@ class ResponseSet:
         self.end_dt_dx: np.ndarray | None = None
 
     def evaluate(self, t: float, s: StepState, ds: StepState | None, params: Any,
-                 total: Callable[..., np.ndarray] | None
+                 value_and_total: Callable[..., tuple[np.ndarray, np.ndarray]] | None
                  ) -> dict[int, Sample]:
-        """Outputs at one step, with total gradients when ``ds`` is given."""
+        """Outputs at one step, with total gradients when ``ds`` is given
+        (``value_and_total``: :meth:`.sensitivity.DesignPartials.value_and_total`)."""
         out = {}
         for oid, o in enumerate(self.outputs):
-            v = np.asarray(o.fn(t, s, params))
             g = None
-            if ds is not None and o.linear:
-                g = np.asarray(o.fn(t, ds, params))
-            elif ds is not None and total is not None:
-                g = total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds, o.batched)
+            if ds is not None and value_and_total is not None and not o.linear:
+                v, g = value_and_total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds,
+                                       o.batched)
+            else:
+                v = np.asarray(o.fn(t, s, params))
+                if ds is not None and o.linear:
+                    g = np.asarray(o.fn(t, ds, params))
             out[oid] = Sample(t, v, g, g, None)
         return out
 

@@ -107,6 +107,15 @@ class DesignPartials:
                 for prm, j, c in zip(self._batch, self._col, self._coef)]
         return self._combine(np.stack(cols, axis=-1))
 
+    def value_and_total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,
+                        batched: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """fn(s, params0) (k,) and its total derivative (k, m) (see :meth:`total`).  With forward
+        differences of a batched fn both come from one call: its unperturbed entry is the value."""
+        if batched and self._stacked is not None and self.method == "forward":
+            F = np.asarray(fn(self._directions(s, ds), self._stacked))          # (m + 1, k)
+            return F[0], self._combine(F.T)
+        return np.asarray(fn(s, self.params0)), self.total(fn, s, ds, batched)
+
     def _directions(self, s: StepState, ds: StepState) -> StepState:
         """The batch of states s + coef[b]·∇s[:, col[b]] (leaves (B, n)), built once per (s, ∇s):
         all outputs of a step share it (and so the model's kinematics of it)."""
