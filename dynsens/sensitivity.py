@@ -81,6 +81,31 @@ class DesignPartials:
         self._stacked = model.stack_parameters(self._batch)
         self._states: tuple[StepState, StepState, StepState] | None = None
 
+        # ∂_x F_R: design variables whose rows of F_R are disjoint share one perturbation
+        # (column colouring, as for sparse Jacobians) when the model knows its pattern
+        pattern = model.design_pattern()
+        self.colours = colour_columns(pattern, m)
+        self._residual_batch = self._batch if self.colours is None else self._colour_batch(pattern)
+
+    def _colour_batch(self, pattern: list[np.ndarray]) -> list[Any]:
+        """The parameter sets of the coloured perturbations, and the index arrays that put
+        each colour's difference quotients back into the columns of its variables."""
+        assert self.colours is not None
+        model, m, h = self.model, self.m, self.h
+        dx = np.zeros((len(self.colours), m))
+        colour_of = np.empty(m, int)
+        for c, cols in enumerate(self.colours):
+            dx[c, cols] = h[cols]
+            colour_of[cols] = c
+        self._scatter_rows = np.concatenate([pattern[j] for j in range(m)]).astype(int)
+        self._scatter_cols = np.concatenate([np.full(len(pattern[j]), j) for j in range(m)]).astype(int)
+        self._scatter_colours = colour_of[self._scatter_cols]
+        if self.method == "forward":
+            return [self.params0] + [model.parameters(self.x + d) for d in dx]
+        if self.method == "central":
+            return [model.parameters(self.x + d) for d in dx] + [model.parameters(self.x - d) for d in dx]
+        return [model.parameters(self.x + 1j * d) for d in dx]
+
     def _combine(self, F: np.ndarray) -> np.ndarray:
         """Difference quotients (k, m) from the values (k, B) of the batch entries."""
         m = self.m
@@ -91,8 +116,22 @@ class DesignPartials:
         return np.imag(F) / self.h
 
     def residual_partials(self, t: float, s: StepState) -> np.ndarray:
-        """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation."""
-        return self._combine(self.model.residual_batch(t, s, self._batch))
+        """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation
+        (of m + 1, 2m or m parameter sets, or per colour of design variables)."""
+        F = self.model.residual_batch(t, s, self._residual_batch)
+        if self.colours is None:
+            return self._combine(F)
+        C = len(self.colours)
+        if self.method == "forward":
+            diff, div = F[:, 1:] - F[:, :1], self.h
+        elif self.method == "central":
+            diff, div = F[:, :C] - F[:, C:], 2.0 * self.h
+        else:
+            diff, div = np.imag(F), self.h
+        D = np.zeros((F.shape[0], self.m))
+        r, j = self._scatter_rows, self._scatter_cols
+        D[r, j] = np.real(diff[r, self._scatter_colours]) / div[j]
+        return D
 
     def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,
               batched: bool = False) -> np.ndarray:
@@ -129,8 +168,8 @@ class DesignPartials:
 
     @property
     def evaluations_per_call(self) -> int:
-        """Function evaluations one partial-derivative call costs."""
-        return {"forward": self.m + 1, "central": 2 * self.m, "complex": self.m}[self.method]
+        """Residual evaluations one :meth:`residual_partials` call costs."""
+        return len(self._residual_batch)
 
     def of(self, fn: Callable[[Any], np.ndarray], base: np.ndarray | None = None) -> np.ndarray:
         """∂fn/∂x (k, m) for fn(params) -> (k,); ``base`` = fn(params0) if already known."""
@@ -147,6 +186,26 @@ class DesignPartials:
                 cols.append(np.imag(fn(self._plus[j])) / self.h[j])
         return np.stack(cols, axis=-1) if cols else np.zeros((np.size(base) if base is not None else 0, 0))
 
+
+
+def colour_columns(pattern: list[np.ndarray] | None, m: int) -> list[list[int]] | None:
+    """Groups of columns with pairwise disjoint rows (greedy, largest first), or None when
+    there is no pattern or grouping would not save an evaluation."""
+    if pattern is None or m < 2:
+        return None
+    colours: list[list[int]] = []
+    used: list[set[int]] = []
+    for j in sorted(range(m), key=lambda k: -len(pattern[k])):
+        rows = set(pattern[j].tolist())
+        for cols, taken in zip(colours, used):
+            if not taken & rows:
+                cols.append(j)
+                taken |= rows
+                break
+        else:
+            colours.append([j])
+            used.append(rows)
+    return colours if len(colours) < m else None
 
 
 def initial_state_gradient(model: Model, partials: DesignPartials

@@ -223,6 +223,16 @@ class ParameterTable:
         """True when entry ``index`` is an expression of design variables."""
         return any(i == index and e.symbols for i, e in self._exprs)
 
+    def design_dependents(self) -> list[list[int]]:
+        """For each design variable, the entries whose expressions name it."""
+        out: list[list[int]] = [[] for _ in self.design_names]
+        index = {name: j for j, name in enumerate(self.design_names)}
+        for i, expr in self._exprs:
+            for name in expr.symbols:
+                if name in index:
+                    out[index[name]].append(i)
+        return out
+
     def evaluate(self, x: Array) -> Array:
         """All entries for design ``x`` (m,); complex when ``x`` is complex."""
         dtype = np.result_type(x.dtype, float)
@@ -268,6 +278,13 @@ class Model(ABC):
         a whole run, so stacked parameters can be cached on its identity.
         """
         return np.stack([self.residual(t, s, p) for p in params_list], axis=1)
+
+    def design_pattern(self) -> list[Array] | None:
+        """For each design variable, the rows of F_R its explicit partial ∂F_R/∂x_j can touch
+        (from the model's connectivity, independent of state and time), or None when unknown.
+        Design variables with disjoint rows are then perturbed together (column colouring):
+        per-element variables cost a few residuals per step instead of m."""
+        return None
 
     @abstractmethod
     def linearize(self, t: float, s: StepState, params: Any) -> Linearization:

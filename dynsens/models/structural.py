@@ -260,10 +260,12 @@ class StructuralModel(Model):
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
-        """Dense parameter arrays stacked along a leading batch axis (None for sparse models)."""
-        if self.traits.sparse:
-            return None
+        """Parameter arrays stacked along a leading batch axis.  Sparse models leave out their
+        (sparse) damping matrix: their residuals are evaluated set by set, and the outputs,
+        which are evaluated in batches, do not need it."""
         keys = [k for k in ("pv", "mass", "D", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
+        if self.traits.sparse:
+            keys = [k for k in keys if k != "D"]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -278,6 +280,35 @@ class StructuralModel(Model):
         if self.traits.has_damping:
             R = R + st["D"] @ s.qd
         return R.T
+
+    def design_pattern(self) -> list[np.ndarray]:
+        """Rows of the residual each design variable reaches through the elements whose
+        parameters depend on it (masses, springs, dampers, bars with their lumped masses
+        and coordinates, loads with their time functions); Rayleigh coefficients reach all."""
+        n = self.n
+        rows_of_param: dict[int, set[int]] = {}
+
+        def touch(params: Any, dofs: Any) -> None:
+            dof_set = {int(d) for d in np.ravel(dofs) if d < n}
+            for p in np.ravel(params):
+                rows_of_param.setdefault(int(p), set()).update(dof_set)
+
+        for d, p in zip(self.mass_dof, self.mass_idx):
+            touch(p, d)
+        for e, dofs in enumerate(self.spring_dofs):
+            touch([k[e] for k in (self.k1, self.k2, self.k3) if len(k)], dofs)
+        for e, dofs in enumerate(self.damper_dofs):
+            touch(self.c[e], dofs)
+        for e, dofs in enumerate(self.bar_dofs):
+            touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
+        for dof, amp, fn in self.loads:
+            touch([amp, *fn.idx], dof)
+        if self.rayleigh is not None:
+            # αM + βK0: every row of the mass and stiffness; the other parameters of M and K0
+            # already reach their own rows
+            touch(list(self.rayleigh), np.arange(n))
+        return [np.array(sorted(set().union(*(rows_of_param.get(p, set()) for p in params))), int)
+                for params in self.table.design_dependents()]
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
