@@ -6,7 +6,9 @@ Runs, interleaved and repeated, on one core:
   forward FD       m + 1 simulations without sensitivities
 and prints median wall times and the ratios to the primal run.  Usage:
 
-    python scripts/bench_sensitivity_cost.py [CASE.yaml ...] [--repeats 7] [--partials forward]
+    python scripts/bench_sensitivity_cost.py [CASE.yaml ...] [--repeats 7] [--partials forward] [--no-fd]
+
+(``--partials case`` keeps each case's own setting; ``--no-fd`` skips the m + 1 runs, for long cases.)
 """
 from __future__ import annotations
 
@@ -29,8 +31,9 @@ def timed(fn) -> float:
     return time.perf_counter() - t0
 
 
-def bench(path: Path, repeats: int, partials: str) -> dict:
-    case = dynsens.load_case(path, [f"sensitivity.partials={partials}", "output.history=none"])
+def bench(path: Path, repeats: int, partials: str, fd: bool = True) -> dict:
+    over = ["output.history=none"] + ([] if partials == "case" else [f"sensitivity.partials={partials}"])
+    case = dynsens.load_case(path, over)
     m = case.x0.size
     h = 1e-7 * np.maximum(np.abs(case.x0), case.scale)
     runs: dict[str, list[float]] = {"primal": [], "ddm": [], "fd": []}
@@ -38,9 +41,10 @@ def bench(path: Path, repeats: int, partials: str) -> dict:
     for _ in range(repeats):
         runs["primal"].append(timed(lambda: dynsens.run_case(case, sensitivities=False)))
         runs["ddm"].append(timed(lambda: dynsens.run_case(case, sensitivities=True)))
-        runs["fd"].append(timed(lambda: [dynsens.run_case(case, case.x0 + h[j] * np.eye(m)[j], sensitivities=False)
-                                         for j in range(-1, m)]))
-    med = {k: statistics.median(v) for k, v in runs.items()}
+        if fd:
+            runs["fd"].append(timed(lambda: [dynsens.run_case(case, case.x0 + h[j] * np.eye(m)[j],
+                                                              sensitivities=False) for j in range(-1, m)]))
+    med = {k: statistics.median(v) if v else float("nan") for k, v in runs.items()}
     counters_on = dynsens.run_case(case).counters
     counters_off = dynsens.run_case(case, sensitivities=False).counters
     return {"case": case.name, "m": m, "steps": case.plan.n_steps, **med,
@@ -52,13 +56,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("cases", nargs="*", default=[str(ROOT / "cases" / "duffing_chain.yaml")])
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--partials", default="forward", choices=["forward", "central", "complex"])
+    ap.add_argument("--partials", default="forward", choices=["forward", "central", "complex", "case"])
+    ap.add_argument("--no-fd", action="store_true", help="skip the forward-difference runs")
     args = ap.parse_args()
     print(f"# dynsens {dynsens.__version__}, Python {platform.python_version()}, {platform.machine()}, "
           f"{time.strftime('%Y-%m-%d')}, median of {args.repeats}, partials = {args.partials}\n")
     print("| case | m | steps | primal [s] | primal + DDM [s] | ratio | forward FD (m+1 runs) [s] | ratio |")
     print("|---|---|---|---|---|---|---|---|")
-    rows = [bench(Path(c), args.repeats, args.partials) for c in args.cases]
+    rows = [bench(Path(c), args.repeats, args.partials, not args.no_fd) for c in args.cases]
     for r in rows:
         print(f"| {r['case']} | {r['m']} | {r['steps']} | {r['primal']:.3f} | {r['ddm']:.3f} | "
               f"{r['ratio_ddm']:.2f} | {r['fd']:.3f} | {r['ratio_fd']:.2f} |")

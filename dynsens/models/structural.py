@@ -93,6 +93,7 @@ class StructuralModel(Model):
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._stacked: tuple[int, dict[str, Any]] | None = None
+        self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
         """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
@@ -150,15 +151,25 @@ class StructuralModel(Model):
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
         return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
 
-    def _spring_state(self, q: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-        """Spring forces f (..., n_s) and tangents df/dδ; params may carry a leading batch axis."""
-        delta = q @ self._spring_elongation          # δ = u_a − u_b for every spring
-        k1 = params["k1"]
+    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Spring forces f (..., n_s) and tangents df/dδ of all springs or of the indices
+        ``springs``; params may carry a leading batch axis."""
+        if springs is None:
+            elongation = self._spring_elongation
+        else:
+            key = tuple(springs.tolist())
+            if key not in self._elongation_of:
+                self._elongation_of[key] = self._spring_elongation[:, springs]
+            elongation = self._elongation_of[key]
+        delta = q @ elongation                       # δ = u_a − u_b for every spring
+        pick = (lambda a: a) if springs is None else (lambda a: a[..., springs])
+        k1 = pick(params["k1"])
         f = k1 * delta
         kt = k1 + 0 * delta
         if self.traits.linear:
             return f, kt
-        k2, k3 = params["k2"], params["k3"]
+        k2, k3 = pick(params["k2"]), pick(params["k3"])
         f = f + k2 * delta ** 2 + k3 * delta ** 3
         kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
         return f, kt
@@ -382,7 +393,7 @@ class StructuralModel(Model):
             return None
         if springs:
             si = np.array(springs)
-            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm)[0][..., _i],
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i)[0],
                           tuple(f"{n}.force" for n in names), "", batched=True)
         bi = np.array(bars)
 
