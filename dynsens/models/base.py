@@ -263,7 +263,8 @@ class Model(ABC):
 
     @abstractmethod
     def residual(self, t: float, s: StepState, params: Any) -> Array:
-        """F_R (n_z,) at time t (s) and state s."""
+        """F_R (n_z,) at time t (s) and state s.  The solver never modifies a state's arrays
+        in place, so models may cache work on their identity."""
 
     def stack_parameters(self, params_list: list[Any]) -> Any | None:
         """Parameter sets stacked along a leading batch axis for vectorized evaluation, or None

@@ -292,8 +292,9 @@ class Kin:
 
 
 class KinCache:
-    """The last few :class:`Kin` by state content and parameter identity (residual and
-    linearize, outputs and monitors are evaluated at the same states)."""
+    """The last few :class:`Kin` by state and parameter identity, then by state content
+    (residual and linearize, outputs and monitors are evaluated at the same states).  State
+    arrays are treated as immutable: the solver creates new ones for every iterate."""
 
     def __init__(self, lay: Layout, size: int = 4):
         self.lay, self.size = lay, size
