@@ -96,3 +96,17 @@ def test_coloured_and_column_by_column_partials_agree(monkeypatch):
     assert coloured.counters["sensitivity_residual_evaluations"] < plain.counters["sensitivity_residual_evaluations"]
     for name, r in plain.responses.items():
         assert rel_err(coloured.responses[name].gradient, r.gradient) < 1e-12, name
+
+
+def test_parameter_table_reevaluates_only_what_a_perturbation_names():
+    case = dynsens.load_case_dict(per_element_chain())
+    table = case.model.table
+    x0 = case.x0
+    full = table.evaluate(x0)
+    rng = np.random.default_rng(1)
+    for j in rng.choice(x0.size, 5, replace=False):
+        for x in (x0 + 1e-3 * np.eye(x0.size)[j], x0 + 1e-20j * np.eye(x0.size)[j]):
+            fresh = type(table).__new__(type(table))
+            fresh.__dict__.update(table.__dict__, _base=None)
+            assert np.array_equal(table.evaluate(x), fresh.evaluate(x))      # incremental == full
+            assert not np.array_equal(table.evaluate(x), full)

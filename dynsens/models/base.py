@@ -170,6 +170,10 @@ class ParameterTable:
         self._known = frozenset(design_names)
         self._constants: list[complex | float] = []
         self._exprs: list[tuple[int, Expression]] = []
+        # the last fully evaluated design and its entries, and per design variable the
+        # positions in _exprs of the expressions naming it (for perturbed designs)
+        self._base: tuple[Array, Array] | None = None
+        self._naming: list[set[int]] | None = None
 
     def __len__(self) -> int:
         return len(self._constants)
@@ -177,6 +181,7 @@ class ParameterTable:
     def add(self, value: Any, path: str, problems: ProblemCollector, *,
             positive: bool = False, nonnegative: bool = False, default: float | None = None) -> int:
         """Register one numeric entry found at YAML ``path``; returns its index (-1 on error)."""
+        self._base = self._naming = None
         if value is None and default is not None:
             value = default
         idx = len(self._constants)
@@ -223,24 +228,47 @@ class ParameterTable:
         """True when entry ``index`` is an expression of design variables."""
         return any(i == index and e.symbols for i, e in self._exprs)
 
+    def _expressions_naming(self) -> list[set[int]]:
+        """For each design variable, the positions in ``_exprs`` of the expressions naming it."""
+        if self._naming is None:
+            index = {name: j for j, name in enumerate(self.design_names)}
+            self._naming = [set() for _ in self.design_names]
+            for k, (_, expr) in enumerate(self._exprs):
+                for name in expr.symbols:
+                    if name in index:
+                        self._naming[index[name]].add(k)
+        return self._naming
+
     def design_dependents(self) -> list[list[int]]:
         """For each design variable, the entries whose expressions name it."""
-        out: list[list[int]] = [[] for _ in self.design_names]
-        index = {name: j for j, name in enumerate(self.design_names)}
-        for i, expr in self._exprs:
-            for name in expr.symbols:
-                if name in index:
-                    out[index[name]].append(i)
-        return out
+        return [sorted(self._exprs[k][0] for k in ks) for ks in self._expressions_naming()]
 
     def evaluate(self, x: Array) -> Array:
-        """All entries for design ``x`` (m,); complex when ``x`` is complex."""
+        """All entries for design ``x`` (m,); complex when ``x`` is complex.
+
+        A design that differs from the last fully evaluated one in a few variables (a
+        perturbed design of the partials) re-evaluates only the expressions naming them."""
         dtype = np.result_type(x.dtype, float)
+        base = self._base
+        # (not from complex entries to a real design: they were computed in complex arithmetic)
+        if base is not None and base[0].shape == x.shape and \
+                (np.iscomplexobj(x) or not np.iscomplexobj(base[1])):
+            changed = np.flatnonzero(x != base[0])
+            if changed.size <= max(1, x.size // 8):
+                out = base[1].astype(dtype)
+                if changed.size:
+                    env: Mapping[str, Any] = dict(zip(self.design_names, x))
+                    naming = self._expressions_naming()
+                    for k in sorted(set().union(*(naming[j] for j in changed))):
+                        i, expr = self._exprs[k]
+                        out[i] = expr.evaluate(env)
+                return out
         out = np.array(self._constants, dtype=dtype)
         if self._exprs:
-            env: Mapping[str, Any] = dict(zip(self.design_names, x))
+            env = dict(zip(self.design_names, x))
             for i, expr in self._exprs:
                 out[i] = expr.evaluate(env)
+        self._base = (np.array(x, copy=True), out.copy())
         return out
 
 
