@@ -110,3 +110,16 @@ def test_parameter_table_reevaluates_only_what_a_perturbation_names():
             fresh.__dict__.update(table.__dict__, _base=None)
             assert np.array_equal(table.evaluate(x), fresh.evaluate(x))      # incremental == full
             assert not np.array_equal(table.evaluate(x), full)
+
+
+def test_initial_conditions_reach_no_residual_row_but_keep_their_gradient():
+    d = per_element_chain()
+    d["model"]["initial"] = {"velocity": {"u3": "v0"}}
+    d["design"]["variables"].append({"name": "v0", "value": 0.5, "lower": -1.0, "upper": 1.0})
+    case = dynsens.load_case_dict(d, overrides=["sensitivity.partials=complex"])
+    assert case.model.design_pattern()[-1].size == 0          # v0 enters only the initial state
+    res = dynsens.run_case(case)
+    ref = complex_step_gradients(case)
+    for name, r in res.responses.items():
+        assert rel_err(r.gradient, ref[name]) < 1e-10, name
+        assert abs(r.gradient[-1]) > 0 or ref[name][-1] == 0

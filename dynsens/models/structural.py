@@ -318,7 +318,14 @@ class StructuralModel(Model):
             # αM + βK0: every row of the mass and stiffness; the other parameters of M and K0
             # already reach their own rows
             touch(list(self.rayleigh), np.arange(n))
-        return [np.array(sorted(set().union(*(rows_of_param.get(p, set()) for p in params))), int)
+        # initial conditions do not enter F_R; any other entry not listed above (a future
+        # element's) is taken to reach every row, so the colouring stays correct, only coarser
+        initial = {int(i) for _, i in list(self.init_q) + list(self.init_qd)}
+        every = set(range(n))
+
+        def rows_of(p: int) -> set[int]:
+            return rows_of_param.get(p, set() if p in initial else every)
+        return [np.array(sorted(set().union(*(rows_of(p) for p in params))), int)
                 for params in self.table.design_dependents()]
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
