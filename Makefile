@@ -39,7 +39,9 @@ report: $(STAMP)
 	$(PY) scripts/extreme_report.py > results/extreme.md
 
 bench: $(STAMP)
-	$(PY) scripts/bench_sensitivity_cost.py cases/duffing_chain.yaml cases/sdof_step.yaml cases/truss_impact.yaml cases/slider_crank.yaml cases/tyrolean_weir.yaml
+	$(PY) scripts/bench_sensitivity_cost.py --repeats 5 cases/duffing_chain.yaml cases/sdof_step.yaml cases/truss_impact.yaml
+	$(PY) scripts/bench_sensitivity_cost.py --repeats 3 --no-fd --partials case cases/tyrolean_weir.yaml cases/slider_crank.yaml cases/hydraulic_lever.yaml
+	$(PY) scripts/bench_large.py
 
 bench-peers: $(STAMP)
 	$(VENV)/bin/pip install --quiet ".[peers]"
