@@ -106,14 +106,23 @@ class DesignPartials:
             return [model.parameters(self.x + d) for d in dx] + [model.parameters(self.x - d) for d in dx]
         return [model.parameters(self.x + 1j * d) for d in dx]
 
+    def _differences(self, F: np.ndarray, groups: int) -> np.ndarray:
+        """Undivided differences (k, groups) from the values (k, B) of a batch of ``groups``
+        perturbations (forward: base first; central: all + then all −; complex: imaginary parts)."""
+        if self.method == "forward":
+            return F[:, 1:] - F[:, :1]
+        if self.method == "central":
+            return F[:, :groups] - F[:, groups:]
+        return np.imag(F)
+
+    @property
+    def _divisor(self) -> np.ndarray:
+        """What turns each column's difference into its quotient: h, or 2h for central."""
+        return 2.0 * self.h if self.method == "central" else self.h
+
     def _combine(self, F: np.ndarray) -> np.ndarray:
         """Difference quotients (k, m) from the values (k, B) of the batch entries."""
-        m = self.m
-        if self.method == "forward":
-            return (F[:, 1:] - F[:, :1]) / self.h
-        if self.method == "central":
-            return (F[:, :m] - F[:, m:]) / (2.0 * self.h)
-        return np.imag(F) / self.h
+        return self._differences(F, self.m) / self._divisor
 
     def residual_partials(self, t: float, s: StepState) -> np.ndarray:
         """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation
@@ -121,16 +130,11 @@ class DesignPartials:
         F = self.model.residual_batch(t, s, self._residual_batch)
         if self.colours is None:
             return self._combine(F)
-        C = len(self.colours)
-        if self.method == "forward":
-            diff, div = F[:, 1:] - F[:, :1], self.h
-        elif self.method == "central":
-            diff, div = F[:, :C] - F[:, C:], 2.0 * self.h
-        else:
-            diff, div = np.imag(F), self.h
+        # each variable's rows of its colour's difference are its own column
+        diff = self._differences(F, len(self.colours))
         D = np.zeros((F.shape[0], self.m))
         r, j = self._scatter_rows, self._scatter_cols
-        D[r, j] = np.real(diff[r, self._scatter_colours]) / div[j]
+        D[r, j] = np.real(diff[r, self._scatter_colours]) / self._divisor[j]
         return D
 
     def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,

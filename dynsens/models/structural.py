@@ -163,13 +163,15 @@ class StructuralModel(Model):
                 self._elongation_of[key] = self._spring_elongation[:, springs]
             elongation = self._elongation_of[key]
         delta = q @ elongation                       # δ = u_a − u_b for every spring
-        pick = (lambda a: a) if springs is None else (lambda a: a[..., springs])
-        k1 = pick(params["k1"])
+
+        def pick(key: str) -> np.ndarray:
+            return params[key] if springs is None else params[key][..., springs]
+        k1 = pick("k1")
         f = k1 * delta
         kt = k1 + 0 * delta
         if self.traits.linear:
             return f, kt
-        k2, k3 = pick(params["k2"]), pick(params["k3"])
+        k2, k3 = pick("k2"), pick("k3")
         f = f + k2 * delta ** 2 + k3 * delta ** 3
         kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
         return f, kt

@@ -48,6 +48,12 @@ class Gravity(ForceElement):
             out[7 * i:7 * i + 3] += bp.mass * g
 
 
+def _amplitude(ctx: Ctx, idx: tuple[int, int, int], fn: TimeFunction) -> Array:
+    """The vector (3, 1) of parameter entries ``idx`` scaled by the time function at ctx.t."""
+    pv = ctx.params.pv
+    return np.array([pv[i] for i in idx]).reshape(3, 1) * fn.value(ctx.t, pv)
+
+
 @dataclass(eq=False)
 class PointForce(ForceElement):
     """Force F φ(t) (force unit) at ``point``; ``frame`` is ``global`` or ``body``."""
@@ -59,8 +65,7 @@ class PointForce(ForceElement):
     fn: TimeFunction
 
     def force(self, ctx: Ctx) -> Array:
-        pv = ctx.params.pv
-        F = np.array([pv[i] for i in self.idx]).reshape(3, 1) * self.fn.value(ctx.t, pv)
+        F = _amplitude(ctx, self.idx, self.fn)
         if self.frame == "body" and self.point.body != GROUND:
             a = 7 * self.point.body
             return rotate(ctx.q[a + 3:a + 7], F)
@@ -83,8 +88,7 @@ class Torque(ForceElement):
     def add(self, ctx: Ctx, out: Array) -> None:
         if self.body == GROUND:
             return
-        pv = ctx.params.pv
-        n = np.array([pv[i] for i in self.idx]).reshape(3, 1) * self.fn.value(ctx.t, pv)
+        n = _amplitude(ctx, self.idx, self.fn)
         a = 7 * self.body
         p = ctx.q[a + 3:a + 7]
         out[a + 3:a + 7] += 2.0 * (GT_mul(p, n + 0 * p[:3]) if self.frame == "body"
