@@ -159,6 +159,23 @@ class Layout:
         self.p_blocks = (np.broadcast_to(pblk[:, :, None], (self.n_b, 4, 4)),
                          np.broadcast_to(pblk[:, None, :], (self.n_b, 4, 4)))
         self.norm_cols = bcol
+        self._compiled: CompiledArrays | None = None
+
+    def compiled_arrays(self) -> "CompiledArrays":
+        """The index structure for :mod:`.compiled` (built on first use)."""
+        if self._compiled is None:
+            ptr, prim, coef = [0], [], []
+            for row in self.MAB:
+                nz = np.flatnonzero(row)
+                prim += nz.tolist()
+                coef += row[nz].tolist()
+                ptr.append(len(prim))
+            self._compiled = CompiledArrays(
+                self.pb.astype(np.int64), self.is_point.astype(bool), np.array(ptr, np.int64),
+                np.array(prim, np.int64), np.array(coef, float), self.norm_eq.astype(np.int64),
+                self.norm_body.astype(np.int64),
+                np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64))
+        return self._compiled
 
 
 @dataclass
@@ -291,13 +308,78 @@ class Kin:
         return H
 
 
+class CompiledKin(Kin):
+    """:class:`Kin` of real states and parameter sets evaluated by the compiled kernel
+    (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp))."""
+
+    def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array):
+        from . import compiled as cc
+        self.lay, self.kp = lay, kp
+        self.arrays = cl = lay.compiled_arrays()
+        self.params = ck = compiled_params(kp)
+        self.q, self.qd = q, qd
+        (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = cc.kinematics(
+            q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,
+            cl.norm_body)
+        self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
+        self._rows = None
+
+    def prim_forces(self, w: Array) -> Array:
+        from . import compiled as cc
+        cl = self.arrays
+        return cc.prim_forces(w, self.ABV, cl.side_ptr, cl.side_prim, cl.side_coef, self.lay.n_t)
+
+
+@dataclass
+class CompiledArrays:
+    """The layout's index structure in the form of the compiled kernel (built once per model)."""
+
+    pb: Array            # (n_t,) body of each primitive
+    is_point: Array      # (n_t,) bool
+    side_ptr: Array      # (2 n_prod + 1,) CSR rows s·n_prod + p of [MA; MB]
+    side_prim: Array
+    side_coef: Array
+    norm_eq: Array
+    norm_body: Array
+    prod_eq: Array       # (n_cp,) equation of each constraint product
+
+
+@dataclass
+class CompiledParams:
+    """Real parameter sets in the form of the compiled kernel (leading axis B)."""
+
+    Ts4: Array           # (B, n_t, 3, 4, 4)
+    cAB: Array           # (B, 2, n_prod, 3) constant parts of both sides
+    mass: Array          # (B, n_b)
+    J: Array             # (B, n_b, 3, 3)
+
+
+def compiled_params(kp: KParams) -> CompiledParams:
+    """:class:`CompiledParams` of real parameter sets (cached on kp)."""
+    hit = getattr(kp, "_compiled", None)
+    if hit is None:
+        hit = CompiledParams(np.ascontiguousarray(kp.Ts4, float),
+                             np.ascontiguousarray(np.stack([kp.cA, kp.cB], axis=1), float),
+                             np.ascontiguousarray(kp.mass, float), np.ascontiguousarray(kp.J, float))
+        kp._compiled = hit  # type: ignore[attr-defined]
+    return hit
+
+
+def _use_compiled(kp: KParams, q: Array, qd: Array, qdd: Array) -> bool:
+    """Real states (Bs, n_q) and real parameter sets: the compiled kernel serves."""
+    return (q.dtype == np.float64 and qd.dtype == np.float64 and qdd.dtype == np.float64
+            and kp.pv.dtype.kind == "f")
+
+
 class KinCache:
     """The last few :class:`Kin` by state and parameter identity, then by state content
     (residual and linearize, outputs and monitors are evaluated at the same states).  State
     arrays are treated as immutable: the solver creates new ones for every iterate."""
 
     def __init__(self, lay: Layout, size: int = 4):
+        from .compiled import enabled
         self.lay, self.size = lay, size
+        self.compiled = enabled()        # decided once per model (DYNSENS_KERNEL)
         self._items: list[tuple[tuple[Any, ...], tuple[Array, Array, Array], Kin]] = []
 
     def get(self, kp: KParams, q: Array, qd: Array, qdd: Array) -> Kin:
@@ -313,7 +395,8 @@ class KinCache:
         for k, _, kin in self._items:
             if k == key and kin.kp is kp:
                 return kin
-        kin = Kin(self.lay, kp, q2, qd2, qdd2)
+        kin = CompiledKin(self.lay, kp, q2, qd2, qdd2) if self.compiled and _use_compiled(kp, q2, qd2, qdd2) \
+            else Kin(self.lay, kp, q2, qd2, qdd2)
         self._items.insert(0, (key, (q, qd, qdd), kin))
         del self._items[self.size:]
         return kin

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..base import Linearization
 from .bodies import Ctx
-from .kernel import Kin
+from . import compiled as cc
+from .kernel import CompiledKin, Kin
 from .rotations import T_G, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -93,9 +94,32 @@ class Evaluation:
                 f[:, j] -= kp.pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
         self.f = f
 
+    @property
+    def compiled(self) -> bool:
+        """Evaluated by the compiled kernel: compiled kinematics and real multipliers, pressures."""
+        return isinstance(self.kin, CompiledKin) and self.lam.dtype.kind == "f" \
+            and self.p.dtype.kind == "f" and self.pd.dtype.kind == "f"
+
+    def _rates(self) -> Array:
+        """h (B, n_p): the pressure rates of the axial elements."""
+        h = np.zeros((self.kin.X.shape[0], self.model.traits.n_p))
+        for el, (_, _, law) in zip(self.model.layout.axial, self.laws):
+            for i, hi in enumerate(law[4]):
+                h[:, el.p_index + i] = hi
+        return h
+
     def residual(self) -> Array:
         """F_R (B, n_z)."""
         m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
+        if self.compiled:
+            ck, cl = kin.params, kin.arrays
+            g = kp.pv[:, list(m.gravity.idx)] if m.gravity is not None else np.zeros((1, 3))
+            R = cc.residual(kin.Lp, kin.Lr, kin.C, self.f, cl.pb, cl.is_point, ck.mass, ck.J,
+                            np.ascontiguousarray(g, float), self.lam, cl.norm_eq, cl.norm_body, self.Phi,
+                            float(m.scale), float(m.alpha), float(m.beta), self.pd, self._rates(), cc.TG)
+            if m.other_forces:
+                R[:, :lay.n_q] -= other_forces_q(m, self.t, kin.q, kin.qd, kp.prms)
+            return R
         Lp = kin.Lp
         p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
         J = kp.J
@@ -133,6 +157,8 @@ class Evaluation:
         m, kin, lay = self.model, self.kin, self.model.layout
         tr = m.traits
         n_q, n_lam, n_p = tr.n_q, tr.n_lam, tr.n_p
+        if self.compiled:
+            return self._compiled_linearization()
         dt = np.result_type(kin.PV, self.lam, self.p, self.f)
         Jx, Dx, Ax, _, _ = kin.rows()
         # rows of J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows (r = Jx, Dx, Ax):
@@ -186,6 +212,40 @@ class Evaluation:
         return Linearization(R_z, np.concatenate([R1_q, R2_q, R3_q]),
                              np.concatenate([R1_qd, R2_qd, R3_qd]),
                              np.concatenate([R1_p, np.zeros((n_lam, n_p)), R3_p]) if n_p else None)
+
+    def _compiled_linearization(self) -> Linearization:
+        """:meth:`linearization` by the compiled kernel; the axial laws' partials enter as arrays."""
+        m, kin, lay = self.model, self.kin, self.model.layout
+        tr = m.traits
+        cl, ck = kin.arrays, kin.params
+        n_ax, n_p = len(lay.axial), tr.n_p
+        ax_law = np.empty((n_ax, 5))
+        ax_Pp = np.zeros((n_ax, n_p))
+        p_owner = np.full(n_p, -1, np.int64)
+        h_L, h_Ld, h_p = np.zeros(n_p), np.zeros(n_p), np.zeros((n_p, n_p))
+        for i, (el, (L, Ld, law)) in enumerate(zip(lay.axial, self.laws)):
+            P, P_L, P_Ld, P_p, h, hL, hLd, hp = law
+            ax_law[i] = (L[0], Ld[0], P[0], P_L[0], P_Ld[0])
+            j = el.p_index
+            for k, Pk in enumerate(P_p):
+                ax_Pp[i, j + k] = Pk[0]
+            for r in range(len(h)):
+                p_owner[j + r] = i
+                h_L[j + r], h_Ld[j + r] = hL[r][0], hLd[r][0]
+                for k in range(len(hp[r])):
+                    h_p[j + r, j + k] = hp[r][k][0]
+        G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
+                            cl.side_coef, tr.n_q)
+        R_z, R_q, R_qd, R_p = cc.linearization(
+            kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
+            cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], float), m.eq_row_weights,
+            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0], self.lam[0], ck.mass[0], ck.J[0], cc.TG,
+            np.arange(lay.n_cp, lay.n_cp + n_ax, dtype=np.int64), ax_law, ax_Pp, p_owner, h_L, h_Ld, h_p)
+        if m.other_forces:
+            Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
+            R_q[:tr.n_q] -= Kq
+            R_qd[:tr.n_q] -= Kqd
+        return Linearization(R_z, R_q, R_qd, R_p if n_p else None)
 
     def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
         """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""

@@ -1,0 +1,466 @@
+r"""Compiled evaluation of the multibody kernel for one real parameter set (the Newton hot path).
+
+The numpy kernel (:mod:`.kernel`, :mod:`.residual`) evaluates batches of states and parameter
+sets, real or complex, with few numpy calls; for the primal Newton iteration (one real state,
+one parameter set) its cost is the call overhead of ~150 tiny array operations, not arithmetic
+(BENCHMARKS.md, "where the time goes").  This module evaluates the same quantities with loops
+compiled by numba, and exploits what the dense products cannot: a side of a product involves
+one or two primitives, each acting on the 7 coordinates of one body.
+
+Same notation as :mod:`.kernel`: primitives j (points and body-fixed directions on moving
+bodies) with point tensors ``Ts4[j]`` and ``C_i = Ts·L_i`` (L_0, L_1, L_2 = p, ṗ, p̈); sides
+``ABV[s, p, level, :]`` of the products ``x_p = a_p·b_p`` as sparse combinations
+(``side_ptr``, ``side_prim``, ``side_coef``: CSR rows ``s·n_prod + p``) of the primitives'
+levels.  The per-element force laws and time functions stay in Python (scalar calls); their
+values and partials enter here as arrays.
+
+The numpy path is kept as the reference (complex step, batched design partials) and
+``tests/test_compiled_kernel.py`` checks that both agree to round-off.  Set the environment
+variable ``DYNSENS_KERNEL=numpy`` to switch the compiled path off (side-by-side benchmarks).
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from .rotations import T_G
+
+try:  # numba is a dependency; without it (an unsupported platform) the numpy kernel serves
+    from numba import njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - exercised only where numba cannot be installed
+    HAVE_NUMBA = False
+
+Array = np.ndarray
+
+
+def enabled() -> bool:
+    """Whether the compiled kernel is used (numba importable and ``DYNSENS_KERNEL`` != numpy)."""
+    return HAVE_NUMBA and os.environ.get("DYNSENS_KERNEL", "compiled").lower() != "numpy"
+
+
+if HAVE_NUMBA:
+    jit = njit(cache=True, fastmath=False, nogil=True)
+else:  # pragma: no cover
+    def jit(fn: Any) -> Any:
+        return fn
+
+
+# ---------------------------------------------------------------------------- kinematics
+@jit
+def _kinematics_one(q: Array, qd: Array, qdd: Array, pb: Array, is_point: Array, Ts4: Array,
+                    side_ptr: Array, side_prim: Array, side_coef: Array, cAB: Array,
+                    norm_body: Array, Lp: Array, Lr: Array, C: Array, PV: Array, ABV: Array,
+                    X: Array, N: Array) -> None:
+    """:func:`kinematics` of one state and parameter set, into the given output slices."""
+    n_b = q.shape[0] // 7
+    n_prod = cAB.shape[1]
+    for b in range(n_b):
+        for k in range(3):
+            Lr[0, b, k] = q[7 * b + k]
+            Lr[1, b, k] = qd[7 * b + k]
+            Lr[2, b, k] = qdd[7 * b + k]
+        for k in range(4):
+            Lp[0, b, k] = q[7 * b + 3 + k]
+            Lp[1, b, k] = qd[7 * b + 3 + k]
+            Lp[2, b, k] = qdd[7 * b + 3 + k]
+    for j in range(pb.shape[0]):
+        b = pb[j]
+        for a in range(3):
+            for k in range(4):
+                for i in range(3):
+                    s = 0.0
+                    for l in range(4):
+                        s += Ts4[j, a, k, l] * Lp[i, b, l]
+                    C[j, a, k, i] = s
+            # value C(p)p, rate 2C(p)ṗ, acceleration 2C(p)p̈ + 2C(ṗ)ṗ
+            v0 = 0.0
+            v1 = 0.0
+            v2 = 0.0
+            for k in range(4):
+                v0 += C[j, a, k, 0] * Lp[0, b, k]
+                v1 += C[j, a, k, 0] * Lp[1, b, k]
+                v2 += C[j, a, k, 0] * Lp[2, b, k] + C[j, a, k, 1] * Lp[1, b, k]
+            PV[j, 0, a] = v0
+            PV[j, 1, a] = 2.0 * v1
+            PV[j, 2, a] = 2.0 * v2
+            if is_point[j]:
+                for lev in range(3):
+                    PV[j, lev, a] += Lr[lev, b, a]
+    for sp in range(2 * n_prod):
+        s_ = sp // n_prod
+        p = sp - s_ * n_prod
+        for lev in range(3):
+            for a in range(3):
+                ABV[s_, p, lev, a] = 0.0
+        for e in range(side_ptr[sp], side_ptr[sp + 1]):
+            j = side_prim[e]
+            c = side_coef[e]
+            for lev in range(3):
+                for a in range(3):
+                    ABV[s_, p, lev, a] += c * PV[j, lev, a]
+        for a in range(3):
+            ABV[s_, p, 0, a] += cAB[s_, p, a]
+    d = np.empty((3, 3))
+    for p in range(n_prod):
+        for l in range(3):
+            for m in range(3):
+                s = 0.0
+                for a in range(3):
+                    s += ABV[0, p, l, a] * ABV[1, p, m, a]
+                d[l, m] = s
+        X[p, 0] = d[0, 0]
+        X[p, 1] = d[0, 1] + d[1, 0]
+        X[p, 2] = d[0, 2] + d[2, 0] + 2.0 * d[1, 1]
+    for e in range(norm_body.shape[0]):
+        b = norm_body[e]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for k in range(4):
+            s0 += Lp[0, b, k] * Lp[0, b, k]
+            s1 += Lp[0, b, k] * Lp[1, b, k]
+            s2 += Lp[0, b, k] * Lp[2, b, k] + Lp[1, b, k] * Lp[1, b, k]
+        N[e, 0] = s0
+        N[e, 1] = 2.0 * s1
+        N[e, 2] = 2.0 * s2
+
+
+@jit
+def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4: Array,
+               side_ptr: Array, side_prim: Array, side_coef: Array, cAB: Array,
+               norm_body: Array) -> tuple[Array, Array, Array, Array, Array, Array, Array]:
+    """Levels of all primitives and products for B = max(Bs, Bp) pairs of a state (Q, Q̇, Q̈
+    (Bs, n_q)) and a parameter set (Ts4 (Bp, n_t, 3, 4, 4), cAB (Bp, 2, n_prod, 3)); a batch
+    of one broadcasts.
+
+    Returns, each with the leading axis B: Lp (3, n_b, 4) and Lr (3, n_b, 3) (levels of p and
+    r), C (n_t, 3, 4, 3) (C[j, a, k, i] = Σ_l Ts4[j, a, k, l] L_i[l]), PV (n_t, 3, 3)
+    (primitive levels), ABV (2, n_prod, 3, 3) (side levels), X (n_prod, 3) (x, ẋ, ẍ of the
+    products) and N (n_norm, 3) (p·p and its rates).
+    """
+    Bs, Bp = Q.shape[0], Ts4.shape[0]
+    B = max(Bs, Bp)
+    n_b = Q.shape[1] // 7
+    n_t = pb.shape[0]
+    n_prod = cAB.shape[2]
+    Lp = np.empty((B, 3, n_b, 4))
+    Lr = np.empty((B, 3, n_b, 3))
+    C = np.empty((B, n_t, 3, 4, 3))
+    PV = np.empty((B, n_t, 3, 3))
+    ABV = np.empty((B, 2, n_prod, 3, 3))
+    X = np.empty((B, n_prod, 3))
+    N = np.empty((B, norm_body.shape[0], 3))
+    for b in range(B):
+        i, k = min(b, Bs - 1), min(b, Bp - 1)
+        _kinematics_one(Q[i], Qd[i], Qdd[i], pb, is_point, Ts4[k], side_ptr, side_prim, side_coef,
+                        cAB[k], norm_body, Lp[b], Lr[b], C[b], PV[b], ABV[b], X[b], N[b])
+    return Lp, Lr, C, PV, ABV, X, N
+
+
+@jit
+def prim_forces(W: Array, ABV: Array, side_ptr: Array, side_prim: Array, side_coef: Array,
+                n_t: int) -> Array:
+    """F (B, n_t, 3) = Σ_p W_p ∂x_p/∂(primitive values) for weights W (B, n_prod): side a is
+    pulled by w·b, side b by w·a."""
+    B, n_prod = ABV.shape[0], ABV.shape[2]
+    F = np.zeros((B, n_t, 3))
+    for bb in range(B):
+        w = W[min(bb, W.shape[0] - 1)]
+        for sp in range(2 * n_prod):
+            s_ = sp // n_prod
+            p = sp - s_ * n_prod
+            wp = w[p]
+            if wp == 0.0:
+                continue
+            for e in range(side_ptr[sp], side_ptr[sp + 1]):
+                j = side_prim[e]
+                c = side_coef[e] * wp
+                for a in range(3):
+                    F[bb, j, a] += c * ABV[bb, 1 - s_, p, 0, a]
+    return F
+
+
+# ---------------------------------------------------------------------------- residual
+@jit
+def _G(TG: Array, a: Array) -> Array:
+    """G(a) (3, 4), G(a)[i, l] = Σ_k T_G[i, k, l] a_k."""
+    out = np.zeros((3, 4))
+    for i in range(3):
+        for k in range(4):
+            if a[k] != 0.0:
+                for l in range(4):
+                    out[i, l] += TG[i, k, l] * a[k]
+    return out
+
+
+@jit
+def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Array, mass: Array,
+             J: Array, gravity: Array, lam: Array, norm_eq: Array, norm_body: Array, Phi: Array,
+             scale: float, alpha: float, beta: float, pd: Array, h: Array, TG: Array) -> Array:
+    """F_R (B, n_z): R1 = M q̈ − Q_v + J_Φᵀλ − Q_ext (primitive forces F carry J_Φᵀλ and the
+    axial and point forces), R2 = c_s(Φ̈ + 2αΦ̇ + β²Φ), R3 = ṗ − h.
+
+    Leading batch axes: Lp, Lr, C, F, Phi (B); mass, J, gravity (3,), lam, pd, h (B or 1).
+    """
+    B, n_b = Lp.shape[0], Lp.shape[2]
+    n_q = 7 * n_b
+    n_lam = Phi.shape[1]
+    n_p = pd.shape[1]
+    out = np.zeros((B, n_q + n_lam + n_p))
+    b2 = beta * beta
+    for bb in range(B):
+        o = out[bb]
+        f, Cb, L, R = F[bb], C[bb], Lp[bb], Lr[bb]
+        ms, Js = mass[min(bb, mass.shape[0] - 1)], J[min(bb, J.shape[0] - 1)]
+        g = gravity[min(bb, gravity.shape[0] - 1)]
+        lm = lam[min(bb, lam.shape[0] - 1)]
+        for j in range(pb.shape[0]):                    # generalized primitive forces
+            b = pb[j]
+            if is_point[j]:
+                for a in range(3):
+                    o[7 * b + a] += f[j, a]
+            for k in range(4):
+                s = 0.0
+                for a in range(3):
+                    s += f[j, a] * Cb[j, a, k, 0]
+                o[7 * b + 3 + k] += 2.0 * s
+        for b in range(n_b):                            # inertia
+            for a in range(3):
+                o[7 * b + a] += ms[b] * (R[2, b, a] - g[a])
+            Gp = _G(TG, L[0, b])
+            Gpd = _G(TG, L[1, b])
+            w1 = Js[b] @ (Gp @ L[2, b])
+            w2 = Js[b] @ (Gpd @ L[0, b])
+            for k in range(4):
+                s = 0.0
+                for i in range(3):
+                    s += 4.0 * Gp[i, k] * w1[i] - 8.0 * Gpd[i, k] * w2[i]
+                o[7 * b + 3 + k] += s
+        for e in range(norm_eq.shape[0]):
+            b = norm_body[e]
+            for k in range(4):
+                o[7 * b + 3 + k] += 2.0 * lm[norm_eq[e]] * L[0, b, k]
+        ph = Phi[bb]
+        for e in range(n_lam):
+            o[n_q + e] = scale * (ph[e, 2] + 2.0 * alpha * ph[e, 1] + b2 * ph[e, 0])
+        pdb, hb = pd[min(bb, pd.shape[0] - 1)], h[min(bb, h.shape[0] - 1)]
+        for i in range(n_p):
+            o[n_q + n_lam + i] = pdb[i] - hb[i]
+    return out
+
+
+# ---------------------------------------------------------------------------- linearization
+@jit
+def _add_prim_rowT(row: Array, j: int, b: int, lev: int, v: Array, coef: float, C: Array,
+                   is_point: Array) -> None:
+    """row (n_q,) += coef · (∂ primitive j at level lev / ∂q)ᵀ v: identity on r (points,
+    value level), 2C(L_lev) on p."""
+    if lev == 0 and is_point[j]:
+        for a in range(3):
+            row[7 * b + a] += coef * v[a]
+    for k in range(4):
+        s = 0.0
+        for a in range(3):
+            s += C[j, a, k, lev] * v[a]
+        row[7 * b + 3 + k] += 2.0 * coef * s
+
+
+@jit
+def product_rows(C: Array, ABV: Array, pb: Array, is_point: Array, side_ptr: Array,
+                 side_prim: Array, side_coef: Array, n_q: int) -> Array:
+    """G (n_prod, 3, n_q): ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q of every product x = a·b, from
+    x_T = Σ RL[T, l, m] a_l·b_m (RL as kernel.ROW_LEVELS)."""
+    n_prod = ABV.shape[1]
+    G = np.zeros((n_prod, 3, n_q))
+    # (T, l, m, weight) of the nonzero entries of ROW_LEVELS
+    TT = (0, 1, 1, 2, 2, 2)
+    LL = (0, 0, 1, 0, 2, 1)
+    MM = (0, 1, 0, 2, 0, 1)
+    WW = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
+    for p in range(n_prod):
+        for r in range(6):
+            T, l, m, wt = TT[r], LL[r], MM[r], WW[r]
+            row = G[p, T]
+            for e in range(side_ptr[p], side_ptr[p + 1]):          # ∂a_l · b_m
+                j = side_prim[e]
+                _add_prim_rowT(row, j, pb[j], l, ABV[1, p, m], wt * side_coef[e], C, is_point)
+            for e in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):   # a_l · ∂b_m
+                j = side_prim[e]
+                _add_prim_rowT(row, j, pb[j], m, ABV[0, p, l], wt * side_coef[e], C, is_point)
+    return G
+
+
+@jit
+def _prim_jac0(j: int, C: Array, is_point: Array) -> Array:
+    """(3, 7) ∂(value of primitive j)/∂(r, p) of its body."""
+    K = np.zeros((3, 7))
+    if is_point[j]:
+        for a in range(3):
+            K[a, a] = 1.0
+    for a in range(3):
+        for k in range(4):
+            K[a, 3 + k] = 2.0 * C[j, a, k, 0]
+    return K
+
+
+@jit
+def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point: Array,
+                  Ts4: Array, side_ptr: Array, side_prim: Array, side_coef: Array, n_cp: int,
+                  prod_eq: Array, cf: Array, eq_w: Array, norm_w: Array, norm_eq: Array,
+                  norm_body: Array, scale: float, w: Array, f: Array, lam: Array, mass: Array,
+                  J: Array, TG: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array,
+                  p_owner: Array, h_L: Array, h_Ld: Array, h_p: Array
+                  ) -> tuple[Array, Array, Array, Array]:
+    """Exact ∂F_R/∂(z, q, q̇, p): (R_z (n_z, n_z), R_q (n_z, n_q), R_qd (n_z, n_q), R_p (n_z, n_p)).
+
+    Axial elements i act through product ax_prod[i] with ax_law[i] = (L, L̇, P, P_L, P_L̇),
+    ax_Pp[i, :] = ∂P/∂p; pressure row r belongs to element p_owner[r] with ∂h_r/∂L = h_L[r],
+    ∂h_r/∂L̇ = h_Ld[r] and ∂h/∂p = h_p (n_p, n_p).
+    """
+    n_b = Lp.shape[1]
+    n_q = 7 * n_b
+    n_lam = lam.shape[0]
+    n_p = h_L.shape[0]
+    n_z = n_q + n_lam + n_p
+    n_prod = ABV.shape[1]
+    # --- constraint rows: J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows
+    rows = np.zeros((3, n_lam, n_q))
+    for p in range(n_cp):
+        e = prod_eq[p]
+        for o in range(3):
+            for r in range(3):
+                kk = eq_w[o, r, 0] * cf[p, 0] + eq_w[o, r, 1] * cf[p, 1] + eq_w[o, r, 2] * cf[p, 2]
+                if kk != 0.0:
+                    for n in range(n_q):
+                        rows[o, e, n] += kk * G[p, r, n]
+    for i in range(norm_eq.shape[0]):
+        e = norm_eq[i]
+        b = norm_body[i]
+        for o in range(3):
+            for k in range(4):
+                s = 0.0
+                for l in range(3):
+                    s += norm_w[o, l] * Lp[l, b, k]
+                rows[o, e, 7 * b + 3 + k] += 2.0 * s
+    # --- R1_q: geometric stiffness Σ_p w_p ∂²x_p/∂q² (sides' value Jacobians are per body)
+    R1_q = np.zeros((n_q, n_q))
+    R1_qd = np.zeros((n_q, n_q))
+    R1_qdd = np.zeros((n_q, n_q))
+    for p in range(n_prod):
+        wp = w[p]
+        if wp == 0.0:
+            continue
+        for ea in range(side_ptr[p], side_ptr[p + 1]):
+            ja = side_prim[ea]
+            Ka = _prim_jac0(ja, C, is_point)
+            ba = 7 * pb[ja]
+            for eb in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):
+                jb = side_prim[eb]
+                Kb = _prim_jac0(jb, C, is_point)
+                bb = 7 * pb[jb]
+                c = wp * side_coef[ea] * side_coef[eb]
+                blk = Ka.T @ Kb
+                for u in range(7):
+                    for v in range(7):
+                        R1_q[ba + u, bb + v] += c * blk[u, v]
+                        R1_q[bb + v, ba + u] += c * blk[u, v]
+    for j in range(pb.shape[0]):                       # ∂²(A s̄)/∂p² · f: 2 Σ_a f_a Ts4[a]
+        o = 7 * pb[j] + 3
+        for a in range(3):
+            fa = f[j, a]
+            if fa != 0.0:
+                for k in range(4):
+                    for l in range(4):
+                        R1_q[o + k, o + l] += 2.0 * fa * Ts4[j, a, k, l]
+    for i in range(norm_eq.shape[0]):
+        o = 7 * norm_body[i] + 3
+        for k in range(4):
+            R1_q[o + k, o + k] += 2.0 * lam[norm_eq[i]]
+    # --- inertia: ∂(M q̈ − Q_v)/∂(q, q̇, q̈), block diagonal per body
+    for b in range(n_b):
+        p, pd_, pdd = Lp[0, b], Lp[1, b], Lp[2, b]
+        Jb = J[b]
+        Gp = _G(TG, p)
+        Gpd = _G(TG, pd_)
+        w1 = Jb @ (Gp @ pdd)
+        w2 = Jb @ (Gpd @ p)
+        Gb_pdd = np.zeros((3, 4))                      # ∂(G(a) b)/∂a = Σ_l T_G[:, :, l] b_l
+        Gb_p = np.zeros((3, 4))
+        GTv1 = np.zeros((4, 4))                        # ∂(G(a)ᵀ v)/∂a [l, k] = Σ_i v_i T_G[i, k, l]
+        GTv2 = np.zeros((4, 4))
+        for i in range(3):
+            for k in range(4):
+                for l in range(4):
+                    t = TG[i, k, l]
+                    if t != 0.0:
+                        Gb_pdd[i, k] += t * pdd[l]
+                        Gb_p[i, k] += t * p[l]
+                        GTv1[l, k] += t * w1[i]
+                        GTv2[l, k] += t * w2[i]
+        JGp = Jb @ Gp
+        JGpd = Jb @ Gpd
+        Mpp = 4.0 * (Gp.T @ JGp)
+        Kpp = 4.0 * (GTv1 + Gp.T @ (Jb @ Gb_pdd)) - 8.0 * (Gpd.T @ JGpd)
+        Cpp = -8.0 * (GTv2 + Gpd.T @ (Jb @ Gb_p))
+        o = 7 * b
+        for a in range(3):
+            R1_qdd[o + a, o + a] += mass[b]
+        for k in range(4):
+            for l in range(4):
+                R1_q[o + 3 + k, o + 3 + l] += Kpp[k, l]
+                R1_qd[o + 3 + k, o + 3 + l] += Cpp[k, l]
+                R1_qdd[o + 3 + k, o + 3 + l] += Mpp[k, l]
+    # --- axial force elements: x = d·d, L = √x, L̇ = ẋ/(2L), generalized force ½ P/L ∂x/∂q
+    R1_p = np.zeros((n_q, n_p))
+    R3_q = np.zeros((n_p, n_q))
+    R3_qd = np.zeros((n_p, n_q))
+    n_ax = ax_prod.shape[0]
+    dL = np.empty((n_ax, n_q))
+    dLd = np.empty((n_ax, n_q))
+    for i in range(n_ax):
+        jx = G[ax_prod[i], 0]
+        dx = G[ax_prod[i], 1]
+        L, Ld, P, P_L, P_Ld = ax_law[i, 0], ax_law[i, 1], ax_law[i, 2], ax_law[i, 3], ax_law[i, 4]
+        for n in range(n_q):
+            dL[i, n] = jx[n] / (2.0 * L)
+            dLd[i, n] = dx[n] / (2.0 * L) - (Ld / L) * dL[i, n]
+        w_L = -0.5 * (P_L / L - P / (L * L))
+        w_Ld = -0.5 * P_Ld / L
+        for u in range(n_q):
+            if jx[u] != 0.0:
+                for v in range(n_q):
+                    R1_q[u, v] += jx[u] * (w_L * dL[i, v] + w_Ld * dLd[i, v])
+                    R1_qd[u, v] += jx[u] * (w_Ld * dL[i, v])
+                for k in range(n_p):
+                    R1_p[u, k] += -0.5 * ax_Pp[i, k] / L * jx[u]
+    for r in range(n_p):
+        i = p_owner[r]
+        if i >= 0:
+            for n in range(n_q):
+                R3_q[r, n] -= h_L[r] * dL[i, n] + h_Ld[r] * dLd[i, n]
+                R3_qd[r, n] -= h_Ld[r] * dL[i, n]
+    # --- assemble
+    R_z = np.zeros((n_z, n_z))
+    R_q = np.zeros((n_z, n_q))
+    R_qd = np.zeros((n_z, n_q))
+    R_p = np.zeros((n_z, n_p))
+    R_z[:n_q, :n_q] = R1_qdd
+    R_z[:n_q, n_q:n_q + n_lam] = rows[0].T
+    R_z[n_q:n_q + n_lam, :n_q] = scale * rows[0]
+    for i in range(n_p):
+        R_z[n_q + n_lam + i, n_q + n_lam + i] = 1.0
+    R_q[:n_q] = R1_q
+    R_q[n_q:n_q + n_lam] = scale * rows[1]
+    R_q[n_q + n_lam:] = R3_q
+    R_qd[:n_q] = R1_qd
+    R_qd[n_q:n_q + n_lam] = scale * rows[2]
+    R_qd[n_q + n_lam:] = R3_qd
+    R_p[:n_q] = R1_p
+    R_p[n_q + n_lam:] = -h_p
+    return R_z, R_q, R_qd, R_p
+
+
+TG = np.ascontiguousarray(T_G, dtype=float)

@@ -1,0 +1,101 @@
+"""The compiled multibody kernel against the numpy kernel (the reference), at states along real
+runs of every shipped mechanism: residual, exact linearization, batched residuals of perturbed
+designs and batched output kinematics agree to round-off (1e-12 relative to each quantity's
+scale).  Whole-run gradients of the compiled path are checked against complex step of the whole
+run by the mechanism and weir tests, which run compiled (the default)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import dynsens
+from conftest import CASES
+from dynsens.models.base import StepState
+from dynsens.models.multibody import compiled
+from dynsens.models.multibody.kernel import CompiledKin, Kin
+
+pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not installed")
+
+FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
+MECHANISMS = [("slider_crank", 0.3), ("four_bar", 0.3), ("hydraulic_lever", 0.3),
+              ("pendulum_3d", 0.3), ("tyrolean_weir", 0.3)]
+TOL = 1e-12
+
+
+def _close(a, b, what):
+    a, b = np.asarray(a), np.asarray(b)
+    scale = max(np.max(np.abs(b)), 1e-300)
+    err = np.max(np.abs(a - b)) / scale
+    assert err < TOL, f"{what}: compiled differs from numpy by {err:.2e} (relative to {scale:.3g})"
+
+
+def _cases(name, t_end, monkeypatch):
+    """(numpy case, compiled case, states along a run)."""
+    over = [f"integrator.t_end={t_end}"]
+    monkeypatch.setenv("DYNSENS_KERNEL", "numpy")
+    ref = dynsens.load_case(CASES / f"{name}.yaml", over)
+    monkeypatch.setenv("DYNSENS_KERNEL", "compiled")
+    cmp_ = dynsens.load_case(CASES / f"{name}.yaml", over)
+    res = dynsens.run_case(ref, sensitivities=False, history=FIELDS)
+    n = len(res.time)
+    idx = sorted({1, n // 2, n - 1})
+    # off the converged solution (relative 1e-3), so that every residual term is of its own size
+    rng = np.random.default_rng(1)
+    states = [(res.time[i], StepState(*(v + 1e-3 * (1.0 + np.abs(v)) * rng.standard_normal(v.shape)
+                                        for v in (res.history[f][i] for f in FIELDS)))) for i in idx]
+    return ref, cmp_, states
+
+
+@pytest.mark.parametrize("name, t_end", MECHANISMS)
+def test_residual_and_linearization_match_numpy(name, t_end, monkeypatch):
+    ref, cmp_, states = _cases(name, t_end, monkeypatch)
+    pr, pc = ref.model.parameters(ref.x0), cmp_.model.parameters(cmp_.x0)
+    for t, s in states:
+        assert isinstance(cmp_.model.kinematics(s, pc), CompiledKin)
+        assert not isinstance(ref.model.kinematics(s, pr), CompiledKin)
+        _close(cmp_.model.residual(t, s, pc), ref.model.residual(t, s, pr), f"{name} F_R at t = {t}")
+        lc, lr = cmp_.model.linearize(t, s, pc), ref.model.linearize(t, s, pr)
+        for block in ("R_z", "R_q", "R_qd", "R_p"):
+            a, b = getattr(lc, block), getattr(lr, block)
+            assert (a is None) == (b is None), block
+            if b is not None:
+                _close(a, b, f"{name} {block} at t = {t}")
+
+
+@pytest.mark.parametrize("name, t_end", MECHANISMS)
+def test_batched_residuals_and_outputs_match_numpy(name, t_end, monkeypatch):
+    """Design partials evaluate one state for m + 1 parameter sets; output totals evaluate m + 1
+    perturbed states for m + 1 parameter sets: both batch shapes agree with the numpy kernel."""
+    ref, cmp_, states = _cases(name, t_end, monkeypatch)
+    m = ref.x0.size
+    xs = [ref.x0] + [ref.x0 + 1e-3 * np.maximum(np.abs(ref.x0), 1.0) * np.eye(m)[j] for j in range(m)]
+    pr = [ref.model.parameters(x) for x in xs]
+    pc = [cmp_.model.parameters(x) for x in xs]
+    rng = np.random.default_rng(0)
+    for t, s in states:
+        _close(cmp_.model.residual_batch(t, s, pc), ref.model.residual_batch(t, s, pr), f"{name} batch F_R")
+        # a batch of perturbed states with the stacked parameter sets (as the output gradients)
+        sb = StepState(*(v[None, :] + 1e-4 * (1.0 + np.abs(v[None, :])) * rng.standard_normal((m + 1, v.size))
+                         for v in s))
+        kc = cmp_.model.kinematics(sb, cmp_.model.stack_parameters(pc))
+        kr = ref.model.kinematics(sb, ref.model.stack_parameters(pr))
+        assert isinstance(kc, CompiledKin) and type(kr) is Kin
+        for attr in ("X", "N", "ABV", "PV"):
+            _close(getattr(kc, attr), getattr(kr, attr), f"{name} batched kinematics {attr}")
+
+
+def test_complex_data_takes_the_numpy_kernel(monkeypatch):
+    """Complex step of the whole run (complex parameters and states) stays on the numpy path."""
+    monkeypatch.setenv("DYNSENS_KERNEL", "compiled")
+    case = dynsens.load_case(CASES / "slider_crank.yaml", ["integrator.t_end=0.01"])
+    res = dynsens.run_case(case, sensitivities=False, history=FIELDS)
+    s = StepState(*(res.history[f][-1].astype(complex) for f in FIELDS))
+    prm = case.model.parameters(case.x0 + 1e-20j)
+    assert type(case.model.kinematics(s, prm)) is Kin
+
+
+def test_switch_off_by_environment(monkeypatch):
+    monkeypatch.setenv("DYNSENS_KERNEL", "numpy")
+    assert not compiled.enabled()
+    monkeypatch.setenv("DYNSENS_KERNEL", "compiled")
+    assert compiled.enabled()
