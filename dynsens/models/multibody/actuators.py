@@ -17,6 +17,12 @@ partials the element returns, so a new actuator only implements :class:`AxialEle
   n_pressures) and their partials (lists; ``h_p[i][j] = ∂h_i/∂p_j``), all broadcasting over
   any leading shape and complex-safe.
 
+An element whose law the compiled kernel (:mod:`.compiled`) knows sets ``law_kind`` (0: the
+spring-damper's :func:`.forces.spring_law`, 1: the cylinder's
+:func:`.hydraulics.cylinder_law`; each law is written once, in plain arithmetic, and serves
+both kernels) and gives its time-dependent input through ``external(t, pv)``; a model with
+an element of ``law_kind = None`` is evaluated by the numpy kernel.
+
 The forces on the bodies follow from P alone (``Q = J_dᵀ d P/L``, exact Jacobian in
 :mod:`.residual`).  :class:`.hydraulics.HydraulicCylinder` is the first actuator with states,
 :class:`.forces.SpringDamper` the stateless case.
@@ -48,9 +54,15 @@ class AxialElement:
     n_pressures: int = 0
     p_index: int = 0
 
+    law_kind: int | None = None
+
     def constants(self, prm: Any) -> Array:
         """Design-dependent constants of the law for one parameter set, (n_c,)."""
         raise NotImplementedError
+
+    def external(self, t: float, pv: Array) -> Any:
+        """Time-dependent input of the law at t (s) for parameters pv (n,) or (B, n); 0 if none."""
+        return 0.0
 
     def law(self, L: Array, Ld: Array, p: Array, t: float, pv: Array, c: Array) -> tuple:
         """(P, P_L, P_L̇, P_p, h, h_L, h_L̇, h_p) at length L (length), rate L̇ (length/s),

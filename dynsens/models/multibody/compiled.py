@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from .forces import spring_law
+from .hydraulics import cylinder_law
 from .rotations import T_G
 
 try:  # numba is a dependency; without it (an unsupported platform) the numpy kernel serves
@@ -42,10 +44,14 @@ def enabled() -> bool:
 
 
 if HAVE_NUMBA:
-    jit = njit(cache=True, fastmath=False, nogil=True)
+    jit = njit(cache=True, nogil=True)
+    # small helpers inlined into their callers: a call that passes arrays costs reference
+    # counting that exceeds the helper's arithmetic
+    inline = njit(cache=True, nogil=True, inline="always")
 else:  # pragma: no cover
     def jit(fn: Any) -> Any:
         return fn
+    inline = jit
 
 
 # ---------------------------------------------------------------------------- kinematics
@@ -161,30 +167,79 @@ def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4:
 
 
 @jit
+def _prim_forces_one(w: Array, ABV: Array, side_ptr: Array, side_prim: Array, side_coef: Array,
+                     f: Array) -> None:
+    """f (n_t, 3) += Σ_p w_p ∂x_p/∂(primitive values): side a is pulled by w·b, side b by w·a."""
+    n_prod = ABV.shape[1]
+    for sp in range(2 * n_prod):
+        s_ = sp // n_prod
+        p = sp - s_ * n_prod
+        wp = w[p]
+        if wp == 0.0:
+            continue
+        for e in range(side_ptr[sp], side_ptr[sp + 1]):
+            j = side_prim[e]
+            c = side_coef[e] * wp
+            for a in range(3):
+                f[j, a] += c * ABV[1 - s_, p, 0, a]
+
+
+@jit
 def prim_forces(W: Array, ABV: Array, side_ptr: Array, side_prim: Array, side_coef: Array,
                 n_t: int) -> Array:
-    """F (B, n_t, 3) = Σ_p W_p ∂x_p/∂(primitive values) for weights W (B, n_prod): side a is
-    pulled by w·b, side b by w·a."""
-    B, n_prod = ABV.shape[0], ABV.shape[2]
+    """F (B, n_t, 3): primitive forces of the product weights W (B or 1, n_prod)."""
+    B = ABV.shape[0]
     F = np.zeros((B, n_t, 3))
-    for bb in range(B):
-        w = W[min(bb, W.shape[0] - 1)]
-        for sp in range(2 * n_prod):
-            s_ = sp // n_prod
-            p = sp - s_ * n_prod
-            wp = w[p]
-            if wp == 0.0:
-                continue
-            for e in range(side_ptr[sp], side_ptr[sp + 1]):
-                j = side_prim[e]
-                c = side_coef[e] * wp
-                for a in range(3):
-                    F[bb, j, a] += c * ABV[bb, 1 - s_, p, 0, a]
+    for b in range(B):
+        _prim_forces_one(W[min(b, W.shape[0] - 1)], ABV[b], side_ptr, side_prim, side_coef, F[b])
     return F
 
 
 # ---------------------------------------------------------------------------- residual
-@jit
+# Tiny products as explicit loops: numba's `@` calls BLAS, whose per-call cost exceeds the
+# arithmetic of a 3×4 block many times over.
+@inline
+def _mm(A: Array, B: Array) -> Array:
+    """A @ B for small dense blocks."""
+    n, k = A.shape
+    m = B.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for l in range(k):
+            a = A[i, l]
+            for j in range(m):
+                out[i, j] += a * B[l, j]
+    return out
+
+
+@inline
+def _tmm(A: Array, B: Array) -> Array:
+    """Aᵀ @ B for small dense blocks."""
+    k, n = A.shape
+    m = B.shape[1]
+    out = np.zeros((n, m))
+    for l in range(k):
+        for i in range(n):
+            a = A[l, i]
+            for j in range(m):
+                out[i, j] += a * B[l, j]
+    return out
+
+
+@inline
+def _mv(A: Array, x: Array) -> Array:
+    """A @ x for a small dense block."""
+    n, k = A.shape
+    out = np.zeros(n)
+    for i in range(n):
+        s = 0.0
+        for l in range(k):
+            s += A[i, l] * x[l]
+        out[i] = s
+    return out
+
+
+@inline
 def _G(TG: Array, a: Array) -> Array:
     """G(a) (3, 4), G(a)[i, l] = Σ_k T_G[i, k, l] a_k."""
     out = np.zeros((3, 4))
@@ -232,8 +287,8 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
                 o[7 * b + a] += ms[b] * (R[2, b, a] - g[a])
             Gp = _G(TG, L[0, b])
             Gpd = _G(TG, L[1, b])
-            w1 = Js[b] @ (Gp @ L[2, b])
-            w2 = Js[b] @ (Gpd @ L[0, b])
+            w1 = _mv(Js[b], _mv(Gp, L[2, b]))
+            w2 = _mv(Js[b], _mv(Gpd, L[0, b]))
             for k in range(4):
                 s = 0.0
                 for i in range(3):
@@ -252,20 +307,102 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
     return out
 
 
-# ---------------------------------------------------------------------------- linearization
+_spring = jit(spring_law)
+_cylinder = jit(cylinder_law)
+SPRING, CYLINDER = 0, 1          # AxialElement.law_kind
+
+
 @jit
-def _add_prim_rowT(row: Array, j: int, b: int, lev: int, v: Array, coef: float, C: Array,
-                   is_point: Array) -> None:
-    """row (n_q,) += coef · (∂ primitive j at level lev / ∂q)ᵀ v: identity on r (points,
-    value level), 2C(L_lev) on p."""
+def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N: Array, pb: Array,
+                        is_point: Array, side_ptr: Array, side_prim: Array, side_coef: Array,
+                        prod_eq: Array, cf: Array, shift: Array, norm_eq: Array, norm_body: Array,
+                        ax_kind: Array, ax_pidx: Array, ax_c: Array, ax_ext: Array, f_ext: Array,
+                        mass: Array, J: Array, gravity: Array, lam: Array, p: Array, pd: Array,
+                        scale: float, alpha: float, beta: float, TG: Array) -> tuple:
+    """Constraint levels, force-element laws, primitive forces and F_R for B evaluations (the
+    kinematics' batch), one call.
+
+    cf (·, n_cp, 3), shift (·, n_eq, 3): time coefficients (c, ċ, c̈) of the constraint products
+    and shifts of the equations; axial element i acts through product n_cp + i with the law
+    ax_kind[i] (SPRING, CYLINDER), constants ax_c (·, n_ax, n_c), time input ax_ext (·, n_ax)
+    and states from p[ax_pidx[i]]; f_ext (·, n_t, 3): applied point forces on the primitives
+    (negative: they enter R1 with −Q_ext).  A leading axis of 1 broadcasts.
+
+    Returns F_R (B, n_z), Φ (B, n_eq, 3), weights W (B, n_prod), primitive forces F (B, n_t, 3),
+    and the laws: AX (B, n_ax, 5) = (L, L̇, P, ∂P/∂L, ∂P/∂L̇), ∂P/∂p (B, n_ax, n_p),
+    h, ∂h/∂L, ∂h/∂L̇ (B, n_p) and ∂h/∂p (B, n_p, n_p).
+    """
+    B, n_prod, n_t = Lp.shape[0], ABV.shape[2], pb.shape[0]
+    n_cp = prod_eq.shape[0]
+    n_eq, n_p, n_ax = shift.shape[1], p.shape[1], ax_kind.shape[0]
+    Phi = np.empty((B, n_eq, 3))
+    W = np.zeros((B, n_prod))
+    F = np.zeros((B, n_t, 3))
+    AX = np.empty((B, n_ax, 5))
+    Pp = np.zeros((B, n_ax, n_p))
+    H = np.zeros((B, n_p))
+    HL = np.zeros((B, n_p))
+    HLd = np.zeros((B, n_p))
+    Hp = np.zeros((B, n_p, n_p))
+    for b in range(B):
+        cfb, shb = cf[min(b, cf.shape[0] - 1)], shift[min(b, shift.shape[0] - 1)]
+        lm, pb_ = lam[min(b, lam.shape[0] - 1)], p[min(b, p.shape[0] - 1)]
+        for e in range(n_eq):
+            for lev in range(3):
+                Phi[b, e, lev] = -shb[e, lev]
+        for q_ in range(n_cp):                          # Φ = Σ c x, and its rates
+            c, cd, cdd = cfb[q_, 0], cfb[q_, 1], cfb[q_, 2]
+            x, xd, xdd = X[b, q_, 0], X[b, q_, 1], X[b, q_, 2]
+            e = prod_eq[q_]
+            Phi[b, e, 0] += c * x
+            Phi[b, e, 1] += cd * x + c * xd
+            Phi[b, e, 2] += cdd * x + 2.0 * cd * xd + c * xdd
+            W[b, q_] = c * lm[e]
+        for i in range(norm_eq.shape[0]):
+            for lev in range(3):
+                Phi[b, norm_eq[i], lev] += N[b, i, lev]
+        cb, eb = ax_c[min(b, ax_c.shape[0] - 1)], ax_ext[min(b, ax_ext.shape[0] - 1)]
+        for i in range(n_ax):                           # axial elements: x = d·d, L = √x
+            L = np.sqrt(X[b, n_cp + i, 0])
+            Ld = X[b, n_cp + i, 1] / (2.0 * L)
+            c = cb[i]
+            j = ax_pidx[i]
+            if ax_kind[i] == SPRING:
+                P, P_L, P_Ld = _spring(L, Ld, c[0], c[1], c[2], c[3])
+            else:
+                P, P_Ld, P_p1, P_p2, h1, h2, h1_L, h2_L, h1_Ld, h2_Ld, h2_p2 = _cylinder(
+                    L, Ld, pb_[j], pb_[j + 1], eb[i], c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
+                    c[8], c[9])
+                P_L = 0.0
+                Pp[b, i, j], Pp[b, i, j + 1] = P_p1, P_p2
+                H[b, j], H[b, j + 1] = h1, h2
+                HL[b, j], HL[b, j + 1] = h1_L, h2_L
+                HLd[b, j], HLd[b, j + 1] = h1_Ld, h2_Ld
+                Hp[b, j + 1, j + 1] = h2_p2
+            AX[b, i, 0], AX[b, i, 1], AX[b, i, 2], AX[b, i, 3], AX[b, i, 4] = L, Ld, P, P_L, P_Ld
+            W[b, n_cp + i] = -0.5 * P / L
+        _prim_forces_one(W[b], ABV[b], side_ptr, side_prim, side_coef, F[b])
+        F[b] += f_ext[min(b, f_ext.shape[0] - 1)]
+    R = residual(Lp, Lr, C, F, pb, is_point, mass, J, gravity, lam, norm_eq, norm_body, Phi,
+                 scale, alpha, beta, pd, H, TG)
+    return R, Phi, W, F, AX, Pp, H, HL, HLd, Hp
+
+
+# ---------------------------------------------------------------------------- linearization
+@inline
+def _add_prim_rowT(G: Array, p: int, T: int, j: int, lev: int, ABV: Array, s_: int, l_: int,
+                   coef: float, C: Array, pb: Array, is_point: Array) -> None:
+    """G[p, T] += coef · (∂ primitive j at level lev / ∂q)ᵀ v with v = ABV[s_, p, l_] (a level
+    of the other side): identity on r (points, value level), 2C(L_lev) on p."""
+    o = 7 * pb[j]
     if lev == 0 and is_point[j]:
         for a in range(3):
-            row[7 * b + a] += coef * v[a]
+            G[p, T, o + a] += coef * ABV[s_, p, l_, a]
     for k in range(4):
         s = 0.0
         for a in range(3):
-            s += C[j, a, k, lev] * v[a]
-        row[7 * b + 3 + k] += 2.0 * coef * s
+            s += C[j, a, k, lev] * ABV[s_, p, l_, a]
+        G[p, T, o + 3 + k] += 2.0 * coef * s
 
 
 @jit
@@ -275,25 +412,29 @@ def product_rows(C: Array, ABV: Array, pb: Array, is_point: Array, side_ptr: Arr
     x_T = Σ RL[T, l, m] a_l·b_m (RL as kernel.ROW_LEVELS)."""
     n_prod = ABV.shape[1]
     G = np.zeros((n_prod, 3, n_q))
-    # (T, l, m, weight) of the nonzero entries of ROW_LEVELS
-    TT = (0, 1, 1, 2, 2, 2)
-    LL = (0, 0, 1, 0, 2, 1)
-    MM = (0, 1, 0, 2, 0, 1)
-    WW = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
+    # the nonzero entries (T, l, m) of ROW_LEVELS unrolled (a runtime index into a tuple costs
+    # more than the arithmetic): (0,0,0), (1,0,1), (1,1,0), (2,0,2), (2,2,0), 2·(2,1,1)
     for p in range(n_prod):
-        for r in range(6):
-            T, l, m, wt = TT[r], LL[r], MM[r], WW[r]
-            row = G[p, T]
-            for e in range(side_ptr[p], side_ptr[p + 1]):          # ∂a_l · b_m
-                j = side_prim[e]
-                _add_prim_rowT(row, j, pb[j], l, ABV[1, p, m], wt * side_coef[e], C, is_point)
-            for e in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):   # a_l · ∂b_m
-                j = side_prim[e]
-                _add_prim_rowT(row, j, pb[j], m, ABV[0, p, l], wt * side_coef[e], C, is_point)
+        for e in range(side_ptr[p], side_ptr[p + 1]):                      # ∂a_l · b_m
+            j, c = side_prim[e], side_coef[e]
+            _add_prim_rowT(G, p, 0, j, 0, ABV, 1, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 1, j, 0, ABV, 1, 1, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 1, j, 1, ABV, 1, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 0, ABV, 1, 2, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 2, ABV, 1, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 1, ABV, 1, 1, 2.0 * c, C, pb, is_point)
+        for e in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):    # a_l · ∂b_m
+            j, c = side_prim[e], side_coef[e]
+            _add_prim_rowT(G, p, 0, j, 0, ABV, 0, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 1, j, 1, ABV, 0, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 1, j, 0, ABV, 0, 1, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 2, ABV, 0, 0, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 0, ABV, 0, 2, c, C, pb, is_point)
+            _add_prim_rowT(G, p, 2, j, 1, ABV, 0, 1, 2.0 * c, C, pb, is_point)
     return G
 
 
-@jit
+@inline
 def _prim_jac0(j: int, C: Array, is_point: Array) -> Array:
     """(3, 7) ∂(value of primitive j)/∂(r, p) of its body."""
     K = np.zeros((3, 7))
@@ -362,7 +503,7 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 Kb = _prim_jac0(jb, C, is_point)
                 bb = 7 * pb[jb]
                 c = wp * side_coef[ea] * side_coef[eb]
-                blk = Ka.T @ Kb
+                blk = _tmm(Ka, Kb)
                 for u in range(7):
                     for v in range(7):
                         R1_q[ba + u, bb + v] += c * blk[u, v]
@@ -385,8 +526,8 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
         Jb = J[b]
         Gp = _G(TG, p)
         Gpd = _G(TG, pd_)
-        w1 = Jb @ (Gp @ pdd)
-        w2 = Jb @ (Gpd @ p)
+        w1 = _mv(Jb, _mv(Gp, pdd))
+        w2 = _mv(Jb, _mv(Gpd, p))
         Gb_pdd = np.zeros((3, 4))                      # ∂(G(a) b)/∂a = Σ_l T_G[:, :, l] b_l
         Gb_p = np.zeros((3, 4))
         GTv1 = np.zeros((4, 4))                        # ∂(G(a)ᵀ v)/∂a [l, k] = Σ_i v_i T_G[i, k, l]
@@ -400,11 +541,9 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                         Gb_p[i, k] += t * p[l]
                         GTv1[l, k] += t * w1[i]
                         GTv2[l, k] += t * w2[i]
-        JGp = Jb @ Gp
-        JGpd = Jb @ Gpd
-        Mpp = 4.0 * (Gp.T @ JGp)
-        Kpp = 4.0 * (GTv1 + Gp.T @ (Jb @ Gb_pdd)) - 8.0 * (Gpd.T @ JGpd)
-        Cpp = -8.0 * (GTv2 + Gpd.T @ (Jb @ Gb_p))
+        Mpp = 4.0 * _tmm(Gp, _mm(Jb, Gp))
+        Kpp = 4.0 * (GTv1 + _tmm(Gp, _mm(Jb, Gb_pdd))) - 8.0 * _tmm(Gpd, _mm(Jb, Gpd))
+        Cpp = -8.0 * (GTv2 + _tmm(Gpd, _mm(Jb, Gb_p)))
         o = 7 * b
         for a in range(3):
             R1_qdd[o + a, o + a] += mass[b]

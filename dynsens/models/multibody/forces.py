@@ -95,6 +95,14 @@ class Torque(ForceElement):
                                    else ET_mul(p, n + 0 * p[:3]))
 
 
+def spring_law(L: Any, Ld: Any, k: Any, k3: Any, cd: Any, L0: Any) -> tuple[Any, Any, Any]:
+    """Push force P = −F of a spring-damper (tension F = k e + k3 e³ + c L̇, e = L − L0) and
+    its partials ∂P/∂L, ∂P/∂L̇, in plain arithmetic (numpy arrays, real or complex, and the
+    compiled kernel's scalars alike)."""
+    e = L - L0
+    return -(k * e + k3 * e * e * e + cd * Ld), -(k + 3.0 * k3 * e * e), -cd
+
+
 @dataclass(eq=False)
 class SpringDamper(ForceElement, AxialElement):
     """Point-to-point spring-damper; parameters k, k3, c, L0 by parameter index.
@@ -123,10 +131,10 @@ class SpringDamper(ForceElement, AxialElement):
         Returns (P, P_L, P_L̇, P_p, h, h_L, h_L̇, h_p) in the form of
         :meth:`.hydraulics.HydraulicCylinder.law` (a spring has no pressure states).
         """
-        k, k3, cd, L0 = (c[..., i] for i in range(4))
-        e = L - L0
-        F = k * e + k3 * e * e * e + cd * Ld
-        return -F, -(k + 3.0 * k3 * e * e), -cd + 0 * L, [], [], [], [], []
+        P, P_L, P_Ld = spring_law(L, Ld, *(c[..., i] for i in range(4)))
+        return P, P_L, P_Ld + 0 * L, [], [], [], [], []
+
+    law_kind = 0
 
     def state(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(L, L̇, F) each (1, k): length, rate and tension force."""

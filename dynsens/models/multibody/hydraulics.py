@@ -37,6 +37,27 @@ CYLINDER_PARAMS = ("area_1", "area_2", "length_0", "stroke_max", "bulk_modulus",
                    "dead_volume_2", "tank_conductance", "tank_pressure", "damping", "pump_flow")
 
 
+def cylinder_law(L: Any, Ld: Any, p1: Any, p2: Any, QP: Any, A1: Any, A2: Any, L0: Any, s_max: Any,
+                 K: Any, Vh1: Any, Vh2: Any, G: Any, pT: Any, dmp: Any) -> tuple:
+    """The cylinder's law in plain arithmetic (numpy arrays of any shape, real or complex, and
+    the compiled kernel's scalars alike): push force P = F_h, pressure rates h1, h2 and their
+    nonzero partials, from |AB| = L, its rate L̇, pressures p1, p2, pump flow QP (volume/s) and
+    the constants of :meth:`HydraulicCylinder.constants`.
+
+    Returns (P, ∂P/∂L̇, ∂P/∂p1, ∂P/∂p2, h1, h2, ∂h1/∂L, ∂h2/∂L, ∂h1/∂L̇, ∂h2/∂L̇, ∂h2/∂p2);
+    ∂P/∂L = ∂h1/∂p = ∂h2/∂p1 = 0.
+    """
+    s = L - L0
+    V1 = Vh1 + A1 * s
+    V2 = Vh2 + A2 * (s_max - s)
+    KV1 = K / V1
+    KV2 = K / V2
+    h1 = KV1 * (QP - A1 * Ld)
+    h2 = KV2 * (A2 * Ld - G * (p2 - pT))
+    return (p1 * A1 - p2 * A2 - dmp * Ld, -dmp, A1, -A2, h1, h2, -A1 * h1 / V1, A2 * h2 / V2,
+            -A1 * KV1, A2 * KV2, -G * KV2)
+
+
 @dataclass(eq=False)
 class HydraulicCylinder(AxialElement):
     """One cylinder, an :class:`.actuators.AxialElement` with two states; ``p_index`` is the position of p1 in the first-order state (p2 follows).
@@ -84,18 +105,17 @@ class HydraulicCylinder(AxialElement):
         by L, L̇ and [p1, p2] (a list), the rates h = [h1, h2] (pressure/s) and their partials
         (lists; h_p[i][j] = ∂h_i/∂p_j).
         """
-        A1, A2, L0, s_max, K, Vh1, Vh2, G, pT, dmp = np.moveaxis(c, -1, 0)
-        s = L - L0
-        V1, V2 = Vh1 + A1 * s, Vh2 + A2 * (s_max - s)
-        p1, p2 = p[..., 0], p[..., 1]
-        QP = pv[..., self.idx["pump_flow"]] * self.pump.value(t, pv)
-        KV1, KV2 = K / V1, K / V2
-        h1 = KV1 * (QP - A1 * Ld)
-        h2 = KV2 * (A2 * Ld - G * (p2 - pT))
+        P, P_Ld, P_p1, P_p2, h1, h2, h1_L, h2_L, h1_Ld, h2_Ld, h2_p2 = cylinder_law(
+            L, Ld, p[..., 0], p[..., 1], self.external(t, pv), *np.moveaxis(c, -1, 0))
         zero = np.zeros_like(h1)
-        return (p1 * A1 - p2 * A2 - dmp * Ld, zero, -dmp + zero, [A1 + zero, -A2 + zero],
-                [h1, h2], [-A1 * h1 / V1, A2 * h2 / V2], [-A1 * KV1, A2 * KV2],
-                [[zero, zero], [zero, -G * KV2]])
+        return (P, zero, P_Ld + zero, [P_p1 + zero, P_p2 + zero], [h1, h2], [h1_L, h2_L],
+                [h1_Ld, h2_Ld], [[zero, zero], [zero, h2_p2]])
+
+    law_kind = 1
+
+    def external(self, t: float, pv: Array) -> Any:
+        """Pump flow Q_P(t) = V̇_S φ(t) (volume/s); pv (n,) or (B, n)."""
+        return pv[..., self.idx["pump_flow"]] * self.pump.value(t, pv)
 
     def kinematics(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(s, ṡ, ê): stroke (1, k), stroke rate (1, k), unit axis A→B (3, k)."""

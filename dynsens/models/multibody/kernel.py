@@ -83,6 +83,8 @@ class Layout:
                 raise TypeError(f"unsupported equation {type(eq).__name__}")
         self.n_cp = len(prod_eq)
         self.axial = axial
+        # every axial law known to the compiled kernel (otherwise the numpy kernel evaluates forces)
+        self.compiled_laws = all(getattr(el, "law_kind", None) is not None for el in axial)
         for el in axial:
             sides += [self._side(el.d), self._side(el.d)]
         self.point_prim = [self._side(P)[0] for P in points]
@@ -170,11 +172,19 @@ class Layout:
                 prim += nz.tolist()
                 coef += row[nz].tolist()
                 ptr.append(len(prim))
+            n_p = sum(el.n_pressures for el in self.axial)
+            p_owner = np.full(n_p, -1, np.int64)
+            for i, el in enumerate(self.axial):
+                p_owner[el.p_index:el.p_index + el.n_pressures] = i
             self._compiled = CompiledArrays(
                 self.pb.astype(np.int64), self.is_point.astype(bool), np.array(ptr, np.int64),
                 np.array(prim, np.int64), np.array(coef, float), self.norm_eq.astype(np.int64),
                 self.norm_body.astype(np.int64),
-                np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64))
+                np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64),
+                np.array([el.law_kind for el in self.axial], np.int64),
+                np.array([el.p_index for el in self.axial], np.int64),
+                np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner,
+                np.zeros((1, self.n_t, 3)), np.zeros((1, 3)))
         return self._compiled
 
 
@@ -342,6 +352,12 @@ class CompiledArrays:
     norm_eq: Array
     norm_body: Array
     prod_eq: Array       # (n_cp,) equation of each constraint product
+    ax_kind: Array       # (n_ax,) law of each axial element (AxialElement.law_kind)
+    ax_pidx: Array       # (n_ax,) position of its first state in p
+    ax_prod: Array       # (n_ax,) its product d·d
+    p_owner: Array       # (n_p,) the element each state belongs to
+    no_forces: Array     # (1, n_t, 3) zeros: no applied point forces
+    no_gravity: Array    # (1, 3) zeros
 
 
 @dataclass
@@ -352,15 +368,19 @@ class CompiledParams:
     cAB: Array           # (B, 2, n_prod, 3) constant parts of both sides
     mass: Array          # (B, n_b)
     J: Array             # (B, n_b, 3, 3)
+    ax_c: Array          # (B, n_ax, n_c) the axial elements' constants, zero-padded
 
 
 def compiled_params(kp: KParams) -> CompiledParams:
     """:class:`CompiledParams` of real parameter sets (cached on kp)."""
     hit = getattr(kp, "_compiled", None)
     if hit is None:
+        ax_c = np.zeros((kp.B, len(kp.ec), max([10] + [c.shape[-1] for c in kp.ec])))
+        for i, c in enumerate(kp.ec):
+            ax_c[:, i, :c.shape[-1]] = c
         hit = CompiledParams(np.ascontiguousarray(kp.Ts4, float),
                              np.ascontiguousarray(np.stack([kp.cA, kp.cB], axis=1), float),
-                             np.ascontiguousarray(kp.mass, float), np.ascontiguousarray(kp.J, float))
+                             np.ascontiguousarray(kp.mass, float), np.ascontiguousarray(kp.J, float), ax_c)
         kp._compiled = hit  # type: ignore[attr-defined]
     return hit
 

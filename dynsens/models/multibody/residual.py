@@ -68,6 +68,11 @@ class Evaluation:
     def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
         self.model, self.kin, self.kp, self.t = model, kin, kin.kp, t
         self.lam, self.p, self.pd = lam, p, pd
+        self.compiled = (isinstance(kin, CompiledKin) and model.layout.compiled_laws
+                         and lam.dtype.kind == "f" and p.dtype.kind == "f" and pd.dtype.kind == "f")
+        if self.compiled:
+            self._compiled_forces_and_residual()
+            return
         lay = model.layout
         kp = self.kp
         self.Phi, cf = model.constraint_levels(t, kin)
@@ -90,36 +95,48 @@ class Evaluation:
         f = kin.prim_forces(w)
         for pf, j in zip(model.point_forces, lay.point_prim):
             if j >= 0:
-                val = np.asarray(pf.fn.value(t, kp.pv))
-                f[:, j] -= kp.pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
+                f[:, j] -= self._point_force(pf)
         self.f = f
 
-    @property
-    def compiled(self) -> bool:
-        """Evaluated by the compiled kernel: compiled kinematics and real multipliers, pressures."""
-        return isinstance(self.kin, CompiledKin) and self.lam.dtype.kind == "f" \
-            and self.p.dtype.kind == "f" and self.pd.dtype.kind == "f"
+    def _point_force(self, pf: Any) -> Array:
+        """Global point force F·φ(t) (B, 3) of a PointForce element."""
+        pv = self.kp.pv
+        val = np.asarray(pf.fn.value(self.t, pv))
+        return pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
 
-    def _rates(self) -> Array:
-        """h (B, n_p): the pressure rates of the axial elements."""
-        h = np.zeros((self.kin.X.shape[0], self.model.traits.n_p))
-        for el, (_, _, law) in zip(self.model.layout.axial, self.laws):
-            for i, hi in enumerate(law[4]):
-                h[:, el.p_index + i] = hi
-        return h
+    def _compiled_forces_and_residual(self) -> None:
+        """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
+        time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
+        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
+        cl, ck, t = kin.arrays, kin.params, self.t
+        cf, shift = m.coefficients(t, kp)
+        ext = np.zeros((kp.B, len(lay.axial)))
+        for i, el in enumerate(lay.axial):
+            ext[:, i] = el.external(t, kp.pv)
+        if m.point_forces:
+            f_ext = np.zeros((kp.B, lay.n_t, 3))
+            for pf, j in zip(m.point_forces, lay.point_prim):
+                if j >= 0:
+                    f_ext[:, j] -= self._point_force(pf)
+        else:
+            f_ext = cl.no_forces
+        g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], float) if m.gravity is not None \
+            else cl.no_gravity
+        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
+            cc.forces_and_residual(
+                kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
+                cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, float), np.ascontiguousarray(shift, float),
+                cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
+                self.lam, self.p, self.pd, float(m.scale), float(m.alpha), float(m.beta), cc.TG)
+        if m.other_forces:
+            R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
+        self.cf, self._R = cf, R
 
     def residual(self) -> Array:
         """F_R (B, n_z)."""
         m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
         if self.compiled:
-            ck, cl = kin.params, kin.arrays
-            g = kp.pv[:, list(m.gravity.idx)] if m.gravity is not None else np.zeros((1, 3))
-            R = cc.residual(kin.Lp, kin.Lr, kin.C, self.f, cl.pb, cl.is_point, ck.mass, ck.J,
-                            np.ascontiguousarray(g, float), self.lam, cl.norm_eq, cl.norm_body, self.Phi,
-                            float(m.scale), float(m.alpha), float(m.beta), self.pd, self._rates(), cc.TG)
-            if m.other_forces:
-                R[:, :lay.n_q] -= other_forces_q(m, self.t, kin.q, kin.qd, kp.prms)
-            return R
+            return self._R
         Lp = kin.Lp
         p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
         J = kp.J
@@ -218,34 +235,18 @@ class Evaluation:
         m, kin, lay = self.model, self.kin, self.model.layout
         tr = m.traits
         cl, ck = kin.arrays, kin.params
-        n_ax, n_p = len(lay.axial), tr.n_p
-        ax_law = np.empty((n_ax, 5))
-        ax_Pp = np.zeros((n_ax, n_p))
-        p_owner = np.full(n_p, -1, np.int64)
-        h_L, h_Ld, h_p = np.zeros(n_p), np.zeros(n_p), np.zeros((n_p, n_p))
-        for i, (el, (L, Ld, law)) in enumerate(zip(lay.axial, self.laws)):
-            P, P_L, P_Ld, P_p, h, hL, hLd, hp = law
-            ax_law[i] = (L[0], Ld[0], P[0], P_L[0], P_Ld[0])
-            j = el.p_index
-            for k, Pk in enumerate(P_p):
-                ax_Pp[i, j + k] = Pk[0]
-            for r in range(len(h)):
-                p_owner[j + r] = i
-                h_L[j + r], h_Ld[j + r] = hL[r][0], hLd[r][0]
-                for k in range(len(hp[r])):
-                    h_p[j + r, j + k] = hp[r][k][0]
         G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                             cl.side_coef, tr.n_q)
         R_z, R_q, R_qd, R_p = cc.linearization(
             kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
             cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], float), m.eq_row_weights,
             m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0], self.lam[0], ck.mass[0], ck.J[0], cc.TG,
-            np.arange(lay.n_cp, lay.n_cp + n_ax, dtype=np.int64), ax_law, ax_Pp, p_owner, h_L, h_Ld, h_p)
+            cl.ax_prod, self._ax[0], self._Pp[0], cl.p_owner, self._hL[0], self._hLd[0], self._hp[0])
         if m.other_forces:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
             R_q[:tr.n_q] -= Kq
             R_qd[:tr.n_q] -= Kqd
-        return Linearization(R_z, R_q, R_qd, R_p if n_p else None)
+        return Linearization(R_z, R_q, R_qd, R_p if tr.n_p else None)
 
     def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
         """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""
