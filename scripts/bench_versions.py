@@ -5,6 +5,10 @@ with sensitivities and reports the median wall times of each tree and their rati
 
     git worktree add /tmp/before <commit>
     python scripts/bench_versions.py /tmp/before . cases/tyrolean_weir.yaml --repeats 3
+
+The same tree under two environments, e.g. the numpy kernel against the compiled one:
+
+    python scripts/bench_versions.py . . cases/slider_crank.yaml --before-env DYNSENS_KERNEL=numpy
 """
 from __future__ import annotations
 
@@ -28,10 +32,10 @@ print(json.dumps({"seconds": time.perf_counter() - t0, "package": dynsens.__file
 """
 
 
-def time_once(tree: Path, case: Path, sens: bool, overrides: list[str]) -> float:
+def time_once(tree: Path, case: Path, sens: bool, overrides: list[str], extra_env: dict[str, str]) -> float:
     """Wall time (s) of one run of ``case`` with the dynsens package of ``tree``."""
     root = tree.resolve()
-    env = dict(os.environ, PYTHONPATH=str(root))
+    env = dict(os.environ, PYTHONPATH=str(root), **extra_env)
     # run inside the tree: `python -c` puts the working directory first on sys.path
     out = subprocess.run([sys.executable, "-c", CHILD, str(case.resolve()), "1" if sens else "0", *overrides],
                          env=env, cwd=root, capture_output=True, text=True, check=True)
@@ -48,7 +52,11 @@ def main() -> None:
     ap.add_argument("cases", nargs="+", type=Path)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="case override")
+    for side in ("before", "after"):
+        ap.add_argument(f"--{side}-env", action="append", default=[], metavar="KEY=VALUE",
+                        help=f"environment variable of the {side} runs")
     args = ap.parse_args()
+    envs = {side: dict(kv.split("=", 1) for kv in getattr(args, f"{side}_env")) for side in ("before", "after")}
     print("| case | run | before [s] | after [s] | after / before |")
     print("|---|---|---|---|---|")
     for case in args.cases:
@@ -56,7 +64,7 @@ def main() -> None:
             t: dict[str, list[float]] = {"before": [], "after": []}
             for _ in range(args.repeats):
                 for name in ("before", "after"):
-                    t[name].append(time_once(getattr(args, name), case, sens, args.overrides))
+                    t[name].append(time_once(getattr(args, name), case, sens, args.overrides, envs[name]))
             b, a = statistics.median(t["before"]), statistics.median(t["after"])
             label = "primal + sensitivities" if sens else "primal"
             print(f"| {case.stem} | {label} | {b:.3f} | {a:.3f} | {a / b:.2f} |", flush=True)

@@ -85,10 +85,11 @@ class Factor:
             self._lu = (lu, piv)
             self._complex = np.iscomplexobj(lu)
             udiag = np.diagonal(lu)
-        scale = np.max(np.abs(udiag)) if udiag.size else 1.0
-        if udiag.size and (np.min(np.abs(udiag)) <= 1e-14 * scale or scale == 0.0):
-            raise SingularMatrixError(
-                f"pivot ratio {np.min(np.abs(udiag)) / max(scale, 1e-300):.1e}")
+        if udiag.size:
+            a = np.abs(udiag)
+            lo, scale = a.min(), a.max()
+            if lo <= 1e-14 * scale or scale == 0.0:
+                raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve S x = rhs; rhs (n,) or (n, k), real or complex."""
