@@ -1,7 +1,7 @@
 """The compiled multibody kernel against the numpy kernel (the reference), at states along real
 runs of every shipped mechanism: residual, exact linearization, batched residuals of perturbed
 designs and batched output kinematics agree to round-off (1e-12 relative to each quantity's
-scale).  Whole-run gradients of the compiled path are checked against complex step of the whole
+scale), for real and for complex-step data.  Whole-run gradients of the compiled path are checked against complex step of the whole
 run by the mechanism and weir tests, which run compiled (the default)."""
 from __future__ import annotations
 
@@ -84,14 +84,24 @@ def test_batched_residuals_and_outputs_match_numpy(name, t_end, monkeypatch):
             _close(getattr(kc, attr), getattr(kr, attr), f"{name} batched kinematics {attr}")
 
 
-def test_complex_data_takes_the_numpy_kernel(monkeypatch):
-    """Complex step of the whole run (complex parameters and states) stays on the numpy path."""
-    monkeypatch.setenv("DYNSENS_KERNEL", "compiled")
-    case = dynsens.load_case(CASES / "slider_crank.yaml", ["integrator.t_end=0.01"])
-    res = dynsens.run_case(case, sensitivities=False, history=FIELDS)
-    s = StepState(*(res.history[f][-1].astype(complex) for f in FIELDS))
-    prm = case.model.parameters(case.x0 + 1e-20j)
-    assert type(case.model.kinematics(s, prm)) is Kin
+@pytest.mark.parametrize("name, t_end", [("hydraulic_lever", 0.3), ("tyrolean_weir", 0.3)])
+def test_complex_step_data_match_numpy(name, t_end, monkeypatch):
+    """Complex parameters and states (complex step of the whole run, complex partials) take the
+    compiled kernel too: residual and linearization, real and imaginary parts, as numpy's."""
+    ref, cmp_, states = _cases(name, t_end, monkeypatch)
+    m = ref.x0.size
+    for j in range(m):
+        x = ref.x0 + 1e-20j * np.eye(m)[j]
+        pr, pc = ref.model.parameters(x), cmp_.model.parameters(x)
+        for t, s in states:
+            sc = StepState(*(v + 1e-20j * (1.0 + np.abs(v)) for v in s))
+            assert isinstance(cmp_.model.kinematics(sc, pc), CompiledKin)
+            for part in (np.real, np.imag):
+                _close(part(cmp_.model.residual(t, sc, pc)), part(ref.model.residual(t, sc, pr)),
+                       f"{name} complex F_R ({part.__name__})")
+                lc, lr = cmp_.model.linearize(t, sc, pc), ref.model.linearize(t, sc, pr)
+                for block in ("R_z", "R_q", "R_qd", "R_p"):
+                    _close(part(getattr(lc, block)), part(getattr(lr, block)), f"{name} complex {block}")
 
 
 def test_switch_off_by_environment(monkeypatch):

@@ -1,11 +1,13 @@
-r"""Compiled evaluation of the multibody kernel for one real parameter set (the Newton hot path).
+r"""Compiled evaluation of the multibody kernel (the Newton hot path and the design partials).
 
 The numpy kernel (:mod:`.kernel`, :mod:`.residual`) evaluates batches of states and parameter
 sets, real or complex, with few numpy calls; for the primal Newton iteration (one real state,
 one parameter set) its cost is the call overhead of ~150 tiny array operations, not arithmetic
 (BENCHMARKS.md, "where the time goes").  This module evaluates the same quantities with loops
 compiled by numba, and exploits what the dense products cannot: a side of a product involves
-one or two primitives, each acting on the 7 coordinates of one body.
+one or two primitives, each acting on the 7 coordinates of one body.  Every function takes the
+dtype of its inputs (the caller casts them to one): real runs and complex step (complex
+partials, complex step of the whole run) take the same code.
 
 Same notation as :mod:`.kernel`: primitives j (points and body-fixed directions on moving
 bodies) with point tensors ``Ts4[j]`` and ``C_i = Ts·L_i`` (L_0, L_1, L_2 = p, ṗ, p̈); sides
@@ -109,7 +111,7 @@ def _kinematics_one(q: Array, qd: Array, qdd: Array, pb: Array, is_point: Array,
                     ABV[s_, p, lev, a] += c * PV[j, lev, a]
         for a in range(3):
             ABV[s_, p, 0, a] += cAB[s_, p, a]
-    d = np.empty((3, 3))
+    d = np.empty((3, 3), ABV.dtype)
     for p in range(n_prod):
         for l in range(3):
             for m in range(3):
@@ -152,13 +154,13 @@ def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4:
     n_b = Q.shape[1] // 7
     n_t = pb.shape[0]
     n_prod = cAB.shape[2]
-    Lp = np.empty((B, 3, n_b, 4))
-    Lr = np.empty((B, 3, n_b, 3))
-    C = np.empty((B, n_t, 3, 4, 3))
-    PV = np.empty((B, n_t, 3, 3))
-    ABV = np.empty((B, 2, n_prod, 3, 3))
-    X = np.empty((B, n_prod, 3))
-    N = np.empty((B, norm_body.shape[0], 3))
+    Lp = np.empty((B, 3, n_b, 4), Q.dtype)
+    Lr = np.empty((B, 3, n_b, 3), Q.dtype)
+    C = np.empty((B, n_t, 3, 4, 3), Q.dtype)
+    PV = np.empty((B, n_t, 3, 3), Q.dtype)
+    ABV = np.empty((B, 2, n_prod, 3, 3), Q.dtype)
+    X = np.empty((B, n_prod, 3), Q.dtype)
+    N = np.empty((B, norm_body.shape[0], 3), Q.dtype)
     for b in range(B):
         i, k = min(b, Bs - 1), min(b, Bp - 1)
         _kinematics_one(Q[i], Qd[i], Qdd[i], pb, is_point, Ts4[k], side_ptr, side_prim, side_coef,
@@ -189,7 +191,7 @@ def prim_forces(W: Array, ABV: Array, side_ptr: Array, side_prim: Array, side_co
                 n_t: int) -> Array:
     """F (B, n_t, 3): primitive forces of the product weights W (B or 1, n_prod)."""
     B = ABV.shape[0]
-    F = np.zeros((B, n_t, 3))
+    F = np.zeros((B, n_t, 3), ABV.dtype)
     for b in range(B):
         _prim_forces_one(W[min(b, W.shape[0] - 1)], ABV[b], side_ptr, side_prim, side_coef, F[b])
     return F
@@ -203,7 +205,7 @@ def _mm(A: Array, B: Array) -> Array:
     """A @ B for small dense blocks."""
     n, k = A.shape
     m = B.shape[1]
-    out = np.zeros((n, m))
+    out = np.zeros((n, m), A.dtype)
     for i in range(n):
         for l in range(k):
             a = A[i, l]
@@ -217,7 +219,7 @@ def _tmm(A: Array, B: Array) -> Array:
     """Aᵀ @ B for small dense blocks."""
     k, n = A.shape
     m = B.shape[1]
-    out = np.zeros((n, m))
+    out = np.zeros((n, m), A.dtype)
     for l in range(k):
         for i in range(n):
             a = A[l, i]
@@ -230,7 +232,7 @@ def _tmm(A: Array, B: Array) -> Array:
 def _mv(A: Array, x: Array) -> Array:
     """A @ x for a small dense block."""
     n, k = A.shape
-    out = np.zeros(n)
+    out = np.zeros(n, A.dtype)
     for i in range(n):
         s = 0.0
         for l in range(k):
@@ -242,7 +244,7 @@ def _mv(A: Array, x: Array) -> Array:
 @inline
 def _G(TG: Array, a: Array) -> Array:
     """G(a) (3, 4), G(a)[i, l] = Σ_k T_G[i, k, l] a_k."""
-    out = np.zeros((3, 4))
+    out = np.zeros((3, 4), a.dtype)
     for i in range(3):
         for k in range(4):
             if a[k] != 0.0:
@@ -264,7 +266,7 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
     n_q = 7 * n_b
     n_lam = Phi.shape[1]
     n_p = pd.shape[1]
-    out = np.zeros((B, n_q + n_lam + n_p))
+    out = np.zeros((B, n_q + n_lam + n_p), Lp.dtype)
     b2 = beta * beta
     for bb in range(B):
         o = out[bb]
@@ -335,15 +337,15 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
     B, n_prod, n_t = Lp.shape[0], ABV.shape[2], pb.shape[0]
     n_cp = prod_eq.shape[0]
     n_eq, n_p, n_ax = shift.shape[1], p.shape[1], ax_kind.shape[0]
-    Phi = np.empty((B, n_eq, 3))
-    W = np.zeros((B, n_prod))
-    F = np.zeros((B, n_t, 3))
-    AX = np.empty((B, n_ax, 5))
-    Pp = np.zeros((B, n_ax, n_p))
-    H = np.zeros((B, n_p))
-    HL = np.zeros((B, n_p))
-    HLd = np.zeros((B, n_p))
-    Hp = np.zeros((B, n_p, n_p))
+    Phi = np.empty((B, n_eq, 3), Lp.dtype)
+    W = np.zeros((B, n_prod), Lp.dtype)
+    F = np.zeros((B, n_t, 3), Lp.dtype)
+    AX = np.empty((B, n_ax, 5), Lp.dtype)
+    Pp = np.zeros((B, n_ax, n_p), Lp.dtype)
+    H = np.zeros((B, n_p), Lp.dtype)
+    HL = np.zeros((B, n_p), Lp.dtype)
+    HLd = np.zeros((B, n_p), Lp.dtype)
+    Hp = np.zeros((B, n_p, n_p), Lp.dtype)
     for b in range(B):
         cfb, shb = cf[min(b, cf.shape[0] - 1)], shift[min(b, shift.shape[0] - 1)]
         lm, pb_ = lam[min(b, lam.shape[0] - 1)], p[min(b, p.shape[0] - 1)]
@@ -411,7 +413,7 @@ def product_rows(C: Array, ABV: Array, pb: Array, is_point: Array, side_ptr: Arr
     """G (n_prod, 3, n_q): ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q of every product x = a·b, from
     x_T = Σ RL[T, l, m] a_l·b_m (RL as kernel.ROW_LEVELS)."""
     n_prod = ABV.shape[1]
-    G = np.zeros((n_prod, 3, n_q))
+    G = np.zeros((n_prod, 3, n_q), C.dtype)
     # the nonzero entries (T, l, m) of ROW_LEVELS unrolled (a runtime index into a tuple costs
     # more than the arithmetic): (0,0,0), (1,0,1), (1,1,0), (2,0,2), (2,2,0), 2·(2,1,1)
     for p in range(n_prod):
@@ -437,7 +439,7 @@ def product_rows(C: Array, ABV: Array, pb: Array, is_point: Array, side_ptr: Arr
 @inline
 def _prim_jac0(j: int, C: Array, is_point: Array) -> Array:
     """(3, 7) ∂(value of primitive j)/∂(r, p) of its body."""
-    K = np.zeros((3, 7))
+    K = np.zeros((3, 7), C.dtype)
     if is_point[j]:
         for a in range(3):
             K[a, a] = 1.0
@@ -468,7 +470,7 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
     n_z = n_q + n_lam + n_p
     n_prod = ABV.shape[1]
     # --- constraint rows: J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows
-    rows = np.zeros((3, n_lam, n_q))
+    rows = np.zeros((3, n_lam, n_q), Lp.dtype)
     for p in range(n_cp):
         e = prod_eq[p]
         for o in range(3):
@@ -487,9 +489,9 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                     s += norm_w[o, l] * Lp[l, b, k]
                 rows[o, e, 7 * b + 3 + k] += 2.0 * s
     # --- R1_q: geometric stiffness Σ_p w_p ∂²x_p/∂q² (sides' value Jacobians are per body)
-    R1_q = np.zeros((n_q, n_q))
-    R1_qd = np.zeros((n_q, n_q))
-    R1_qdd = np.zeros((n_q, n_q))
+    R1_q = np.zeros((n_q, n_q), Lp.dtype)
+    R1_qd = np.zeros((n_q, n_q), Lp.dtype)
+    R1_qdd = np.zeros((n_q, n_q), Lp.dtype)
     for p in range(n_prod):
         wp = w[p]
         if wp == 0.0:
@@ -528,10 +530,11 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
         Gpd = _G(TG, pd_)
         w1 = _mv(Jb, _mv(Gp, pdd))
         w2 = _mv(Jb, _mv(Gpd, p))
-        Gb_pdd = np.zeros((3, 4))                      # ∂(G(a) b)/∂a = Σ_l T_G[:, :, l] b_l
-        Gb_p = np.zeros((3, 4))
-        GTv1 = np.zeros((4, 4))                        # ∂(G(a)ᵀ v)/∂a [l, k] = Σ_i v_i T_G[i, k, l]
-        GTv2 = np.zeros((4, 4))
+        # ∂(G(a) b)/∂a = Σ_l T_G[:, :, l] b_l and ∂(G(a)ᵀ v)/∂a [l, k] = Σ_i v_i T_G[i, k, l]
+        Gb_pdd = np.zeros((3, 4), Lp.dtype)
+        Gb_p = np.zeros((3, 4), Lp.dtype)
+        GTv1 = np.zeros((4, 4), Lp.dtype)
+        GTv2 = np.zeros((4, 4), Lp.dtype)
         for i in range(3):
             for k in range(4):
                 for l in range(4):
@@ -553,12 +556,12 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 R1_qd[o + 3 + k, o + 3 + l] += Cpp[k, l]
                 R1_qdd[o + 3 + k, o + 3 + l] += Mpp[k, l]
     # --- axial force elements: x = d·d, L = √x, L̇ = ẋ/(2L), generalized force ½ P/L ∂x/∂q
-    R1_p = np.zeros((n_q, n_p))
-    R3_q = np.zeros((n_p, n_q))
-    R3_qd = np.zeros((n_p, n_q))
+    R1_p = np.zeros((n_q, n_p), Lp.dtype)
+    R3_q = np.zeros((n_p, n_q), Lp.dtype)
+    R3_qd = np.zeros((n_p, n_q), Lp.dtype)
     n_ax = ax_prod.shape[0]
-    dL = np.empty((n_ax, n_q))
-    dLd = np.empty((n_ax, n_q))
+    dL = np.empty((n_ax, n_q), Lp.dtype)
+    dLd = np.empty((n_ax, n_q), Lp.dtype)
     for i in range(n_ax):
         jx = G[ax_prod[i], 0]
         dx = G[ax_prod[i], 1]
@@ -582,10 +585,10 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 R3_q[r, n] -= h_L[r] * dL[i, n] + h_Ld[r] * dLd[i, n]
                 R3_qd[r, n] -= h_Ld[r] * dL[i, n]
     # --- assemble
-    R_z = np.zeros((n_z, n_z))
-    R_q = np.zeros((n_z, n_q))
-    R_qd = np.zeros((n_z, n_q))
-    R_p = np.zeros((n_z, n_p))
+    R_z = np.zeros((n_z, n_z), Lp.dtype)
+    R_q = np.zeros((n_z, n_q), Lp.dtype)
+    R_qd = np.zeros((n_z, n_q), Lp.dtype)
+    R_p = np.zeros((n_z, n_p), Lp.dtype)
     R_z[:n_q, :n_q] = R1_qdd
     R_z[:n_q, n_q:n_q + n_lam] = rows[0].T
     R_z[n_q:n_q + n_lam, :n_q] = scale * rows[0]

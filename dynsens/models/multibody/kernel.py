@@ -319,14 +319,16 @@ class Kin:
 
 
 class CompiledKin(Kin):
-    """:class:`Kin` of real states and parameter sets evaluated by the compiled kernel
-    (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp))."""
+    """:class:`Kin` of states and parameter sets (real or complex) evaluated by the compiled
+    kernel (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp))."""
 
     def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array):
         from . import compiled as cc
         self.lay, self.kp = lay, kp
+        self.dtype = dt = np.result_type(q, qd, qdd, kp.pv)          # float64 or complex128
         self.arrays = cl = lay.compiled_arrays()
-        self.params = ck = compiled_params(kp)
+        self.params = ck = compiled_params(kp, dt)
+        q, qd, qdd = (np.asarray(v, dt) for v in (q, qd, qdd))
         self.q, self.qd = q, qd
         (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = cc.kinematics(
             q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,
@@ -337,7 +339,9 @@ class CompiledKin(Kin):
     def prim_forces(self, w: Array) -> Array:
         from . import compiled as cc
         cl = self.arrays
-        return cc.prim_forces(w, self.ABV, cl.side_ptr, cl.side_prim, cl.side_coef, self.lay.n_t)
+        dt = np.result_type(w, self.ABV)
+        return cc.prim_forces(np.asarray(w, dt), np.asarray(self.ABV, dt), cl.side_ptr, cl.side_prim,
+                              cl.side_coef, self.lay.n_t)
 
 
 @dataclass
@@ -362,7 +366,7 @@ class CompiledArrays:
 
 @dataclass
 class CompiledParams:
-    """Real parameter sets in the form of the compiled kernel (leading axis B)."""
+    """Parameter sets in the form of the compiled kernel (leading axis B), in one dtype."""
 
     Ts4: Array           # (B, n_t, 3, 4, 4)
     cAB: Array           # (B, 2, n_prod, 3) constant parts of both sides
@@ -371,24 +375,29 @@ class CompiledParams:
     ax_c: Array          # (B, n_ax, n_c) the axial elements' constants, zero-padded
 
 
-def compiled_params(kp: KParams) -> CompiledParams:
-    """:class:`CompiledParams` of real parameter sets (cached on kp)."""
-    hit = getattr(kp, "_compiled", None)
+def compiled_params(kp: KParams, dtype: Any) -> CompiledParams:
+    """:class:`CompiledParams` of the parameter sets in ``dtype`` (float64 or complex128; cached
+    on kp per dtype)."""
+    cache = kp.__dict__.setdefault("_compiled", {})
+    hit = cache.get(np.dtype(dtype).char)
     if hit is None:
-        ax_c = np.zeros((kp.B, len(kp.ec), max([10] + [c.shape[-1] for c in kp.ec])))
+        ax_c = np.zeros((kp.B, len(kp.ec), max([10] + [c.shape[-1] for c in kp.ec])), dtype)
         for i, c in enumerate(kp.ec):
             ax_c[:, i, :c.shape[-1]] = c
-        hit = CompiledParams(np.ascontiguousarray(kp.Ts4, float),
-                             np.ascontiguousarray(np.stack([kp.cA, kp.cB], axis=1), float),
-                             np.ascontiguousarray(kp.mass, float), np.ascontiguousarray(kp.J, float), ax_c)
-        kp._compiled = hit  # type: ignore[attr-defined]
+        hit = cache[np.dtype(dtype).char] = CompiledParams(
+            np.ascontiguousarray(kp.Ts4, dtype), np.ascontiguousarray(np.stack([kp.cA, kp.cB], axis=1), dtype),
+            np.ascontiguousarray(kp.mass, dtype), np.ascontiguousarray(kp.J, dtype), ax_c)
     return hit
 
 
+_COMPILED_DTYPES = (np.dtype(np.float64), np.dtype(np.complex128))
+
+
 def _use_compiled(kp: KParams, q: Array, qd: Array, qdd: Array) -> bool:
-    """Real states (Bs, n_q) and real parameter sets: the compiled kernel serves."""
-    return (q.dtype == np.float64 and qd.dtype == np.float64 and qdd.dtype == np.float64
-            and kp.pv.dtype.kind == "f")
+    """States (Bs, n_q) and parameter sets in double precision, real or complex: the compiled
+    kernel serves."""
+    return (q.dtype in _COMPILED_DTYPES and qd.dtype in _COMPILED_DTYPES and qdd.dtype in _COMPILED_DTYPES
+            and kp.pv.dtype in _COMPILED_DTYPES)
 
 
 class KinCache:

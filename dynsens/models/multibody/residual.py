@@ -68,8 +68,9 @@ class Evaluation:
     def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
         self.model, self.kin, self.kp, self.t = model, kin, kin.kp, t
         self.lam, self.p, self.pd = lam, p, pd
+        # the compiled kernel in the kinematics' dtype (complex holds real multipliers too)
         self.compiled = (isinstance(kin, CompiledKin) and model.layout.compiled_laws
-                         and lam.dtype.kind == "f" and p.dtype.kind == "f" and pd.dtype.kind == "f")
+                         and (kin.dtype.kind == "c" or not any(v.dtype.kind == "c" for v in (lam, p, pd))))
         if self.compiled:
             self._compiled_forces_and_residual()
             return
@@ -108,26 +109,27 @@ class Evaluation:
         """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
         time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
         m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
-        cl, ck, t = kin.arrays, kin.params, self.t
+        cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
         cf, shift = m.coefficients(t, kp)
-        ext = np.zeros((kp.B, len(lay.axial)))
+        ext = np.zeros((kp.B, len(lay.axial)), dt)
         for i, el in enumerate(lay.axial):
             ext[:, i] = el.external(t, kp.pv)
         if m.point_forces:
-            f_ext = np.zeros((kp.B, lay.n_t, 3))
+            f_ext = np.zeros((kp.B, lay.n_t, 3), dt)
             for pf, j in zip(m.point_forces, lay.point_prim):
                 if j >= 0:
                     f_ext[:, j] -= self._point_force(pf)
         else:
-            f_ext = cl.no_forces
-        g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], float) if m.gravity is not None \
-            else cl.no_gravity
+            f_ext = cl.no_forces.astype(dt, copy=False)
+        g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], dt) if m.gravity is not None \
+            else cl.no_gravity.astype(dt, copy=False)
         (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
-                cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, float), np.ascontiguousarray(shift, float),
+                cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
-                self.lam, self.p, self.pd, float(m.scale), float(m.alpha), float(m.beta), cc.TG)
+                *(np.asarray(v, dt) for v in (self.lam, self.p, self.pd)), float(m.scale), float(m.alpha),
+                float(m.beta), cc.TG)
         if m.other_forces:
             R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
         self.cf, self._R = cf, R
@@ -239,8 +241,8 @@ class Evaluation:
                             cl.side_coef, tr.n_q)
         R_z, R_q, R_qd, R_p = cc.linearization(
             kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
-            cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], float), m.eq_row_weights,
-            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0], self.lam[0], ck.mass[0], ck.J[0], cc.TG,
+            cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], kin.dtype), m.eq_row_weights,
+            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0], np.asarray(self.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG,
             cl.ax_prod, self._ax[0], self._Pp[0], cl.p_owner, self._hL[0], self._hLd[0], self._hp[0])
         if m.other_forces:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
