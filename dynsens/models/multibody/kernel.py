@@ -328,7 +328,8 @@ class CompiledKin(Kin):
         self.dtype = dt = np.result_type(q, qd, qdd, kp.pv)          # float64 or complex128
         self.arrays = cl = lay.compiled_arrays()
         self.params = ck = compiled_params(kp, dt)
-        q, qd, qdd = (np.asarray(v, dt) for v in (q, qd, qdd))
+        # contiguous, in one dtype: one compiled specialization per dtype
+        q, qd, qdd = (np.ascontiguousarray(v, dt) for v in (q, qd, qdd))
         self.q, self.qd = q, qd
         (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = cc.kinematics(
             q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,

@@ -128,7 +128,7 @@ class Evaluation:
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                 cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
-                *(np.asarray(v, dt) for v in (self.lam, self.p, self.pd)), float(m.scale), float(m.alpha),
+                *(np.ascontiguousarray(v, dt) for v in (self.lam, self.p, self.pd)), float(m.scale), float(m.alpha),
                 float(m.beta), cc.TG)
         if m.other_forces:
             R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
