@@ -44,7 +44,7 @@ bench: $(STAMP)
 	$(PY) scripts/bench_large.py
 
 bench-peers: $(STAMP)
-	$(VENV)/bin/pip install --quiet ".[peers]"
+	$(VENV)/bin/pip install --quiet -e ".[peers]"
 	$(PY) scripts/bench_peers.py
 
 cases: $(STAMP)

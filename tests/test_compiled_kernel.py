@@ -1,8 +1,9 @@
 """The compiled multibody kernel against the numpy kernel (the reference), at states along real
 runs of every shipped mechanism: residual, exact linearization, batched residuals of perturbed
 designs and batched output kinematics agree to round-off (1e-12 relative to each quantity's
-scale), for real and for complex-step data.  Whole-run gradients of the compiled path are checked against complex step of the whole
-run by the mechanism and weir tests, which run compiled (the default)."""
+scale), for real and for complex-step data.  Whole-run gradients of the compiled path are
+checked against complex step of the whole run by the mechanism and weir tests, which run
+compiled (the default)."""
 from __future__ import annotations
 
 import numpy as np
@@ -102,6 +103,23 @@ def test_complex_step_data_match_numpy(name, t_end, monkeypatch):
                 lc, lr = cmp_.model.linearize(t, sc, pc), ref.model.linearize(t, sc, pr)
                 for block in ("R_z", "R_q", "R_qd", "R_p"):
                     _close(part(getattr(lc, block)), part(getattr(lr, block)), f"{name} complex {block}")
+
+
+def test_element_without_a_compiled_law_takes_numpy_forces(monkeypatch):
+    """An actuator the compiled kernel does not know (law_kind None) is evaluated by its Python
+    law on the compiled kinematics, with the same residual and linearization."""
+    from dynsens.models.multibody.hydraulics import HydraulicCylinder
+    monkeypatch.setattr(HydraulicCylinder, "law_kind", None)
+    ref, cmp_, states = _cases("hydraulic_lever", 0.3, monkeypatch)
+    assert not cmp_.model.layout.compiled_laws
+    pr, pc = ref.model.parameters(ref.x0), cmp_.model.parameters(cmp_.x0)
+    for t, s in states:
+        ev = cmp_.model._evaluation(t, s, pc)
+        assert isinstance(ev.kin, CompiledKin) and not ev.compiled
+        _close(cmp_.model.residual(t, s, pc), ref.model.residual(t, s, pr), "F_R, Python law")
+        lc, lr = cmp_.model.linearize(t, s, pc), ref.model.linearize(t, s, pr)
+        for block in ("R_z", "R_q", "R_qd", "R_p"):
+            _close(getattr(lc, block), getattr(lr, block), f"{block}, Python law")
 
 
 def test_switch_off_by_environment(monkeypatch):

@@ -215,20 +215,6 @@ def _mm(A: Array, B: Array) -> Array:
 
 
 @inline
-def _tmm(A: Array, B: Array) -> Array:
-    """Aᵀ @ B for small dense blocks."""
-    k, n = A.shape
-    m = B.shape[1]
-    out = np.zeros((n, m), A.dtype)
-    for l in range(k):
-        for i in range(n):
-            a = A[l, i]
-            for j in range(m):
-                out[i, j] += a * B[l, j]
-    return out
-
-
-@inline
 def _mv(A: Array, x: Array) -> Array:
     """A @ x for a small dense block."""
     n, k = A.shape
@@ -505,7 +491,7 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 Kb = _prim_jac0(jb, C, is_point)
                 bb = 7 * pb[jb]
                 c = wp * side_coef[ea] * side_coef[eb]
-                blk = _tmm(Ka, Kb)
+                blk = _mm(Ka.T, Kb)
                 for u in range(7):
                     for v in range(7):
                         R1_q[ba + u, bb + v] += c * blk[u, v]
@@ -544,9 +530,9 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                         Gb_p[i, k] += t * p[l]
                         GTv1[l, k] += t * w1[i]
                         GTv2[l, k] += t * w2[i]
-        Mpp = 4.0 * _tmm(Gp, _mm(Jb, Gp))
-        Kpp = 4.0 * (GTv1 + _tmm(Gp, _mm(Jb, Gb_pdd))) - 8.0 * _tmm(Gpd, _mm(Jb, Gpd))
-        Cpp = -8.0 * (GTv2 + _tmm(Gpd, _mm(Jb, Gb_p)))
+        Mpp = 4.0 * _mm(Gp.T, _mm(Jb, Gp))
+        Kpp = 4.0 * (GTv1 + _mm(Gp.T, _mm(Jb, Gb_pdd))) - 8.0 * _mm(Gpd.T, _mm(Jb, Gpd))
+        Cpp = -8.0 * (GTv2 + _mm(Gpd.T, _mm(Jb, Gb_p)))
         o = 7 * b
         for a in range(3):
             R1_qdd[o + a, o + a] += mass[b]

@@ -181,7 +181,7 @@ class Layout:
                 np.array(prim, np.int64), np.array(coef, float), self.norm_eq.astype(np.int64),
                 self.norm_body.astype(np.int64),
                 np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64),
-                np.array([el.law_kind for el in self.axial], np.int64),
+                np.array([-1 if el.law_kind is None else el.law_kind for el in self.axial], np.int64),
                 np.array([el.p_index for el in self.axial], np.int64),
                 np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner,
                 np.zeros((1, self.n_t, 3)), np.zeros((1, 3)))
@@ -357,7 +357,7 @@ class CompiledArrays:
     norm_eq: Array
     norm_body: Array
     prod_eq: Array       # (n_cp,) equation of each constraint product
-    ax_kind: Array       # (n_ax,) law of each axial element (AxialElement.law_kind)
+    ax_kind: Array       # (n_ax,) law of each axial element (AxialElement.law_kind; -1: none)
     ax_pidx: Array       # (n_ax,) position of its first state in p
     ax_prod: Array       # (n_ax,) its product d·d
     p_owner: Array       # (n_p,) the element each state belongs to

@@ -58,6 +58,9 @@ def _GTv(v: Array) -> Array:
 class Evaluation:
     """Residual pieces at one (batched) state; :meth:`residual` and :meth:`linearization`.
 
+    With compiled kinematics and force laws the compiled kernel evaluates everything
+    (:mod:`.compiled`); otherwise the numpy expressions below, which are its reference.
+
     Parameters
     ----------
     model : the multibody model (layout, settings, force elements).
@@ -136,9 +139,9 @@ class Evaluation:
 
     def residual(self) -> Array:
         """F_R (B, n_z)."""
-        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
         if self.compiled:
             return self._R
+        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
         Lp = kin.Lp
         p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
         J = kp.J
@@ -242,8 +245,9 @@ class Evaluation:
         R_z, R_q, R_qd, R_p = cc.linearization(
             kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
             cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], kin.dtype), m.eq_row_weights,
-            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0], np.asarray(self.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG,
-            cl.ax_prod, self._ax[0], self._Pp[0], cl.p_owner, self._hL[0], self._hLd[0], self._hp[0])
+            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0],
+            np.asarray(self.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG, cl.ax_prod, self._ax[0], self._Pp[0],
+            cl.p_owner, self._hL[0], self._hLd[0], self._hp[0])
         if m.other_forces:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
             R_q[:tr.n_q] -= Kq
