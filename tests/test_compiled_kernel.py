@@ -122,6 +122,28 @@ def test_element_without_a_compiled_law_takes_numpy_forces(monkeypatch):
             _close(getattr(lc, block), getattr(lr, block), f"{block}, Python law")
 
 
+def test_other_forces_jacobians_against_central_differences(monkeypatch):
+    """Torques and body-frame point forces (evaluated in Python, one Ctx for a batch of states):
+    ∂Q/∂q and ∂Q/∂q̇ are full (n_q, n_q) matrices equal to central differences of Q."""
+    from dynsens.models.multibody.residual import other_forces_jacobians, other_forces_q
+    ref, _, states = _cases("four_bar", 0.3, monkeypatch)
+    model, prm = ref.model, ref.model.parameters(ref.x0)
+    assert model.other_forces
+    t, s = states[-1]
+    Kq, Kqd = other_forces_jacobians(model, t, s.q, s.qd, prm)
+    n = model.traits.n_q
+    assert Kq.shape == Kqd.shape == (n, n)
+    h = 1e-6
+    for K, wrt in ((Kq, "q"), (Kqd, "qd")):
+        for j in range(n):
+            e = h * np.eye(n)[j]
+            q_p, q_m = (s.q + e, s.q - e) if wrt == "q" else (s.q, s.q)
+            v_p, v_m = (s.qd + e, s.qd - e) if wrt == "qd" else (s.qd, s.qd)
+            fd = (other_forces_q(model, t, q_p[None], v_p[None], [prm])[0]
+                  - other_forces_q(model, t, q_m[None], v_m[None], [prm])[0]) / (2 * h)
+            assert np.allclose(K[:, j], fd, rtol=1e-6, atol=1e-8 * max(1.0, np.max(np.abs(Kq)))), (wrt, j)
+
+
 def test_switch_off_by_environment(monkeypatch):
     monkeypatch.setenv("DYNSENS_KERNEL", "numpy")
     assert not compiled.enabled()

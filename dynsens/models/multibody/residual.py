@@ -276,10 +276,19 @@ class Evaluation:
 
 
 def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms: list[Any]) -> Array:
-    """Q_ext (B, n_q) of the elements without a law here, one Ctx per batch entry (q, qd (B, n_q))."""
-    B = max(q.shape[0], len(prms))
+    """Q_ext (B, n_q) of the elements without a law here (q, qd (B or 1, n_q)): the states of one
+    parameter set as the columns of one Ctx, otherwise one Ctx per batch entry."""
+    B = max(q.shape[0], qd.shape[0], len(prms))
     dt = np.result_type(q, qd, *(p.pv for p in prms), float)
-    out = np.zeros((B, model.traits.n_q), dt)
+    n_q = model.traits.n_q
+    if len(prms) == 1:
+        Q, Qd = (np.broadcast_to(v, (B, n_q)).T for v in (q, qd))
+        o = np.zeros((n_q, B), dt)
+        ctx = Ctx(Q, Qd, np.zeros((n_q, 1)), prms[0], t)
+        for el in model.other_forces:
+            el.add(ctx, o)
+        return o.T
+    out = np.zeros((B, n_q), dt)
     for b in range(B):
         qb, qdb = q[min(b, q.shape[0] - 1)], qd[min(b, qd.shape[0] - 1)]
         ctx = Ctx(qb[:, None], qdb[:, None], np.zeros((qb.shape[0], 1)), prms[min(b, len(prms) - 1)], t)
