@@ -52,3 +52,18 @@ def test_weir_sensitivities_match_complex_step(location):
         s_dot = 62.0                                                               # mm/s, roughly
         diff = res.responses["stroke"].gradient - res.responses["stroke_fixed_time"].gradient
         assert np.allclose(diff, s_dot * res.responses["t_F"].gradient, rtol=0.5)
+
+
+@pytest.mark.parametrize("kernel", ["compiled", "numpy"])
+def test_static_start_at_the_optimum_converges(kernel, monkeypatch):
+    """At this design (met by the optimizer next to its optimum) the static start's accelerations
+    are pure round-off (~1e-11 mm/s² against multipliers of 1e7): Newton stops at the residual's
+    noise floor instead of failing after max_iterations (it did with the compiled kernel's
+    round-off before the stagnation test)."""
+    monkeypatch.setenv("DYNSENS_KERNEL", kernel)
+    x = np.array([float.fromhex(h) for h in ("-0x1.1504c6385e156p+0", "0x1.d6eb159eee6c5p+10",
+                                               "0x1.d78adcdf4c410p+10", "0x1.e024671700986p+18")])
+    case = dynsens.load_case(WEIR, ["integrator.t_end=0.005", "output.history=none"])
+    res = dynsens.run_case(case, x)
+    assert res.status == "completed"
+    assert res.counters["newton_iterations"] <= 25 + 2 * 5        # the start and five steps
