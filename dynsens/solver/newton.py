@@ -33,7 +33,10 @@ class NewtonSettings:
     """Newton tolerances: converged when, for every block b of z (q̈, λ, ṗ),
     ‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol, scale_b being the largest ‖z_b‖ seen so far
     in the run (so the test is relative to the problem's own magnitudes, in any units); a
-    block that has been zero throughout is measured against ‖z‖."""
+    block that has been zero throughout is measured against ‖z‖.  Two more acceptances, both at
+    round-off: every residual entry within round-off of the terms S·z that make it up, or the
+    residual norm stalled at its noise floor while ‖Δz‖ ≤ rtol·‖z‖ + atol (a block that is
+    nothing but round-off cannot meet its own relative test)."""
 
     rtol: float = 1e-10
     atol: float = 0.0
