@@ -1,24 +1,26 @@
 r"""Compiled evaluation of the multibody kernel (the Newton hot path and the design partials).
 
 The numpy kernel (:mod:`.kernel`, :mod:`.residual`) evaluates batches of states and parameter
-sets, real or complex, with few numpy calls; for the primal Newton iteration (one real state,
-one parameter set) its cost is the call overhead of ~150 tiny array operations, not arithmetic
-(BENCHMARKS.md, "where the time goes").  This module evaluates the same quantities with loops
-compiled by numba, and exploits what the dense products cannot: a side of a product involves
-one or two primitives, each acting on the 7 coordinates of one body.  Every function takes the
-dtype of its inputs (the caller casts them to one): real runs and complex step (complex
-partials, complex step of the whole run) take the same code.
+sets, real or complex, with few numpy calls; for the small arrays of a mechanism its cost is the
+call overhead of ~150 tiny array operations per Newton iteration, not arithmetic (BENCHMARKS.md).
+This module evaluates the same quantities with loops compiled by numba, and exploits what the
+dense products cannot: a side of a product involves one or two primitives, each acting on the 7
+coordinates of one body.  Every function takes the dtype of its inputs (the caller casts them to
+one): real runs and complex step (complex partials, complex step of the whole run) take the same
+code, for one state or a batch (the design partials' parameter sets, the output gradients'
+perturbed states).
 
 Same notation as :mod:`.kernel`: primitives j (points and body-fixed directions on moving
 bodies) with point tensors ``Ts4[j]`` and ``C_i = Ts·L_i`` (L_0, L_1, L_2 = p, ṗ, p̈); sides
 ``ABV[s, p, level, :]`` of the products ``x_p = a_p·b_p`` as sparse combinations
 (``side_ptr``, ``side_prim``, ``side_coef``: CSR rows ``s·n_prod + p``) of the primitives'
-levels.  The per-element force laws and time functions stay in Python (scalar calls); their
-values and partials enter here as arrays.
+levels.  The force laws are the elements' own plain-arithmetic functions (``spring_law``,
+``cylinder_law``), compiled here; the time functions (pump flow, point-force amplitudes,
+constraint coefficients) stay in Python and enter as arrays.
 
-The numpy path is kept as the reference (complex step, batched design partials) and
-``tests/test_compiled_kernel.py`` checks that both agree to round-off.  Set the environment
-variable ``DYNSENS_KERNEL=numpy`` to switch the compiled path off (side-by-side benchmarks).
+The numpy path is kept as the reference and ``tests/test_compiled_kernel.py`` checks that both
+agree to round-off.  Set the environment variable ``DYNSENS_KERNEL=numpy`` to switch the
+compiled path off (side-by-side benchmarks).
 """
 from __future__ import annotations
 
