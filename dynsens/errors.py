@@ -40,6 +40,10 @@ class CaseError(DynsensError, ValueError):
         super().__init__("\n".join(lines))
 
 
+class ConfigurationError(DynsensError, ValueError):
+    """The environment asks for something dynsens does not have (e.g. an unknown DYNSENS_KERNEL)."""
+
+
 class ModelError(DynsensError, RuntimeError):
     """The model reached a state where its equations are not valid (e.g. a chamber volume <= 0)."""
 

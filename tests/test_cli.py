@@ -25,6 +25,7 @@ import dynsens
 import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
 import dynsens.cli.simulate  # noqa: F401  (registers the command)
 from dynsens.cli.main import cli, main  # noqa: F401
+from conftest import CASES
 from dynsens.errors import ModelError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -444,3 +445,13 @@ def test_check_gradients_bad_case_is_clean(runner, tmp_path):
     assert_clean_failure(result, "responses[0].quantity.dof", "did you mean 'u'")
     assert result.exit_code != 1  # an invalid case is not a failed gradient check
     assert leftovers(tmp_path) == []
+
+
+def test_unknown_kernel_in_the_environment_is_a_clean_error(runner, tmp_path, monkeypatch):
+    """DYNSENS_KERNEL with a typo stops with a message naming the variable and its choices,
+    instead of silently taking the compiled kernel."""
+    monkeypatch.setenv("DYNSENS_KERNEL", "nmpy")
+    out = tmp_path / "pendulum.h5"
+    res = invoke(runner, "simulate", CASES / "pendulum_3d.yaml", "-o", out, "--set", "integrator.t_end=0.01")
+    assert_clean_failure(res, "DYNSENS_KERNEL", "'nmpy'", "compiled, numpy", code=2)
+    assert not out.exists() and leftovers(tmp_path) == []

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ...errors import ConfigurationError
 from .forces import spring_law
 from .hydraulics import cylinder_law
 from .rotations import T_G
@@ -42,9 +43,21 @@ except ImportError:  # pragma: no cover - exercised only where numba cannot be i
 Array = np.ndarray
 
 
+KERNELS = ("compiled", "numpy")
+
+
 def enabled() -> bool:
-    """Whether the compiled kernel is used (numba importable and ``DYNSENS_KERNEL`` != numpy)."""
-    return HAVE_NUMBA and os.environ.get("DYNSENS_KERNEL", "compiled").lower() != "numpy"
+    """Whether the compiled kernel is used: numba importable and the environment variable
+    ``DYNSENS_KERNEL`` unset or ``compiled`` (``numpy``: the numpy kernel).
+
+    Raises ConfigurationError for any other value of ``DYNSENS_KERNEL``.
+    """
+    choice = os.environ.get("DYNSENS_KERNEL", "compiled").strip().lower() or "compiled"
+    if choice not in KERNELS:
+        raise ConfigurationError(
+            f"environment variable DYNSENS_KERNEL = {os.environ['DYNSENS_KERNEL']!r}: expected one of "
+            f"{', '.join(KERNELS)} (unset means compiled)")
+    return HAVE_NUMBA and choice == "compiled"
 
 
 if HAVE_NUMBA:
