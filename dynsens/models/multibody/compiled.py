@@ -415,25 +415,21 @@ def product_rows(C: Array, ABV: Array, pb: Array, is_point: Array, side_ptr: Arr
     x_T = Σ RL[T, l, m] a_l·b_m (RL as kernel.ROW_LEVELS)."""
     n_prod = ABV.shape[1]
     G = np.zeros((n_prod, 3, n_q), C.dtype)
-    # the nonzero entries (T, l, m) of ROW_LEVELS unrolled (a runtime index into a tuple costs
-    # more than the arithmetic): (0,0,0), (1,0,1), (1,1,0), (2,0,2), (2,2,0), 2·(2,1,1)
+    # x_T = Σ RL[T, l, m] a_l·b_m with RL symmetric in (l, m), so ∂x_T/∂q sums, for side a and
+    # side b alike, (∂ own side at level l)·(other side at level m) over the same pairs: (0, 0)
+    # for T = 0; (0, 1), (1, 0) for T = 1; (0, 2), (2, 0), 2·(1, 1) for T = 2 (unrolled: a
+    # runtime index into a tuple of them costs more than the arithmetic)
     for p in range(n_prod):
-        for e in range(side_ptr[p], side_ptr[p + 1]):                      # ∂a_l · b_m
-            j, c = side_prim[e], side_coef[e]
-            _add_prim_rowT(G, p, 0, j, 0, ABV, 1, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 1, j, 0, ABV, 1, 1, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 1, j, 1, ABV, 1, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 0, ABV, 1, 2, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 2, ABV, 1, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 1, ABV, 1, 1, 2.0 * c, C, pb, is_point)
-        for e in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):    # a_l · ∂b_m
-            j, c = side_prim[e], side_coef[e]
-            _add_prim_rowT(G, p, 0, j, 0, ABV, 0, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 1, j, 1, ABV, 0, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 1, j, 0, ABV, 0, 1, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 2, ABV, 0, 0, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 0, ABV, 0, 2, c, C, pb, is_point)
-            _add_prim_rowT(G, p, 2, j, 1, ABV, 0, 1, 2.0 * c, C, pb, is_point)
+        for s_ in range(2):
+            o = 1 - s_
+            for e in range(side_ptr[s_ * n_prod + p], side_ptr[s_ * n_prod + p + 1]):
+                j, c = side_prim[e], side_coef[e]
+                _add_prim_rowT(G, p, 0, j, 0, ABV, o, 0, c, C, pb, is_point)
+                _add_prim_rowT(G, p, 1, j, 0, ABV, o, 1, c, C, pb, is_point)
+                _add_prim_rowT(G, p, 1, j, 1, ABV, o, 0, c, C, pb, is_point)
+                _add_prim_rowT(G, p, 2, j, 0, ABV, o, 2, c, C, pb, is_point)
+                _add_prim_rowT(G, p, 2, j, 2, ABV, o, 0, c, C, pb, is_point)
+                _add_prim_rowT(G, p, 2, j, 1, ABV, o, 1, 2.0 * c, C, pb, is_point)
     return G
 
 
