@@ -39,8 +39,10 @@ report: $(STAMP)
 	$(PY) scripts/extreme_report.py > results/extreme.md
 
 bench: $(STAMP)
+	$(PY) scripts/bench_versions.py . . cases/slider_crank.yaml cases/four_bar.yaml cases/hydraulic_lever.yaml cases/pendulum_3d.yaml cases/tyrolean_weir.yaml --repeats 3 --before-env DYNSENS_KERNEL=numpy
+	$(PY) scripts/bench_sensitivity_cost.py --repeats 3 --no-fd --partials case cases/tyrolean_weir.yaml cases/slider_crank.yaml cases/hydraulic_lever.yaml cases/four_bar.yaml
+	$(PY) scripts/bench_sensitivity_cost.py --repeats 3 --no-fd --partials complex cases/tyrolean_weir.yaml
 	$(PY) scripts/bench_sensitivity_cost.py --repeats 5 cases/duffing_chain.yaml cases/sdof_step.yaml cases/truss_impact.yaml
-	$(PY) scripts/bench_sensitivity_cost.py --repeats 3 --no-fd --partials case cases/tyrolean_weir.yaml cases/slider_crank.yaml cases/hydraulic_lever.yaml
 	$(PY) scripts/bench_large.py
 
 bench-peers: $(STAMP)
