@@ -201,17 +201,6 @@ def _prim_forces_one(w: Array, ABV: Array, side_ptr: Array, side_prim: Array, si
                 f[j, a] += c * ABV[1 - s_, p, 0, a]
 
 
-@jit
-def prim_forces(W: Array, ABV: Array, side_ptr: Array, side_prim: Array, side_coef: Array,
-                n_t: int) -> Array:
-    """F (B, n_t, 3): primitive forces of the product weights W (B or 1, n_prod)."""
-    B = ABV.shape[0]
-    F = np.zeros((B, n_t, 3), ABV.dtype)
-    for b in range(B):
-        _prim_forces_one(W[min(b, W.shape[0] - 1)], ABV[b], side_ptr, side_prim, side_coef, F[b])
-    return F
-
-
 # ---------------------------------------------------------------------------- residual
 # Tiny products as explicit loops: numba's `@` calls BLAS, whose per-call cost exceeds the
 # arithmetic of a 3×4 block many times over.

@@ -183,8 +183,7 @@ class Layout:
                 np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64),
                 np.array([-1 if el.law_kind is None else el.law_kind for el in self.axial], np.int64),
                 np.array([el.p_index for el in self.axial], np.int64),
-                np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner,
-                np.zeros((1, self.n_t, 3)), np.zeros((1, 3)))
+                np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner)
         return self._compiled
 
 
@@ -337,13 +336,6 @@ class CompiledKin(Kin):
         self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
         self._rows = None
 
-    def prim_forces(self, w: Array) -> Array:
-        from . import compiled as cc
-        cl = self.arrays
-        dt = np.result_type(w, self.ABV)
-        return cc.prim_forces(np.asarray(w, dt), np.asarray(self.ABV, dt), cl.side_ptr, cl.side_prim,
-                              cl.side_coef, self.lay.n_t)
-
 
 @dataclass
 class CompiledArrays:
@@ -361,8 +353,6 @@ class CompiledArrays:
     ax_pidx: Array       # (n_ax,) position of its first state in p
     ax_prod: Array       # (n_ax,) its product d·d
     p_owner: Array       # (n_p,) the element each state belongs to
-    no_forces: Array     # (1, n_t, 3) zeros: no applied point forces
-    no_gravity: Array    # (1, 3) zeros
 
 
 @dataclass

@@ -117,15 +117,12 @@ class Evaluation:
         ext = np.zeros((kp.B, len(lay.axial)), dt)
         for i, el in enumerate(lay.axial):
             ext[:, i] = el.external(t, kp.pv)
-        if m.point_forces:
-            f_ext = np.zeros((kp.B, lay.n_t, 3), dt)
-            for pf, j in zip(m.point_forces, lay.point_prim):
-                if j >= 0:
-                    f_ext[:, j] -= self._point_force(pf)
-        else:
-            f_ext = cl.no_forces.astype(dt, copy=False)
+        f_ext = np.zeros((kp.B if m.point_forces else 1, lay.n_t, 3), dt)
+        for pf, j in zip(m.point_forces, lay.point_prim):
+            if j >= 0:
+                f_ext[:, j] -= self._point_force(pf)
         g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], dt) if m.gravity is not None \
-            else cl.no_gravity.astype(dt, copy=False)
+            else np.zeros((1, 3), dt)
         (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
@@ -176,11 +173,11 @@ class Evaluation:
 
     def linearization(self) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p) of the first batch entry."""
+        if self.compiled:
+            return self._compiled_linearization()
         m, kin, lay = self.model, self.kin, self.model.layout
         tr = m.traits
         n_q, n_lam, n_p = tr.n_q, tr.n_lam, tr.n_p
-        if self.compiled:
-            return self._compiled_linearization()
         dt = np.result_type(kin.PV, self.lam, self.p, self.f)
         Jx, Dx, Ax, _, _ = kin.rows()
         # rows of J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows (r = Jx, Dx, Ax):
