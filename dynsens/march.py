@@ -164,7 +164,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     shist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0], m)) for f in hist_fields} if store_sens else {}
     mon_names = list(model.monitors(plan.t0, s, params))
     mons = {k: np.empty(n_steps + 1) for k in mon_names}
-    total = partials.value_and_total if partials is not None else None
+    responses.start(params, partials, None if partials is not None else model.stack_parameters([params]))
 
     def record(k: int, t: float, st: StepState, dst: StepState | None) -> None:
         times[k] = t
@@ -178,7 +178,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
                 mons[name][k] = val
 
     record(0, plan.t0, s, ds)
-    responses.observe(0, plan.t0, responses.evaluate(plan.t0, s, ds, params, total), 0.0)
+    responses.push(0, plan.t0, s, ds, 0.0)
     counters.output_evaluations += 1
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
     last = 0
@@ -228,9 +228,8 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         counters.steps += 1
         record(i, t, s, ds)
         last = i
-        samples = responses.evaluate(t, s, ds, params, total)
         counters.output_evaluations += 1
-        if responses.observe(i, t, samples, h):
+        if responses.push(i, t, s, ds, h):
             ev = next(reversed(responses.fired))
             status = "terminated"
             message = f"event '{ev}' at t = {float(np.real(responses.fired[ev].t)):.6g} s"

@@ -1,8 +1,12 @@
-r"""Responses, events and their gradients (method.md §5), accumulated step by step.
+r"""Responses, events and their gradients (method.md §5), accumulated as the run goes.
 
-At every step the outputs that responses and events read are evaluated once, with their
-total design gradients ∇v = ∂v/∂state·∇state + ∂_x v (from the sensitivity state), and
-fed to the responses; nothing needs the stored history.
+The outputs that responses read are evaluated with their total design gradients
+∇v = ∂v/∂state·∇state + ∂_x v (from the sensitivity state) and fed to the responses;
+nothing needs the stored history.  Steps are collected in blocks: an output that accepts a
+batch of states and does not depend on t explicitly is evaluated for the whole block (all
+steps and gradient directions) in one call, which removes the per-step cost of calling it.
+Only the outputs that events watch are evaluated at every step (values only), so a run stops
+at the step where its event fires.
 
 Events: e = v − level crosses zero between steps i−1 and i.  The crossing is located
 at the fraction ϑ = −e_{i−1}/(e_i − e_{i−1}) of the step (``interpolate``) or taken at
@@ -25,14 +29,31 @@ from .models.base import Output, StepState
 
 
 @dataclass
-class Sample:
-    """One output at one instant: value (k,), total and fixed-time gradients (k, m) or None."""
+class Samples:
+    """The outputs at K consecutive instants: a block of steps, or one event instant.
 
-    t: Any
-    value: np.ndarray
-    grad: np.ndarray | None
-    grad_fixed: np.ndarray | None
-    dt_dx: np.ndarray | None  # gradient of the sample's time (non-zero only at events)
+    t : (K,) times (s); value[oid] : (K, k); grad[oid], grad_fixed[oid] : (K, k, m) or None
+    (total and fixed-time gradients; they differ only at an event); dt_dx : gradient (m,) of
+    the time of the last instant (an event's; None otherwise).
+    """
+
+    t: np.ndarray
+    value: dict[int, np.ndarray]
+    grad: dict[int, np.ndarray | None]
+    grad_fixed: dict[int, np.ndarray | None]
+    dt_dx: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def part(self, start: int, stop: int) -> "Samples":
+        """Instants start:stop (an event's dt_dx stays with the last instant only)."""
+        sl = slice(start, stop)
+
+        def cut(d: dict[int, Any]) -> dict[int, Any]:
+            return {k: None if v is None else v[sl] for k, v in d.items()}
+        keep_dt = self.dt_dx if stop >= len(self) else None
+        return Samples(self.t[sl], cut(self.value), cut(self.grad), cut(self.grad_fixed), keep_dt)
 
 
 @dataclass
@@ -54,8 +75,8 @@ class Response(ABC):
     unit: str = ""
     output_ids: tuple[int, ...] = ()
 
-    def feed(self, samples: dict[int, Sample]) -> None:  # noqa: B027
-        """Take the samples of one instant (default: ignore)."""
+    def feed(self, samples: Samples) -> None:  # noqa: B027
+        """Take the outputs of the next instants, in time order (default: ignore)."""
 
     @abstractmethod
     def finish(self, ctx: "FinishContext") -> ResponseValue:
@@ -95,49 +116,54 @@ class ValueAt(Response):
         self.time = time
         self.event = event
         self.fixed_time = fixed_time
-        self._prev: Sample | None = None
+        # the latest instant (t, value, gradient): the end (or event) value when the run stops
+        self._prev: tuple[Any, Any, np.ndarray | None] | None = None
         self._hit: tuple[Any, np.ndarray | None] | None = None
 
-    def _pick(self, smp: Sample) -> tuple[Any, np.ndarray | None]:
-        g = smp.grad_fixed if self.fixed_time else smp.grad
-        return smp.value[self.component], (None if g is None else g[self.component])
+    def _pick(self, smp: Samples) -> tuple[np.ndarray, np.ndarray | None]:
+        """Values (K,) and gradients (K, m) of the component."""
+        oid = self.output_ids[0]
+        g = (smp.grad_fixed if self.fixed_time else smp.grad)[oid]
+        return smp.value[oid][:, self.component], (None if g is None else g[:, self.component])
 
-    def feed(self, samples: dict[int, Sample]) -> None:
-        smp = samples[self.output_ids[0]]
+    def feed(self, samples: Samples) -> None:
+        v, g = self._pick(samples)
         if self.time is not None and self._hit is None:
-            tc = float(np.real(smp.t))
-            if abs(tc - self.time) <= 1e-12 * max(1.0, abs(self.time)):
-                self._hit = self._pick(smp)
-            elif self._prev is not None and float(np.real(self._prev.t)) < self.time < tc:
-                w = (self.time - self._prev.t) / (smp.t - self._prev.t)
-                v0, g0 = self._pick(self._prev)
-                v1, g1 = self._pick(smp)
-                self._hit = (v0 + w * (v1 - v0), None if g0 is None else g0 + w * (g1 - g0))
-        self._prev = smp          # the latest sample: the end (or event) value when the run stops
+            tr = np.real(samples.t)
+            tol = 1e-12 * max(1.0, abs(self.time))
+            after = np.flatnonzero(tr >= self.time - tol)
+            if after.size:
+                j = int(after[0])
+                if abs(tr[j] - self.time) <= tol:
+                    self._hit = (v[j], None if g is None else g[j])
+                else:
+                    # the first instant past the time: interpolate from the one before it
+                    prev = (samples.t[j - 1], v[j - 1], None if g is None else g[j - 1]) if j \
+                        else self._prev
+                    if prev is not None and float(np.real(prev[0])) < self.time:
+                        w = (self.time - prev[0]) / (samples.t[j] - prev[0])
+                        g_hit = None if g is None or prev[2] is None else prev[2] + w * (g[j] - prev[2])
+                        self._hit = (prev[1] + w * (v[j] - prev[1]), g_hit)
+        self._prev = (samples.t[-1], v[-1], None if g is None else g[-1])
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         kind = "fixed_time" if self.fixed_time else ""
-        if self.event is not None:
-            if self.event not in ctx.events:
-                return ResponseValue(np.nan, None, self.unit, missing=f"event '{self.event}' never fired")
-            assert self._prev is not None
-            v, g = self._pick(self._prev)
-            return ResponseValue(v, g, self.unit, kind=kind)
-        if self.time is not None:
+        if self.event is not None and self.event not in ctx.events:
+            return ResponseValue(np.nan, None, self.unit, missing=f"event '{self.event}' never fired")
+        if self.time is not None and self.event is None:
             if self._hit is None:
                 return ResponseValue(np.nan, None, self.unit,
                                      missing=f"the run ended before t = {self.time} s")
             return ResponseValue(self._hit[0], self._hit[1], self.unit)
         assert self._prev is not None
-        v, g = self._pick(self._prev)
-        return ResponseValue(v, g, self.unit, kind=kind)
+        return ResponseValue(self._prev[1], self._prev[2], self.unit, kind=kind)
 
 
 class KSAggregate(Response):
     r"""Kreisselmeier–Steinhauser maximum over time and components, streamed.
 
     KS = g_max + (1/ρ) ln Σ exp(ρ(g_k − g_max)); ∇KS = Σ w_k ∇g_k with softmax weights.
-    The running maximum is updated on the fly and earlier sums rescaled (log-sum-exp).
+    The running maximum is updated block by block and earlier sums rescaled (log-sum-exp).
     """
 
     def __init__(self, name: str, output_ids: tuple[int, ...], components: tuple[Any, ...],
@@ -150,15 +176,10 @@ class KSAggregate(Response):
         self._sum: Any = 0.0
         self._wgrad: np.ndarray | None = None
 
-    def feed(self, samples: dict[int, Sample]) -> None:
-        vals = []
-        grads = []
-        for oid, comp in zip(self.output_ids, self.components):
-            smp = samples[oid]
-            vals.append(smp.value[comp])
-            if smp.grad is not None:
-                grads.append(smp.grad[comp])
-        v = np.concatenate(vals)
+    def feed(self, samples: Samples) -> None:
+        v = np.concatenate([samples.value[oid][:, comp]
+                            for oid, comp in zip(self.output_ids, self.components)], axis=1).ravel()
+        grads = [samples.grad[oid] for oid in self.output_ids]
         new_max = v[int(np.argmax(v.real))]
         if self._gmax is None or new_max.real > np.real(self._gmax):
             if self._gmax is not None:
@@ -169,8 +190,9 @@ class KSAggregate(Response):
             self._gmax = new_max
         w = np.exp(self.rho * (v - self._gmax))
         self._sum = self._sum + np.sum(w)
-        if grads:
-            contrib = w @ np.concatenate(grads)
+        if all(g is not None for g in grads):
+            G = np.concatenate([g[:, comp] for g, comp in zip(grads, self.components)], axis=1)
+            contrib = w @ G.reshape(v.size, -1)
             self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
@@ -186,24 +208,32 @@ class TimeIntegral(Response):
         self.name, self.unit = name, unit
         self.output_ids = (output_id,)
         self.component = component
-        self._prev: Sample | None = None
+        self._prev: tuple[Any, Any, np.ndarray | None] | None = None
         self._value: Any = 0.0
         self._grad: np.ndarray | None = None
 
-    def feed(self, samples: dict[int, Sample]) -> None:
-        smp = samples[self.output_ids[0]]
-        c = self.component
+    def feed(self, samples: Samples) -> None:
+        oid, c = self.output_ids[0], self.component
+        t, v = samples.t, samples.value[oid][:, c]
+        g = samples.grad[oid]
+        g = None if g is None else g[:, c]
+        last = (t[-1], v[-1], None if g is None else g[-1])
         if self._prev is not None:
-            p = self._prev
-            h = smp.t - p.t
-            mean = 0.5 * (p.value[c] + smp.value[c])
-            self._value = self._value + h * mean
-            if smp.grad is not None and p.grad is not None:
-                g = h * 0.5 * (p.grad[c] + smp.grad[c])
-                if smp.dt_dx is not None:
-                    g = g + mean * smp.dt_dx  # the end of the last interval moves with the event
-                self._grad = g if self._grad is None else self._grad + g
-        self._prev = smp
+            # the interval from the previous block's last instant to this block's first
+            pt, pv, pg = self._prev
+            t = np.concatenate([[pt], t])
+            v = np.concatenate([[pv], v])
+            g = None if g is None or pg is None else np.concatenate([pg[None], g])
+        if len(t) >= 2:
+            h = np.diff(t)
+            mean = 0.5 * (v[:-1] + v[1:])
+            self._value = self._value + np.sum(h * mean)
+            if g is not None:
+                dg = (0.5 * h) @ (g[:-1] + g[1:])
+                if samples.dt_dx is not None:
+                    dg = dg + mean[-1] * samples.dt_dx  # the end of the last interval moves with the event
+                self._grad = dg if self._grad is None else self._grad + dg
+        self._prev = last
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         grad = self._grad if self._grad is not None else (np.zeros(ctx.m) if ctx.m else None)
@@ -286,98 +316,157 @@ class EventSpec:
 
 
 class ResponseSet:
-    """Evaluates the outputs once per step, detects events and feeds the responses.
+    """Collects the steps of a run in blocks, evaluates the outputs, detects events and feeds
+    the responses.
 
     Parameters
     ----------
     outputs : the distinct outputs needed (ids are list indices).
     responses : in dependency order (combinations last).
     events : terminating events.
+    block : most steps evaluated together (fewer when many gradient directions make the
+        batch large: at most ``BATCH_STATES`` states per call).
     """
 
-    def __init__(self, outputs: list[Output], responses: list[Response], events: list[EventSpec]):
+    BATCH_STATES = 2048
+
+    def __init__(self, outputs: list[Output], responses: list[Response], events: list[EventSpec],
+                 block: int = 128):
         self.outputs = outputs
         self.responses = responses
         self.events = events
-        self._prev: dict[int, Sample] | None = None
+        self.block = block
         self.fired: dict[str, EventRecord] = {}
         self.end_time: Any = None
         self.end_dt_dx: np.ndarray | None = None
+        self._event_oids = sorted({ev.output_id for ev in events})
+        self._pending: list[tuple[Any, StepState, StepState | None]] = []
+        self._event_prev: dict[int, np.ndarray] | None = None   # watched values at the last step
+        self._last: Samples | None = None                       # the last instant fed
+        self._params: Any = None
+        self._partials: Any = None
+        self._params_one: Any = None
 
-    def evaluate(self, t: float, s: StepState, ds: StepState | None, params: Any,
-                 value_and_total: Callable[..., tuple[np.ndarray, np.ndarray]] | None
-                 ) -> dict[int, Sample]:
-        """Outputs at one step, with total gradients when ``ds`` is given
-        (``value_and_total``: :meth:`.sensitivity.DesignPartials.value_and_total`)."""
-        out = {}
-        for oid, o in enumerate(self.outputs):
-            g = None
-            if ds is not None and value_and_total is not None and not o.linear:
-                v, g = value_and_total(lambda st, prm, _fn=o.fn: np.asarray(_fn(t, st, prm)), s, ds,
-                                       o.batched)
-            else:
-                v = np.asarray(o.fn(t, s, params))
-                if ds is not None and o.linear:
-                    g = np.asarray(o.fn(t, ds, params))
-            out[oid] = Sample(t, v, g, g, None)
-        return out
+    def start(self, params: Any, partials: Any | None, stacked_one: Any | None) -> None:
+        """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
+        sensitivities) and ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
+        model does not evaluate batches)."""
+        self._params, self._partials, self._params_one = params, partials, stacked_one
+        if partials is not None:
+            self.block = max(1, min(self.block, self.BATCH_STATES // partials.block_entries))
 
-    def observe(self, step: int, t: Any, samples: dict[int, Sample], dt: float) -> bool:
-        """Feed one step; returns True when a terminating event fired (the run stops)."""
-        fired = None
-        if self._prev is not None:
-            best = None
-            for ev in self.events:
-                e0 = self._prev[ev.output_id].value[ev.component] - ev.level
-                e1 = samples[ev.output_id].value[ev.component] - ev.level
-                r0, r1 = float(np.real(e0)), float(np.real(e1))
-                up = r0 < 0.0 <= r1
-                down = r0 > 0.0 >= r1
-                if (ev.direction == "rising" and up) or (ev.direction == "falling" and down) or \
-                        (ev.direction == "either" and (up or down)):
-                    theta = -e0 / (e1 - e0)
-                    if best is None or np.real(theta) < np.real(best[1]):
-                        best = (ev, theta, e0, e1)
-            if best is not None:
-                fired = best
+    # ------------------------------------------------------------------ per step
+    def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float) -> bool:
+        """Take the converged state of one step (time t, s; step size dt, s); returns True when
+        a terminating event fired in this step (the run stops)."""
+        fired = self._detect(t, s)
+        self._pending.append((t, s, ds))
         if fired is None:
-            self._feed(samples)
-            self._prev = samples
+            if len(self._pending) >= self.block:
+                self._feed(self._evaluate())
             return False
+        block = self._evaluate()
+        if len(block) > 1:
+            self._feed(block.part(0, len(block) - 1))
+        assert self._last is not None, "an event needs the instant before it"
         ev, theta, e0, e1 = fired
-        prev = self._prev
-        assert prev is not None
-        g0 = prev[ev.output_id].grad
-        g1 = samples[ev.output_id].grad
-        dtheta = None
-        if g0 is not None and g1 is not None:
-            de0, de1 = g0[ev.component], g1[ev.component]
-            dtheta = -(de0 * (e1 - e0) - e0 * (de1 - de0)) / (e1 - e0) ** 2
-        frac = theta if ev.location == "interpolate" else 1.0
-        t_event = prev[ev.output_id].t + frac * dt
-        dt_dx = None if dtheta is None else dt * dtheta
-        event_samples = {}
-        for oid, smp in samples.items():
-            p = prev[oid]
-            dv = smp.value - p.value
-            value = p.value + frac * dv
-            g_fixed = g_total = None
-            if smp.grad is not None and p.grad is not None:
-                g_fixed = p.grad + frac * (smp.grad - p.grad)
-                g_total = g_fixed + np.outer(dv, dtheta)
-            event_samples[oid] = Sample(t_event, value, g_total, g_fixed, dt_dx)
-        self.fired[ev.name] = EventRecord(t_event, dt_dx, step)
-        self._feed(event_samples)
-        self.end_time, self.end_dt_dx = t_event, dt_dx
+        self._fire(ev, theta, e0, e1, self._last, block.part(len(block) - 1, len(block)), dt, step)
         return True
 
-    def _feed(self, samples: dict[int, Sample]) -> None:
+    def _detect(self, t: Any, s: StepState) -> tuple[EventSpec, Any, Any, Any] | None:
+        """The first event whose watched value crossed its level since the last step."""
+        if not self.events:
+            return None
+        now = {oid: np.asarray(self.outputs[oid].fn(t, s, self._params)) for oid in self._event_oids}
+        prev, self._event_prev = self._event_prev, now
+        if prev is None:
+            return None
+        best = None
+        for ev in self.events:
+            e0 = prev[ev.output_id][ev.component] - ev.level
+            e1 = now[ev.output_id][ev.component] - ev.level
+            r0, r1 = float(np.real(e0)), float(np.real(e1))
+            up = r0 < 0.0 <= r1
+            down = r0 > 0.0 >= r1
+            if (ev.direction == "rising" and up) or (ev.direction == "falling" and down) or \
+                    (ev.direction == "either" and (up or down)):
+                theta = -e0 / (e1 - e0)
+                if best is None or np.real(theta) < np.real(best[1]):
+                    best = (ev, theta, e0, e1)
+        return best
+
+    def _fire(self, ev: EventSpec, theta: Any, e0: Any, e1: Any, prev: Samples, cur: Samples,
+              dt: float, step: int) -> None:
+        """Feed the event instant, interpolated between the last step and this one."""
+        oid, c = ev.output_id, ev.component
+        g0, g1 = prev.grad[oid], cur.grad[oid]
+        dtheta = None
+        if g0 is not None and g1 is not None:
+            de0, de1 = g0[0, c], g1[0, c]
+            dtheta = -(de0 * (e1 - e0) - e0 * (de1 - de0)) / (e1 - e0) ** 2
+        frac = theta if ev.location == "interpolate" else 1.0
+        t_event = prev.t[0] + frac * dt
+        dt_dx = None if dtheta is None else dt * dtheta
+        value, grad, grad_fixed = {}, {}, {}
+        for k in cur.value:
+            dv = cur.value[k] - prev.value[k]
+            value[k] = prev.value[k] + frac * dv
+            pg, cg = prev.grad[k], cur.grad[k]
+            grad[k] = grad_fixed[k] = None
+            if pg is not None and cg is not None:
+                grad_fixed[k] = pg + frac * (cg - pg)
+                grad[k] = grad_fixed[k] + dv[:, :, None] * dtheta
+        self.fired[ev.name] = EventRecord(t_event, dt_dx, step)
+        self._feed(Samples(np.array([t_event]), value, grad, grad_fixed, dt_dx))
+        self.end_time, self.end_dt_dx = t_event, dt_dx
+
+    # ------------------------------------------------------------------ per block
+    def _evaluate(self) -> Samples:
+        """The outputs at the pending steps, with total gradients when they carry sensitivities."""
+        steps, self._pending = self._pending, []
+        times = np.array([t for t, _, _ in steps])
+        states = [s for _, s, _ in steps]
+        dstates = [ds for _, _, ds in steps]
+        partials = self._partials if dstates[0] is not None else None
+        stacked_s: StepState | None = None
+        value: dict[int, np.ndarray] = {}
+        grad: dict[int, np.ndarray | None] = {}
+        for oid, o in enumerate(self.outputs):
+            if o.linear:
+                # linear in the state, independent of the design: ∇v = fn(∇state)
+                value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
+                grad[oid] = None if partials is None else \
+                    np.stack([np.asarray(o.fn(t, ds, self._params)) for t, ds in zip(times, dstates)])
+            elif o.batched and o.autonomous and (partials is not None or self._params_one is not None):
+                # one call for all steps (and directions); t is irrelevant to the output
+                if partials is not None:
+                    value[oid], grad[oid] = partials.value_and_total_block(
+                        lambda st, prm, _fn=o.fn: np.asarray(_fn(times[-1], st, prm)), states, dstates)
+                else:
+                    if stacked_s is None:
+                        stacked_s = StepState(*(np.stack(v) for v in zip(*states)))
+                    value[oid], grad[oid] = np.asarray(o.fn(times[-1], stacked_s, self._params_one)), None
+            elif partials is not None:
+                pairs = [partials.value_and_total(lambda st, prm, _fn=o.fn, _t=t: np.asarray(_fn(_t, st, prm)),
+                                                  s, ds, o.batched)
+                         for t, s, ds in zip(times, states, dstates)]
+                value[oid] = np.stack([v for v, _ in pairs])
+                grad[oid] = np.stack([g for _, g in pairs])
+            else:
+                value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
+                grad[oid] = None
+        return Samples(times, value, grad, dict(grad))
+
+    def _feed(self, samples: Samples) -> None:
         for r in self.responses:
             if r.output_ids:
                 r.feed(samples)
+        self._last = samples.part(len(samples) - 1, len(samples))
 
     def close(self, t_end: Any, m: int) -> None:
-        """Mark the last fed sample as the end of a run that reached its end time."""
+        """Evaluate the steps still pending; mark the end of a run that reached its end time."""
+        if self._pending:
+            self._feed(self._evaluate())
         if self.end_time is None:
             self.end_time = t_end
             self.end_dt_dx = np.zeros(m) if m else None

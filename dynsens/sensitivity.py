@@ -107,12 +107,12 @@ class DesignPartials:
         return [model.parameters(self.x + 1j * d) for d in dx]
 
     def _differences(self, F: np.ndarray, groups: int) -> np.ndarray:
-        """Undivided differences (k, groups) from the values (k, B) of a batch of ``groups``
+        """Undivided differences (..., groups) from the values (..., B) of a batch of ``groups``
         perturbations (forward: base first; central: all + then all −; complex: imaginary parts)."""
         if self.method == "forward":
-            return F[:, 1:] - F[:, :1]
+            return F[..., 1:] - F[..., :1]
         if self.method == "central":
-            return F[:, :groups] - F[:, groups:]
+            return F[..., :groups] - F[..., groups:]
         return np.imag(F)
 
     @property
@@ -121,7 +121,7 @@ class DesignPartials:
         return 2.0 * self.h if self.method == "central" else self.h
 
     def _combine(self, F: np.ndarray) -> np.ndarray:
-        """Difference quotients (k, m) from the values (k, B) of the batch entries."""
+        """Difference quotients (..., m) from the values (..., B) of the batch entries."""
         return self._differences(F, self.m) / self._divisor
 
     def residual_partials(self, t: float, s: StepState) -> np.ndarray:
@@ -169,6 +169,53 @@ class DesignPartials:
                              else np.zeros((len(self._batch), 0)) for v, dv in zip(s, ds)))
         self._states = (s, ds, states)
         return states
+
+    @property
+    def block_entries(self) -> int:
+        """States per step in :meth:`value_and_total_block`: the batch, plus the unperturbed
+        state unless the batch starts with it (forward differences)."""
+        return len(self._batch) + (self.method != "forward")
+
+    def value_and_total_block(self, fn: Callable[[StepState, Any], np.ndarray], states: list[StepState],
+                              dstates: list[StepState]) -> tuple[np.ndarray, np.ndarray]:
+        """Values (K, k) and total derivatives (K, k, m) of a batched fn at K states with their
+        sensitivities, in one call: every step's unperturbed state and its directions (the
+        same differences as :meth:`value_and_total`).  fn must not depend on time explicitly.
+        Calls with the same ``states`` list share its batch of states (and the model's
+        kinematics of it)."""
+        K, E = len(states), self.block_entries
+        F = np.asarray(fn(self._block_directions(states, dstates), self._block_parameters(K)))
+        F = F.reshape(K, E, -1).transpose(0, 2, 1)                             # (K, k, E)
+        value = F[..., 0].real if self.method == "complex" else F[..., 0]
+        return value, self._combine(F[..., 1:] if self.method != "forward" else F)
+
+    def _block_directions(self, states: list[StepState], dstates: list[StepState]) -> StepState:
+        """Leaves (K·E, n): for each step, its state and the states along its directions."""
+        last = self.__dict__.get("_block_states")
+        if last is not None and last[0] is states:
+            return last[1]
+        K, E = len(states), self.block_entries
+        base = self.method != "forward"
+        col = np.concatenate([[0], self._col]) if base else self._col
+        coef = np.concatenate([[0.0], self._coef]) if base else self._coef
+        leaves = []
+        for v, dv in zip(zip(*states), zip(*dstates)):
+            if v[0].size == 0:
+                leaves.append(np.zeros((K * E, 0)))
+                continue
+            V, dV = np.stack(v), np.stack(dv)                              # (K, n), (K, n, m)
+            leaves.append((V[:, None, :] + (dV[:, :, col] * coef).transpose(0, 2, 1)).reshape(K * E, -1))
+        out = StepState(*leaves)
+        self._block_states = (states, out)          # keeps the list alive: identity stays unique
+        return out
+
+    def _block_parameters(self, K: int) -> Any:
+        """The model's stacked parameters of K copies of the block entries (cached per K)."""
+        cache = self.__dict__.setdefault("_block_stacks", {})
+        if K not in cache:
+            entries = self._batch if self.method == "forward" else [self.params0] + self._batch
+            cache[K] = self.model.stack_parameters(entries * K)
+        return cache[K]
 
     @property
     def evaluations_per_call(self) -> int:

@@ -149,6 +149,8 @@ class Output:
     the sensitivity state (no numerical differentiation needed).  ``batched`` declares that fn
     accepts state leaves with a leading batch axis together with the model's stacked
     parameters (``Model.stack_parameters``), so all gradient directions take one call.
+    ``autonomous`` declares that fn depends on time only through the state, so a block of
+    steps (a batch of states at different times) is evaluated in one call as well.
     """
 
     fn: OutputFn
@@ -156,6 +158,7 @@ class Output:
     unit: str = ""
     linear: bool = False
     batched: bool = False
+    autonomous: bool = False
 
 
 class ParameterTable:

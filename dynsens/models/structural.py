@@ -92,7 +92,7 @@ class StructuralModel(Model):
         self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
-        self._stacked: tuple[int, dict[str, Any]] | None = None
+        self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
@@ -285,8 +285,8 @@ class StructuralModel(Model):
         """F_R for several parameter sets at one state, vectorized: (n, B)."""
         if self.traits.sparse:
             return super().residual_batch(t, s, params_list)
-        if self._stacked is None or self._stacked[0] != id(params_list):
-            self._stacked = (id(params_list), self.stack_parameters(params_list))
+        if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
+            self._stacked = (params_list, self.stack_parameters(params_list))
         st = self._stacked[1]
         R = st["mass"] * s.qdd + self._internal_force(s.q, st)
         R = R - self.external_force(t, st)
@@ -403,7 +403,7 @@ class StructuralModel(Model):
         if springs:
             si = np.array(springs)
             return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i)[0],
-                          tuple(f"{n}.force" for n in names), "", batched=True)
+                          tuple(f"{n}.force" for n in names), "", batched=True, autonomous=True)
         bi = np.array(bars)
 
         def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
@@ -415,7 +415,7 @@ class StructuralModel(Model):
             return (prm["E"] * bs["strain"])[..., _i]
 
         return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "",
-                      batched=True)
+                      batched=True, autonomous=True)
 
 
 # ---------------------------------------------------------------------- builder

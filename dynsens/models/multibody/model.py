@@ -94,7 +94,7 @@ class MultibodyModel(Model):
         self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
         self._kin = KinCache(self.layout)
         self._eval: tuple[tuple[Any, ...], Evaluation, tuple[Array, Array, Array]] | None = None
-        self._stacked: tuple[int, KParams] | None = None
+        self._stacked: tuple[list[MBParams], KParams] | None = None
         lay = self.layout
         self._cf0 = np.zeros((1, lay.n_cp, 3))
         self._cf0[..., 0] = 1.0
@@ -210,8 +210,9 @@ class MultibodyModel(Model):
 
     def stack_parameters(self, params_list: list[MBParams]) -> KParams:
         """The kernel parameters of all sets stacked along a leading batch axis (cached on the list)."""
-        if self._stacked is None or self._stacked[0] != id(params_list):
-            self._stacked = (id(params_list), stack_kernel_params(
+        # the entry keeps its list alive: a new list cannot take over its identity
+        if self._stacked is None or self._stacked[0] is not params_list:
+            self._stacked = (params_list, stack_kernel_params(
                 [kernel_params(self.layout, p) for p in params_list]))
         return self._stacked[1]
 

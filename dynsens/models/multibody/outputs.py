@@ -17,7 +17,8 @@ Spec forms (``quantity:`` in a case):
 All functions are complex-safe.  Quantities that are linear in the state and independent of
 the design are declared ``linear``; joint reaction forces, body angles and angular
 velocities, cylinder and spring quantities are ``batched`` (evaluated from the kernel's
-kinematics for all gradient directions in one call).
+kinematics for all gradient directions in one call) and ``autonomous`` (a block of steps in
+one call; reaction forces only without time-dependent constraint coefficients).
 """
 from __future__ import annotations
 
@@ -174,7 +175,8 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
                 f = force(t, s, prm)
                 return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
-            return Output(rfn, labs, batched=True)
+            # t enters only through time-dependent constraint coefficients (driving joints)
+            return Output(rfn, labs, batched=True, autonomous=not model.layout.coefs)
 
         def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
             f, n, ctx = _joint_load(model, _jt, t, s, prm)
@@ -214,7 +216,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
                 v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
                 v = v if _k == "angular_velocity" else v[2:3]
             return v.T if s.q.ndim == 2 else v[:, 0]
-        return Output(fn, labels, "rad" if kind == "angle_z" else "", batched=True)
+        return Output(fn, labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
     if head == "marker":
         from .spec import Reader
         if not isinstance(name, str) or "." not in name:
@@ -246,13 +248,14 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         if kind in ("pressure_1", "pressure_2"):
             j = cyl.p_index + (kind == "pressure_2")
             return Output(lambda t, s, prm: s.p[j:j + 1], (f"{name}.{kind}",), linear=True)
-        return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True)
+        # the push force depends on the state only (t enters the pressure rates: pump flow)
+        return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
     if name in springs:
         spr = springs[name]
         if kind not in SPRING_KINDS:
             problems.add(f"{path}.kind", f"unknown spring quantity {kind!r}{did_you_mean(kind, SPRING_KINDS)}")
             return None
-        return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True)
+        return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
     allnames = list(cyls) + list(springs)
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")
