@@ -50,8 +50,8 @@ class Prediction(NamedTuple):
     q: np.ndarray
     qd: np.ndarray
     p: np.ndarray
-    a_rest: np.ndarray
-    b_rest: np.ndarray
+    a_rest: np.ndarray | float   # 0.0 for plain Newmark (α_m = α_f = 0)
+    b_rest: np.ndarray | float
 
 
 @dataclass(frozen=True)
@@ -86,10 +86,13 @@ class Newmark:
         """Predictor from the state at the previous step (vectors or (n, m) matrices)."""
         b, g, am, af = self.beta, self.gamma, self.alpha_m, self.alpha_f
         if am == 0.0 and af == 0.0:
-            a_rest, b_rest = 0.0 * aux.a, 0.0 * aux.b
-        else:
-            a_rest = (af * s.qdd - am * aux.a) / (1.0 - am)
-            b_rest = (af * s.pd - am * aux.b) / (1.0 - am)
+            # plain Newmark: no remainder terms (the predictor is evaluated every step, also for
+            # the (n, m) sensitivity matrices)
+            return Prediction(s.q + dt * s.qd + (dt * dt * (0.5 - b)) * aux.a,
+                              s.qd + (dt * (1.0 - g)) * aux.a,
+                              s.p + (dt * (1.0 - g)) * aux.b, 0.0, 0.0)
+        a_rest = (af * s.qdd - am * aux.a) / (1.0 - am)
+        b_rest = (af * s.pd - am * aux.b) / (1.0 - am)
         return Prediction(
             s.q + dt * s.qd + dt * dt * ((0.5 - b) * aux.a + b * a_rest),
             s.qd + dt * ((1.0 - g) * aux.a + g * a_rest),
@@ -107,6 +110,8 @@ class Newmark:
     def advance(self, pred: Prediction, s: StepState) -> Aux:
         """Algorithmic accelerations of the new step."""
         c = self._c_a
+        if c == 1.0:
+            return Aux(pred.a_rest + s.qdd, pred.b_rest + s.pd)
         return Aux(pred.a_rest + c * s.qdd, pred.b_rest + c * s.pd)
 
 

@@ -50,12 +50,16 @@ class Counters:
 
 
 class Factor:
-    """A factorized square matrix; ``solve(rhs)`` for rhs (n,) or (n, k)."""
+    """A factorized square matrix; ``solve(rhs)`` for rhs (n,) or (n, k).
 
-    def __init__(self, S: Any, counters: Counters):
+    ``dense_general`` skips the test for a diagonal matrix: a caller that has seen the
+    structure of its matrices (a dense, non-diagonal iteration matrix stays one) says so.
+    """
+
+    def __init__(self, S: Any, counters: Counters, dense_general: bool = False):
         self.counters = counters
         self.n = S.shape[0]
-        diag = _diagonal_or_none(S)
+        diag = None if dense_general else _diagonal_or_none(S)
         counters.factorizations += 1
         if diag is not None:
             # a diagonal matrix is its own factorization: invert elementwise
@@ -74,7 +78,9 @@ class Factor:
             udiag = self._lu.U.diagonal()
         else:
             self._kind = "dense"
-            if not np.all(np.isfinite(S)):
+            # one reduction: a NaN or Inf entry makes the sum non-finite (so may an overflowing
+            # sum of finite entries: then look at the entries)
+            if not np.isfinite(S.sum()) and not np.all(np.isfinite(S)):
                 raise SingularMatrixError("matrix has non-finite entries")
             # LAPACK getrf/getrs directly: scipy's lu_factor/lu_solve wrappers cost more
             # than the factorization itself for the small matrices of mechanisms
@@ -90,6 +96,11 @@ class Factor:
             lo, scale = a.min(), a.max()
             if lo <= 1e-14 * scale or scale == 0.0:
                 raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
+
+    @property
+    def kind(self) -> str:
+        """``diag``, ``dense`` or ``sparse``: how S was factorized."""
+        return self._kind
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve S x = rhs; rhs (n,) or (n, k), real or complex."""

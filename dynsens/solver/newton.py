@@ -98,6 +98,7 @@ class StepSolver:
         self._scales = np.zeros(3)
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
         self._S: Any = None  # the last iteration matrix, for the round-off test
+        self._dense_general = False
 
     def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         b = self._blocks
@@ -111,7 +112,8 @@ class StepSolver:
         lin = self.model.linearize(t, s, params)
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
         self._S = S
-        factor = Factor(S, self.counters)
+        factor = Factor(S, self.counters, dense_general=self._dense_general)
+        self._dense_general = factor.kind == "dense"   # the structure of S does not change
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
         if not self.refactor:
