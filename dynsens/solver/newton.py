@@ -95,7 +95,7 @@ class StepSolver:
                         slice(t.n_q + t.n_lam, t.n_z)]
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._starts = np.array([self._blocks[k].start for k in self._present], dtype=np.intp)
-        self._scales = np.zeros(3)
+        self._scales = [0.0, 0.0, 0.0]   # largest block norms of z so far
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
         self._S: Any = None  # the last iteration matrix, for the round-off test
         self._dense_general = False
@@ -200,24 +200,27 @@ class StepSolver:
         return (f"{head}: first in the equation of {where}; check the parameters of the elements "
                 "acting there, the initial conditions and the time step")
 
-    def _block_norms(self, v: np.ndarray) -> np.ndarray:
-        """2-norms of the real parts of the present blocks of v (one reduction; the overflow-safe
-        :func:`_real_norm` per block when the squares overflow)."""
-        r = v.real
-        sq = np.add.reduceat(r * r, self._starts)
-        if np.all(sq < 1e300):
-            return np.sqrt(sq)
-        return np.array([_real_norm(v[self._blocks[k]]) for k in self._present])
+    def _block_norms(self, z: np.ndarray, dz: np.ndarray) -> tuple[list[float], list[float]]:
+        """2-norms of the real parts of the present blocks of z and dz (one reduction for both;
+        the overflow-safe :func:`_real_norm` per block when the squares overflow)."""
+        r = np.stack((z.real, dz.real))
+        sq = np.add.reduceat(r * r, self._starts, axis=1)
+        if sq.max() < 1e300:
+            zn, dzn = np.sqrt(sq).tolist()
+            return zn, dzn
+        return ([_real_norm(z[self._blocks[k]]) for k in self._present],
+                [_real_norm(dz[self._blocks[k]]) for k in self._present])
 
     def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
         st = self.settings
         ok = True
-        zn, dzn = self._block_norms(z), self._block_norms(dz)
+        zn, dzn = self._block_norms(z, dz)
+        scales = self._scales
         for i, k in enumerate(self._present):
-            self._scales[k] = max(self._scales[k], zn[i])
+            scales[k] = max(scales[k], zn[i])
             # a block that has been exactly zero so far (accelerations of a static start) has
             # no scale of its own: measure its correction against the whole unknown vector
-            ref = max(zn[i], self._scales[k]) if self._scales[k] > 0 else _real_norm(z)
+            ref = max(zn[i], scales[k]) if scales[k] > 0 else _real_norm(z)
             if dzn[i] > st.rtol * ref + st.atol:
                 ok = False
         return ok

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from . import compiled as cc
 from .bodies import GROUND, Const, Diff, Direction, MBParams, Point, Term
 from .joints import ONE, DotEq, Equation, NormEq
 from .rotations import matmul_real, point_tensor, rmatmul
@@ -322,7 +323,6 @@ class CompiledKin(Kin):
     kernel (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp))."""
 
     def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array):
-        from . import compiled as cc
         self.lay, self.kp = lay, kp
         self.dtype = dt = np.result_type(q, qd, qdd, kp.pv)          # float64 or complex128
         self.arrays = cl = lay.compiled_arrays()
@@ -397,9 +397,8 @@ class KinCache:
     arrays are treated as immutable: the solver creates new ones for every iterate."""
 
     def __init__(self, lay: Layout, size: int = 4):
-        from .compiled import enabled
         self.lay, self.size = lay, size
-        self.compiled = enabled()        # decided once per model (DYNSENS_KERNEL)
+        self.compiled = cc.enabled()        # decided once per model (DYNSENS_KERNEL)
         self._items: list[tuple[tuple[Any, ...], tuple[Array, Array, Array], Kin]] = []
 
     def get(self, kp: KParams, q: Array, qd: Array, qdd: Array) -> Kin:

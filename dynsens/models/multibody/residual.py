@@ -108,12 +108,15 @@ class Evaluation:
         val = np.asarray(pf.fn.value(self.t, pv))
         return pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
 
-    def _compiled_forces_and_residual(self) -> None:
-        """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
-        time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
-        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
-        cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
-        cf, shift = m.coefficients(t, kp)
+    def _inputs(self) -> tuple[Array, Array, Array]:
+        """Element inputs (B, n_ax), applied point forces on the primitives (·, n_t, 3) and
+        gravity (·, 3) at time t in the kinematics' dtype; kept on the parameter sets for the
+        last t (Newton evaluates all iterates of a step at one time; the arrays are read-only)."""
+        m, kp, lay, t, dt = self.model, self.kp, self.model.layout, self.t, self.kin.dtype
+        cache = kp.__dict__.setdefault("_inputs", {})
+        hit = cache.get(dt.char)
+        if hit is not None and hit[0] == t:
+            return hit[1]
         ext = np.zeros((kp.B, len(lay.axial)), dt)
         for i, el in enumerate(lay.axial):
             ext[:, i] = el.external(t, kp.pv)
@@ -121,8 +124,21 @@ class Evaluation:
         for pf, j in zip(m.point_forces, lay.point_prim):
             if j >= 0:
                 f_ext[:, j] -= self._point_force(pf)
-        g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], dt) if m.gravity is not None \
-            else np.zeros((1, 3), dt)
+        if hit is not None:
+            g = hit[1][2]                                   # gravity does not depend on t
+        else:
+            g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], dt) if m.gravity is not None \
+                else np.zeros((1, 3), dt)
+        cache[dt.char] = (t, (ext, f_ext, g))
+        return ext, f_ext, g
+
+    def _compiled_forces_and_residual(self) -> None:
+        """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
+        time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
+        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
+        cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
+        cf, shift = m.coefficients(t, kp)
+        ext, f_ext, g = self._inputs()
         (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
