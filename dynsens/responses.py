@@ -324,11 +324,13 @@ class ResponseSet:
     outputs : the distinct outputs needed (ids are list indices).
     responses : in dependency order (combinations last).
     events : terminating events.
-    block : most steps evaluated together (fewer when many gradient directions make the
-        batch large: at most ``BATCH_STATES`` states per call).
+    block : most steps evaluated together (fewer when many gradient directions or a large
+        state make the batch large: at most ``BATCH_STATES`` states and ``BATCH_VALUES`` state
+        entries per call, which also bounds the stacked parameter sets of large models).
     """
 
     BATCH_STATES = 2048
+    BATCH_VALUES = 250_000
 
     def __init__(self, outputs: list[Output], responses: list[Response], events: list[EventSpec],
                  block: int = 128):
@@ -347,13 +349,14 @@ class ResponseSet:
         self._partials: Any = None
         self._params_one: Any = None
 
-    def start(self, params: Any, partials: Any | None, stacked_one: Any | None) -> None:
+    def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int) -> None:
         """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
-        sensitivities) and ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
-        model does not evaluate batches)."""
+        sensitivities), ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
+        model does not evaluate batches) and the size of a state (n_z)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
-        if partials is not None:
-            self.block = max(1, min(self.block, self.BATCH_STATES // partials.block_entries))
+        entries = partials.block_entries if partials is not None else 1
+        self.block = max(1, min(self.block, self.BATCH_STATES // entries,
+                                self.BATCH_VALUES // (entries * max(n_state, 1))))
 
     # ------------------------------------------------------------------ per step
     def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float) -> bool:
