@@ -11,7 +11,7 @@ import pytest
 
 import dynsens
 from conftest import CASES
-from dynsens.models.base import StepState
+from dynsens.models.base import Linearization, StepState
 from dynsens.models.multibody import compiled
 from dynsens.models.multibody.kernel import CompiledKin, Kin
 
@@ -61,6 +61,13 @@ def test_residual_and_linearization_match_numpy(name, t_end, monkeypatch):
             assert (a is None) == (b is None), block
             if b is not None:
                 _close(a, b, f"{name} {block} at t = {t}")
+        # the compiled kernel assembles the iteration matrix too: the same arithmetic as the
+        # generic dense assembly, for the step coefficients and for those of the initial solve
+        n_q = cmp_.model.traits.n_q
+        generic = Linearization(lc.R_z, lc.R_q, lc.R_qd, lc.R_p)
+        for coeffs in ((2.5e-7, 1e-3, 1e-3), (0.0, 0.0, 0.0)):
+            assert np.array_equal(lc.iteration_matrix(*coeffs, n_q=n_q),
+                                  generic.iteration_matrix(*coeffs, n_q=n_q)), coeffs
 
 
 @pytest.mark.parametrize("name, t_end", MECHANISMS)

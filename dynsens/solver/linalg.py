@@ -69,7 +69,7 @@ class Factor:
             self._inv = 1.0 / diag
             counters.diagonal_inversions += 1
             return
-        if sp.issparse(S):
+        if not dense_general and sp.issparse(S):
             self._kind = "sparse"
             try:
                 self._lu = spla.splu(sp.csc_matrix(S))
@@ -89,11 +89,11 @@ class Factor:
             if info > 0:
                 raise SingularMatrixError(f"exactly zero pivot in column {info}")
             self._lu = (lu, piv)
-            self._complex = np.iscomplexobj(lu)
-            udiag = np.diagonal(lu)
+            self._complex = lu.dtype.kind == "c"
+            udiag = lu.diagonal()
         if udiag.size:
             a = np.abs(udiag)
-            lo, scale = a.min(), a.max()
+            lo, scale = np.minimum.reduce(a), np.maximum.reduce(a)
             if lo <= 1e-14 * scale or scale == 0.0:
                 raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
 

@@ -591,4 +591,19 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
     return R_z, R_q, R_qd, R_p
 
 
+@jit
+def iteration_matrix(R_z: Array, R_q: Array, R_qd: Array, R_p: Array, c_q: float, c_qd: float,
+                     c_p: float) -> Array:
+    """S = R_z + [c_q R_q + c_qd R_qd, 0, c_p R_p] (method.md §3), in the order of
+    :meth:`.base.Linearization.iteration_matrix`'s arithmetic."""
+    n_z, n_q, n_p = R_z.shape[0], R_q.shape[1], R_p.shape[1]
+    S = R_z.copy()
+    for i in range(n_z):
+        for j in range(n_q):
+            S[i, j] += c_q * R_q[i, j] + c_qd * R_qd[i, j]
+        for k in range(n_p):
+            S[i, n_z - n_p + k] += c_p * R_p[i, k]
+    return S
+
+
 TG = np.ascontiguousarray(T_G, dtype=float)

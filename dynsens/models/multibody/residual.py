@@ -55,6 +55,14 @@ def _GTv(v: Array) -> Array:
     return (v @ _TG_V).reshape(v.shape[:-1] + (4, 4))
 
 
+class CompiledLinearization(Linearization):
+    """A dense linearization of the compiled kernel: the iteration matrix is assembled by it
+    too (one call instead of a handful of array operations per Newton iteration)."""
+
+    def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Array:
+        R_p = self.R_p if self.R_p is not None else np.zeros((self.R_z.shape[0], 0), self.R_z.dtype)
+        return cc.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
+
 class Evaluation:
     """Residual pieces at one (batched) state; :meth:`residual` and :meth:`linearization`.
 
@@ -265,7 +273,7 @@ class Evaluation:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
             R_q[:tr.n_q] -= Kq
             R_qd[:tr.n_q] -= Kqd
-        return Linearization(R_z, R_q, R_qd, R_p if tr.n_p else None)
+        return CompiledLinearization(R_z, R_q, R_qd, R_p if tr.n_p else None)
 
     def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
         """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""
