@@ -324,13 +324,14 @@ class ResponseSet:
     outputs : the distinct outputs needed (ids are list indices).
     responses : in dependency order (combinations last).
     events : terminating events.
-    block : most steps evaluated together (fewer when many gradient directions or a large
-        state make the batch large: at most ``BATCH_STATES`` states and ``BATCH_VALUES`` state
-        entries per call, which also bounds the stacked parameter sets of large models).
+    block : most steps evaluated together (fewer when many gradient directions, a large state
+        or large parameter sets make the batch large: at most ``BATCH_STATES`` states,
+        ``BATCH_VALUES`` state entries and ``BATCH_BYTES`` of stacked parameter sets per call).
     """
 
     BATCH_STATES = 2048
     BATCH_VALUES = 250_000
+    BATCH_BYTES = 32 * 2**20
 
     def __init__(self, outputs: list[Output], responses: list[Response], events: list[EventSpec],
                  block: int = 128):
@@ -355,8 +356,12 @@ class ResponseSet:
         model does not evaluate batches) and the size of a state (n_z)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
         entries = partials.block_entries if partials is not None else 1
+        # the parameter sets are stacked once per entry and step of a block (without
+        # sensitivities one set serves the whole block)
+        set_bytes = partials.parameter_set_bytes if partials is not None else 0
         self.block = max(1, min(self.block, self.BATCH_STATES // entries,
-                                self.BATCH_VALUES // (entries * max(n_state, 1))))
+                                self.BATCH_VALUES // (entries * max(n_state, 1)),
+                                self.BATCH_BYTES // max(entries * set_bytes, 1)))
 
     # ------------------------------------------------------------------ per step
     def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float) -> bool:

@@ -171,6 +171,17 @@ class DesignPartials:
         return states
 
     @property
+    def parameter_set_bytes(self) -> int:
+        """Memory (bytes) of one set of the model's stacked parameters (0 when the model does
+        not stack them): what a block of output evaluations holds per entry."""
+        if self._stacked is None:
+            return 0
+        held = self._stacked.values() if isinstance(self._stacked, dict) else vars(self._stacked).values()
+        arrays = [a for v in held for a in (v if isinstance(v, (list, tuple)) else [v])
+                  if isinstance(a, np.ndarray)]
+        return sum(a.nbytes for a in arrays) // max(len(self._batch), 1)
+
+    @property
     def block_entries(self) -> int:
         """States per step in :meth:`value_and_total_block`: the batch, plus the unperturbed
         state unless the batch starts with it (forward differences)."""
