@@ -18,7 +18,7 @@ from .errors import ConvergenceError, NonFiniteError
 from .integrators.newmark import Aux, Newmark, Prediction
 from .models.base import Model, StepState
 from .responses import ResponseSet, ResponseValue
-from .sensitivity import DesignPartials, initial_state_gradient, pseudo_load
+from .sensitivity import DesignPartials, initial_state_gradient, pseudo_load, pseudo_load_with
 from .solver.linalg import Counters
 from .solver.newton import NewtonSettings, StepSolver
 
@@ -107,6 +107,20 @@ def _check_finite(s: StepState, t: float, step: int, labels: list[str]) -> None:
                 "reduce the time step or check parameters and loads")
 
 
+TRAIL_STEPS = 128
+TRAIL_BYTES = 32 * 2**20
+
+
+def _trail_length(traits: Any, m: int) -> int:
+    """Steps the sensitivities may trail the state: up to TRAIL_STEPS, while the held dense
+    linearizations and factors (≈ 4 n_z² + 6 m n_z numbers per step) stay within TRAIL_BYTES;
+    one step (no trail) for sparse models, whose factors are large."""
+    if traits.sparse:
+        return 1
+    per_step = 8 * (4 * traits.n_z * traits.n_z + 6 * m * traits.n_z)
+    return max(1, min(TRAIL_STEPS, TRAIL_BYTES // per_step))
+
+
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
               responses: ResponseSet, *, design_names: tuple[str, ...] = (),
               design_scale: np.ndarray | None = None,
@@ -171,28 +185,39 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     responses.start(params, partials, None if partials is not None else model.stack_parameters([params]),
                     tr.n_z)
 
-    def record(k: int, t: float, st: StepState, dst: StepState | None) -> None:
+    def record(k: int, t: float, st: StepState) -> None:
         times[k] = t
         for f in hist_fields:
             hist[f][k] = getattr(st, f)
-        if store_sens and dst is not None:
-            for f in hist_fields:
-                shist[f][k] = getattr(dst, f)
         if mon_names:
             for name, val in model.monitors(t, st, params).items():
                 mons[name][k] = val
 
-    record(0, plan.t0, s, ds)
-    responses.push(0, plan.t0, s, ds, 0.0)
+    def record_sensitivities(k: int, dst: StepState) -> None:
+        for f in hist_fields:
+            shist[f][k] = getattr(dst, f)
+
+    record(0, plan.t0, s)
+    if store_sens and ds is not None:
+        record_sensitivities(0, ds)
+    responses.push(0, plan.t0, s, ds, 0.0, responses.watch(plan.t0, s))
     counters.output_evaluations += 1
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
     last = 0
     t = plan.t0
-    def take_step(i: int, t_prev: float, h: float, cuts: int, s: StepState, aux: Aux,
-                  ds: StepState | None, daux: Aux | None
-                  ) -> tuple[StepState, Aux, StepState | None, Aux | None]:
-        """Advance from t_prev by h (s); on Newton failure, halve the step (up to
-        plan.max_step_cuts times) — primal and sensitivities follow the steps taken."""
+
+    # The sensitivities trail the state by a block of steps: the explicit design partials of
+    # the block's converged states take one batched residual call (Model.residual_batch_steps),
+    # then each step solves S ∇z = −P with its own converged linearization and factor, in step
+    # order (method.md §4).  Sub-steps of step cuts are in the trail; the grid steps are marked.
+    trail: list[tuple[float, float, StepState, Any, Any]] = []      # (t, h, s, lin, factor)
+    marks: list[tuple[int, float, StepState, float, Any, int]] = []  # (i, t, s, h, event, trail index)
+    trail_length = _trail_length(tr, m) if partials is not None else 1
+
+    def take_step(i: int, t_prev: float, h: float, cuts: int, s: StepState, aux: Aux
+                  ) -> tuple[StepState, Aux]:
+        """Advance the state from t_prev by h (s); on Newton failure, halve the step (up to
+        plan.max_step_cuts times).  Every step taken joins the sensitivity trail."""
         t = t_prev + h
         pred = scheme.predict(s, aux, h)
         z_guess = np.concatenate([s.qdd, s.lam, s.pd])
@@ -209,38 +234,59 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
                 raise
             counters.step_cuts += 1
             half = 0.5 * h
-            s, aux, ds, daux = take_step(i, t_prev, half, cuts + 1, s, aux, ds, daux)
-            return take_step(i, t_prev + half, half, cuts + 1, s, aux, ds, daux)
+            s, aux = take_step(i, t_prev, half, cuts + 1, s, aux)
+            return take_step(i, t_prev + half, half, cuts + 1, s, aux)
         s_new = out.state
         _check_finite(s_new, t, i, labels)
         model.check_state(t, s_new, params)
-        aux_new = scheme.advance(pred, s_new)
-        if partials is not None and ds is not None and daux is not None:
-            dpred = scheme.predict(ds, daux, h)
-            P = pseudo_load(model, t, s_new, out.lin, dpred.q, dpred.qd, dpred.p, partials)
-            counters.sensitivity_residual_evaluations += partials.evaluations_per_call
+        if partials is not None:
             assert out.factor is not None
-            dz = solver.solve_sensitivity(out.factor, P)
-            ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
-            daux = scheme.advance(dpred, ds)
-        return s_new, aux_new, ds, daux
+            trail.append((t, h, s_new, out.lin, out.factor))
+        return s_new, scheme.advance(pred, s_new)
+
+    def catch_up() -> None:
+        """Sensitivities of the trailing steps, then the marked grid steps to the responses."""
+        nonlocal ds, daux
+        ds_of: list[StepState | None] = [None] * len(trail)
+        if partials is not None and trail and ds is not None and daux is not None:
+            design_part = partials.residual_partials_steps(np.array([e[0] for e in trail]),
+                                                           [e[2] for e in trail])
+            counters.sensitivity_residual_evaluations += partials.evaluations_per_call * len(trail)
+            for k, (_, h, _, lin, factor) in enumerate(trail):
+                dpred = scheme.predict(ds, daux, h)
+                P = pseudo_load_with(design_part[k], lin, dpred.q, dpred.qd, dpred.p)
+                dz = solver.solve_sensitivity(factor, P)
+                ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
+                daux = scheme.advance(dpred, ds)
+                ds_of[k] = ds
+        for i, t, s, h, event, k in marks:
+            dst = ds_of[k] if k >= 0 else None
+            if store_sens and dst is not None:
+                record_sensitivities(i, dst)
+            responses.push(i, t, s, dst, h, event)
+        trail.clear()
+        marks.clear()
 
     for i in range(1, n_steps + 1):
         h = plan.step_size(i)
         t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
-        s_new, aux, ds, daux = take_step(i, t_prev, h, 0, s, aux, ds, daux)
-        s = s_new
+        s, aux = take_step(i, t_prev, h, 0, s, aux)
         counters.steps += 1
-        record(i, t, s, ds)
+        record(i, t, s)
         last = i
         counters.output_evaluations += 1
-        if responses.push(i, t, s, ds, h):
+        event = responses.watch(t, s)
+        marks.append((i, t, s, h, event, len(trail) - 1))
+        if event is not None or len(marks) >= trail_length:
+            catch_up()
+        if event is not None:
             ev = next(reversed(responses.fired))
             status = "terminated"
             message = f"event '{ev}' at t = {float(np.real(responses.fired[ev].t)):.6g} s"
             break
         if progress is not None:
             progress(i, n_steps)
+    catch_up()
     responses.close(t, m)
 
     def mass() -> tuple[Any, np.ndarray | None]:

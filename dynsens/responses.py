@@ -315,6 +315,10 @@ class EventSpec:
     location: str = "interpolate"  # interpolate | step
 
 
+# an event that fired: its spec, the fraction ϑ of the step and the crossing values e0, e1
+EventHit = tuple[EventSpec, Any, Any, Any]
+
+
 class ResponseSet:
     """Collects the steps of a run in blocks, evaluates the outputs, detects events and feeds
     the responses.
@@ -364,24 +368,29 @@ class ResponseSet:
                                 self.BATCH_BYTES // max(entries * set_bytes, 1)))
 
     # ------------------------------------------------------------------ per step
-    def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float) -> bool:
-        """Take the converged state of one step (time t, s; step size dt, s); returns True when
-        a terminating event fired in this step (the run stops)."""
-        fired = self._detect(t, s)
+    def watch(self, t: Any, s: StepState) -> EventHit | None:
+        """The event that fired in the step that ended at (t, s), if any (values only: called at
+        every step, as soon as the step's state is known; the run stops when one fires)."""
+        return self._detect(t, s)
+
+    def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float,
+             fired: EventHit | None) -> None:
+        """Take one step (time t, s; state s with its sensitivities ds; step size dt, s) and what
+        :meth:`watch` said of it, in step order; the sensitivities may trail the state by a
+        block of steps, so a step is pushed once they are known."""
         self._pending.append((t, s, ds))
         if fired is None:
             if len(self._pending) >= self.block:
                 self._feed(self._evaluate())
-            return False
+            return
         block = self._evaluate()
         if len(block) > 1:
             self._feed(block.part(0, len(block) - 1))
         assert self._last is not None, "an event needs the instant before it"
         ev, theta, e0, e1 = fired
         self._fire(ev, theta, e0, e1, self._last, block.part(len(block) - 1, len(block)), dt, step)
-        return True
 
-    def _detect(self, t: Any, s: StepState) -> tuple[EventSpec, Any, Any, Any] | None:
+    def _detect(self, t: Any, s: StepState) -> EventHit | None:
         """The first event whose watched value crossed its level since the last step."""
         if not self.events:
             return None

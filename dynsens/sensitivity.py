@@ -127,14 +127,22 @@ class DesignPartials:
     def residual_partials(self, t: float, s: StepState) -> np.ndarray:
         """∂_x F_R (n_z, m) at fixed state s and time t (s), one batched residual evaluation
         (of m + 1, 2m or m parameter sets, or per colour of design variables)."""
-        F = self.model.residual_batch(t, s, self._residual_batch)
+        return self._partials_of(self.model.residual_batch(t, s, self._residual_batch))
+
+    def residual_partials_steps(self, ts: np.ndarray, states: list[StepState]) -> np.ndarray:
+        """∂_x F_R (K, n_z, m) at K states (times ts, s): the same partials for a block of
+        steps, in one call where the model evaluates blocks (``Model.residual_batch_steps``)."""
+        return self._partials_of(self.model.residual_batch_steps(ts, states, self._residual_batch))
+
+    def _partials_of(self, F: np.ndarray) -> np.ndarray:
+        """Difference quotients (..., n_z, m) from residuals (..., n_z, B) of the batch."""
         if self.colours is None:
             return self._combine(F)
         # each variable's rows of its colour's difference are its own column
         diff = self._differences(F, len(self.colours))
-        D = np.zeros((F.shape[0], self.m))
+        D = np.zeros(F.shape[:-1] + (self.m,))
         r, j = self._scatter_rows, self._scatter_cols
-        D[r, j] = np.real(diff[r, self._scatter_colours]) / self._divisor[j]
+        D[..., r, j] = np.real(diff[..., r, self._scatter_colours]) / self._divisor[j]
         return D
 
     def total(self, fn: Callable[[StepState, Any], np.ndarray], s: StepState, ds: StepState,
@@ -293,6 +301,12 @@ def initial_state_gradient(model: Model, partials: DesignPartials
 def pseudo_load(model: Model, t: float, s: StepState, lin: Any, dq_pred: np.ndarray,
                 dqd_pred: np.ndarray, dp_pred: np.ndarray, partials: DesignPartials) -> np.ndarray:
     """P (n_z, m) of method.md §4 at the converged state s of time t (s)."""
-    P = partials.residual_partials(t, s)
+    return pseudo_load_with(partials.residual_partials(t, s), lin, dq_pred, dqd_pred, dp_pred)
+
+
+def pseudo_load_with(design_part: np.ndarray, lin: Any, dq_pred: np.ndarray, dqd_pred: np.ndarray,
+                     dp_pred: np.ndarray) -> np.ndarray:
+    """P (n_z, m) from the explicit design part ∂_x F_R (already evaluated, e.g. for a block of
+    steps) and the state part R_q ∇q^pred + R_q̇ ∇q̇^pred + R_p ∇p^pred."""
     state_part = lin.state_product(dq_pred, dqd_pred, dp_pred) if lin is not None else None
-    return P if state_part is None else P + state_part
+    return design_part if state_part is None else design_part + state_part

@@ -311,6 +311,15 @@ class Model(ABC):
         """
         return np.stack([self.residual(t, s, p) for p in params_list], axis=1)
 
+    def residual_batch_steps(self, ts: Array, states: list[StepState], params_list: list[Any]) -> Array:
+        """F_R at K states (times ts, s) for several parameter sets, (K, n_z, B).
+
+        The design partials of a block of steps (the sensitivities trail the state by a block).
+        Models may override it with one vectorized evaluation; by default one
+        :meth:`residual_batch` per state.
+        """
+        return np.stack([self.residual_batch(t, s, params_list) for t, s in zip(ts, states)])
+
     def design_pattern(self) -> list[Array] | None:
         """For each design variable, the rows of F_R its explicit partial ∂F_R/∂x_j can touch
         (from the model's connectivity, independent of state and time), or None when unknown.

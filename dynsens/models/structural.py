@@ -285,14 +285,24 @@ class StructuralModel(Model):
         """F_R for several parameter sets at one state, vectorized: (n, B)."""
         if self.traits.sparse:
             return super().residual_batch(t, s, params_list)
+        return self.residual_batch_steps(np.array([t]), [s], params_list)[0]
+
+    def residual_batch_steps(self, ts: np.ndarray, states: list[StepState],
+                             params_list: list[dict[str, Any]]) -> np.ndarray:
+        """F_R at K states (times ts, s) for several parameter sets, vectorized over both:
+        (K, n, B).  Sparse models evaluate state by state and set by set."""
+        if self.traits.sparse:
+            return super().residual_batch_steps(ts, states, params_list)
         if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
             self._stacked = (params_list, self.stack_parameters(params_list))
         st = self._stacked[1]
-        R = st["mass"] * s.qdd + self._internal_force(s.q, st)
-        R = R - self.external_force(t, st)
+        # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
+        q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
+        R = st["mass"] * qdd + self._internal_force(q, st)
+        R = R - np.stack([self.external_force(t, st) for t in ts])
         if self.traits.has_damping:
-            R = R + st["D"] @ s.qd
-        return R.T
+            R = R + (st["D"] @ qd[..., None])[..., 0]
+        return R.transpose(0, 2, 1)
 
     def design_pattern(self) -> list[np.ndarray]:
         """Rows of the residual each design variable reaches through the elements whose
