@@ -156,8 +156,9 @@ def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4:
                side_ptr: Array, side_prim: Array, side_coef: Array, cAB: Array,
                norm_body: Array) -> tuple[Array, Array, Array, Array, Array, Array, Array]:
     """Levels of all primitives and products for B = max(Bs, Bp) pairs of a state (Q, Q̇, Q̈
-    (Bs, n_q)) and a parameter set (Ts4 (Bp, n_t, 3, 4, 4), cAB (Bp, 2, n_prod, 3)); a batch
-    of one broadcasts.
+    (Bs, n_q)) and a parameter set (Ts4 (Bp, n_t, 3, 4, 4), cAB (Bp, 2, n_prod, 3)); a shorter
+    batch repeats cyclically (entry b takes b mod its length): one state or one parameter set
+    serves all, and a block of K states × B sets takes the B sets once.
 
     Returns, each with the leading axis B: Lp (3, n_b, 4) and Lr (3, n_b, 3) (levels of p and
     r), C (n_t, 3, 4, 3) (C[j, a, k, i] = Σ_l Ts4[j, a, k, l] L_i[l]), PV (n_t, 3, 3)
@@ -177,7 +178,7 @@ def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4:
     X = np.empty((B, n_prod, 3), Q.dtype)
     N = np.empty((B, norm_body.shape[0], 3), Q.dtype)
     for b in range(B):
-        i, k = min(b, Bs - 1), min(b, Bp - 1)
+        i, k = b % Bs, b % Bp
         _kinematics_one(Q[i], Qd[i], Qdd[i], pb, is_point, Ts4[k], side_ptr, side_prim, side_coef,
                         cAB[k], norm_body, Lp[b], Lr[b], C[b], PV[b], ABV[b], X[b], N[b])
     return Lp, Lr, C, PV, ABV, X, N
@@ -250,7 +251,8 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
     """F_R (B, n_z): R1 = M q̈ − Q_v + J_Φᵀλ − Q_ext (primitive forces F carry J_Φᵀλ and the
     axial and point forces), R2 = c_s(Φ̈ + 2αΦ̇ + β²Φ), R3 = ṗ − h.
 
-    Leading batch axes: Lp, Lr, C, F, Phi (B); mass, J, gravity (3,), lam, pd, h (B or 1).
+    Leading batch axes: Lp, Lr, C, F, Phi (B); mass, J, gravity (3,), lam, pd, h (B or a
+    divisor of it, repeated cyclically).
     """
     B, n_b = Lp.shape[0], Lp.shape[2]
     n_q = 7 * n_b
@@ -261,9 +263,9 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
     for bb in range(B):
         o = out[bb]
         f, Cb, L, R = F[bb], C[bb], Lp[bb], Lr[bb]
-        ms, Js = mass[min(bb, mass.shape[0] - 1)], J[min(bb, J.shape[0] - 1)]
-        g = gravity[min(bb, gravity.shape[0] - 1)]
-        lm = lam[min(bb, lam.shape[0] - 1)]
+        ms, Js = mass[bb % mass.shape[0]], J[bb % J.shape[0]]
+        g = gravity[bb % gravity.shape[0]]
+        lm = lam[bb % lam.shape[0]]
         for j in range(pb.shape[0]):                    # generalized primitive forces
             b = pb[j]
             if is_point[j]:
@@ -293,7 +295,7 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
         ph = Phi[bb]
         for e in range(n_lam):
             o[n_q + e] = scale * (ph[e, 2] + 2.0 * alpha * ph[e, 1] + b2 * ph[e, 0])
-        pdb, hb = pd[min(bb, pd.shape[0] - 1)], h[min(bb, h.shape[0] - 1)]
+        pdb, hb = pd[bb % pd.shape[0]], h[bb % h.shape[0]]
         for i in range(n_p):
             o[n_q + n_lam + i] = pdb[i] - hb[i]
     return out
@@ -318,7 +320,8 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
     and shifts of the equations; axial element i acts through product n_cp + i with the law
     ax_kind[i] (SPRING, CYLINDER), constants ax_c (·, n_ax, n_c), time input ax_ext (·, n_ax)
     and states from p[ax_pidx[i]]; f_ext (·, n_t, 3): applied point forces on the primitives
-    (negative: they enter R1 with −Q_ext).  A leading axis of 1 broadcasts.
+    (negative: they enter R1 with −Q_ext).  A shorter leading axis repeats cyclically (as in
+    :func:`kinematics`).
 
     Returns F_R (B, n_z), Φ (B, n_eq, 3), weights W (B, n_prod), primitive forces F (B, n_t, 3),
     and the laws: AX (B, n_ax, 5) = (L, L̇, P, ∂P/∂L, ∂P/∂L̇), ∂P/∂p (B, n_ax, n_p),
@@ -337,8 +340,8 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
     HLd = np.zeros((B, n_p), Lp.dtype)
     Hp = np.zeros((B, n_p, n_p), Lp.dtype)
     for b in range(B):
-        cfb, shb = cf[min(b, cf.shape[0] - 1)], shift[min(b, shift.shape[0] - 1)]
-        lm, pb_ = lam[min(b, lam.shape[0] - 1)], p[min(b, p.shape[0] - 1)]
+        cfb, shb = cf[b % cf.shape[0]], shift[b % shift.shape[0]]
+        lm, pb_ = lam[b % lam.shape[0]], p[b % p.shape[0]]
         for e in range(n_eq):
             for lev in range(3):
                 Phi[b, e, lev] = -shb[e, lev]
@@ -353,7 +356,7 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
         for i in range(norm_eq.shape[0]):
             for lev in range(3):
                 Phi[b, norm_eq[i], lev] += N[b, i, lev]
-        cb, eb = ax_c[min(b, ax_c.shape[0] - 1)], ax_ext[min(b, ax_ext.shape[0] - 1)]
+        cb, eb = ax_c[b % ax_c.shape[0]], ax_ext[b % ax_ext.shape[0]]
         for i in range(n_ax):                           # axial elements: x = d·d, L = √x
             L = np.sqrt(X[b, n_cp + i, 0])
             Ld = X[b, n_cp + i, 1] / (2.0 * L)
@@ -374,7 +377,7 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
             AX[b, i, 0], AX[b, i, 1], AX[b, i, 2], AX[b, i, 3], AX[b, i, 4] = L, Ld, P, P_L, P_Ld
             W[b, n_cp + i] = -0.5 * P / L
         _prim_forces_one(W[b], ABV[b], side_ptr, side_prim, side_coef, F[b])
-        F[b] += f_ext[min(b, f_ext.shape[0] - 1)]
+        F[b] += f_ext[b % f_ext.shape[0]]
     R = residual(Lp, Lr, C, F, pb, is_point, mass, J, gravity, lam, norm_eq, norm_body, Phi,
                  scale, alpha, beta, pd, H, TG)
     return R, Phi, W, F, AX, Pp, H, HL, HLd, Hp

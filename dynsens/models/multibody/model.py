@@ -33,8 +33,8 @@ from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
-from .kernel import KinCache, KParams, Kin, Layout, kernel_params, stack_kernel_params
-from .residual import Evaluation
+from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
+from .residual import Evaluation, time_inputs
 from .rotations import from_axis_angle, rmatmul
 
 Array = np.ndarray
@@ -219,6 +219,30 @@ class MultibodyModel(Model):
     def residual_batch(self, t: float, s: StepState, params_list: list[MBParams]) -> Array:
         """F_R (n_z, B) at one state for B parameter sets, one vectorized evaluation."""
         return self._evaluation(t, s, self.stack_parameters(params_list)).residual().T
+
+    def residual_batch_steps(self, ts: Array, states: list[StepState], params_list: list[MBParams]) -> Array:
+        """F_R (K, n_z, B) at K states (times ts, s) for B parameter sets: one compiled call for
+        all K·B entries (entry k·B + j: state k, set j; the sets are stacked once and repeat
+        cyclically), with the time inputs of each step.  Models with Python "other forces" or
+        without the compiled kernel evaluate state by state."""
+        kp = self.stack_parameters(params_list)
+        lay, K, B = self.layout, len(states), kp.B
+        if not (self._kin.compiled and lay.compiled_laws) or self.other_forces:
+            return super().residual_batch_steps(ts, states, params_list)
+        q, qd, qdd, lam, p, pd = (np.repeat(np.stack(v), B, axis=0) for v in zip(*states))
+        if not _use_compiled(kp, q, qd, qdd):
+            return super().residual_batch_steps(ts, states, params_list)
+        kin = CompiledKin(lay, kp, q, qd, qdd)
+        dt = kin.dtype
+        coef = [self.coefficients(t, kp) for t in ts]
+        cf = coef[0][0] if coef[0][0] is self._cf0 else np.concatenate([c[0] for c in coef])
+        shift = coef[0][1] if coef[0][1] is self._shift0 else np.concatenate([c[1] for c in coef])
+        inputs = [time_inputs(self, kp, t, dt) for t in ts]
+        ext = np.concatenate([x[0] for x in inputs])
+        f_ext = np.concatenate([x[1] for x in inputs]) if self.point_forces else inputs[0][1]
+        ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, inputs[0][2]))
+        assert ev.compiled
+        return ev.residual().reshape(K, B, -1).transpose(0, 2, 1)
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`)."""

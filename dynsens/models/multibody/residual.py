@@ -63,6 +63,38 @@ class CompiledLinearization(Linearization):
         R_p = self.R_p if self.R_p is not None else np.zeros((self.R_z.shape[0], 0), self.R_z.dtype)
         return cc.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
 
+def point_force(pf: Any, t: float, pv: Array) -> Array:
+    """Global point force F·φ(t) (B, 3) of a PointForce element for parameter vectors pv (B, n)."""
+    val = np.asarray(pf.fn.value(t, pv))
+    return pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
+
+
+def time_inputs(model: "MultibodyModel", kp: Any, t: float, dtype: Any) -> tuple[Array, Array, Array]:
+    """Element inputs (B, n_ax), applied point forces on the primitives (·, n_t, 3) and gravity
+    (·, 3) of the parameter sets kp at time t (s), in dtype; kept on kp for the last t (Newton
+    evaluates all iterates of a step at one time; the arrays are read-only)."""
+    lay = model.layout
+    dt = np.dtype(dtype)
+    cache = kp.__dict__.setdefault("_inputs", {})
+    hit = cache.get(dt.char)
+    if hit is not None and hit[0] == t:
+        return hit[1]
+    ext = np.zeros((kp.B, len(lay.axial)), dt)
+    for i, el in enumerate(lay.axial):
+        ext[:, i] = el.external(t, kp.pv)
+    f_ext = np.zeros((kp.B if model.point_forces else 1, lay.n_t, 3), dt)
+    for pf, j in zip(model.point_forces, lay.point_prim):
+        if j >= 0:
+            f_ext[:, j] -= point_force(pf, t, kp.pv)
+    if hit is not None:
+        g = hit[1][2]                                   # gravity does not depend on t
+    else:
+        g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
+            else np.zeros((1, 3), dt)
+    cache[dt.char] = (t, (ext, f_ext, g))
+    return ext, f_ext, g
+
+
 class Evaluation:
     """Residual pieces at one (batched) state; :meth:`residual` and :meth:`linearization`.
 
@@ -76,15 +108,20 @@ class Evaluation:
     t : time (s); lam (Bs, n_λ), p (Bs, n_p), pd (Bs, n_p): multipliers, pressures, rates.
     """
 
-    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
+    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array,
+                 inputs: tuple[Array, ...] | None = None):
         self.model, self.kin, self.kp, self.t = model, kin, kin.kp, t
         self.lam, self.p, self.pd = lam, p, pd
+        # (cf, shift, ext, f_ext, g) per entry, for a block of steps at different times
+        # (compiled kernel only); otherwise evaluated at t
+        self._given_inputs = inputs
         # the compiled kernel in the kinematics' dtype (complex holds real multipliers too)
         self.compiled = (isinstance(kin, CompiledKin) and model.layout.compiled_laws
                          and (kin.dtype.kind == "c" or not any(v.dtype.kind == "c" for v in (lam, p, pd))))
         if self.compiled:
             self._compiled_forces_and_residual()
             return
+        assert inputs is None, "time inputs per entry need the compiled kernel"
         lay = model.layout
         kp = self.kp
         self.Phi, cf = model.constraint_levels(t, kin)
@@ -107,46 +144,23 @@ class Evaluation:
         f = kin.prim_forces(w)
         for pf, j in zip(model.point_forces, lay.point_prim):
             if j >= 0:
-                f[:, j] -= self._point_force(pf)
+                f[:, j] -= point_force(pf, self.t, kp.pv)
         self.f = f
 
-    def _point_force(self, pf: Any) -> Array:
-        """Global point force F·φ(t) (B, 3) of a PointForce element."""
-        pv = self.kp.pv
-        val = np.asarray(pf.fn.value(self.t, pv))
-        return pv[:, list(pf.idx)] * (val[..., None] if val.ndim else val)
-
     def _inputs(self) -> tuple[Array, Array, Array]:
-        """Element inputs (B, n_ax), applied point forces on the primitives (·, n_t, 3) and
-        gravity (·, 3) at time t in the kinematics' dtype; kept on the parameter sets for the
-        last t (Newton evaluates all iterates of a step at one time; the arrays are read-only)."""
-        m, kp, lay, t, dt = self.model, self.kp, self.model.layout, self.t, self.kin.dtype
-        cache = kp.__dict__.setdefault("_inputs", {})
-        hit = cache.get(dt.char)
-        if hit is not None and hit[0] == t:
-            return hit[1]
-        ext = np.zeros((kp.B, len(lay.axial)), dt)
-        for i, el in enumerate(lay.axial):
-            ext[:, i] = el.external(t, kp.pv)
-        f_ext = np.zeros((kp.B if m.point_forces else 1, lay.n_t, 3), dt)
-        for pf, j in zip(m.point_forces, lay.point_prim):
-            if j >= 0:
-                f_ext[:, j] -= self._point_force(pf)
-        if hit is not None:
-            g = hit[1][2]                                   # gravity does not depend on t
-        else:
-            g = np.ascontiguousarray(kp.pv[:, list(m.gravity.idx)], dt) if m.gravity is not None \
-                else np.zeros((1, 3), dt)
-        cache[dt.char] = (t, (ext, f_ext, g))
-        return ext, f_ext, g
+        """Element inputs, point loads and gravity at this evaluation's time (:func:`time_inputs`)."""
+        return time_inputs(self.model, self.kp, self.t, self.kin.dtype)
 
     def _compiled_forces_and_residual(self) -> None:
         """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
         time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
         m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
         cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
-        cf, shift = m.coefficients(t, kp)
-        ext, f_ext, g = self._inputs()
+        if self._given_inputs is not None:
+            cf, shift, ext, f_ext, g = self._given_inputs
+        else:
+            cf, shift = m.coefficients(t, kp)
+            ext, f_ext, g = self._inputs()
         (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
