@@ -3,8 +3,11 @@
 Per step (method.md §2–4): predict → Newton on F_R(z) = 0 → correct; then, when
 sensitivities are requested, predict the sensitivity matrices with the same scheme,
 form the pseudo load P at the converged state and solve S ∇z = −P with the factor of
-the converged Newton matrix → correct.  What a case does not need is decided once in
-:class:`RunPlan` and never re-tested inside the loop's numerics.
+the converged Newton matrix → correct.  The sensitivity steps trail the state steps by a
+block (each step keeps its converged linearization and factor), so that the explicit design
+partials of a whole block take one batched residual call; the arithmetic per step is the
+same.  What a case does not need is decided once in :class:`RunPlan` and never re-tested
+inside the loop's numerics.
 """
 from __future__ import annotations
 
