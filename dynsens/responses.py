@@ -368,11 +368,6 @@ class ResponseSet:
                                 self.BATCH_BYTES // max(entries * set_bytes, 1)))
 
     # ------------------------------------------------------------------ per step
-    def watch(self, t: Any, s: StepState) -> EventHit | None:
-        """The event that fired in the step that ended at (t, s), if any (values only: called at
-        every step, as soon as the step's state is known; the run stops when one fires)."""
-        return self._detect(t, s)
-
     def push(self, step: int, t: Any, s: StepState, ds: StepState | None, dt: float,
              fired: EventHit | None) -> None:
         """Take one step (time t, s; state s with its sensitivities ds; step size dt, s) and what
@@ -390,8 +385,10 @@ class ResponseSet:
         ev, theta, e0, e1 = fired
         self._fire(ev, theta, e0, e1, self._last, block.part(len(block) - 1, len(block)), dt, step)
 
-    def _detect(self, t: Any, s: StepState) -> EventHit | None:
-        """The first event whose watched value crossed its level since the last step."""
+    def watch(self, t: Any, s: StepState) -> EventHit | None:
+        """The first event whose watched value crossed its level in the step that ended at
+        (t, s), if any (values only: called at every step, as soon as the step's state is known;
+        the run stops when one fires)."""
         if not self.events:
             return None
         now = {oid: np.asarray(self.outputs[oid].fn(t, s, self._params)) for oid in self._event_oids}

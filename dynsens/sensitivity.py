@@ -173,8 +173,7 @@ class DesignPartials:
         last = self._states
         if last is not None and last[0] is s and last[1] is ds:
             return last[2]
-        states = StepState(*(v[None, :] + (dv[:, self._col] * self._coef).T if v.size
-                             else np.zeros((len(self._batch), 0)) for v, dv in zip(s, ds)))
+        states = StepState(*(_along(v, dv, self._col, self._coef) for v, dv in zip(s, ds)))
         self._states = (s, ds, states)
         return states
 
@@ -217,14 +216,9 @@ class DesignPartials:
         base = self.method != "forward"
         col = np.concatenate([[0], self._col]) if base else self._col
         coef = np.concatenate([[0.0], self._coef]) if base else self._coef
-        leaves = []
-        for v, dv in zip(zip(*states), zip(*dstates)):
-            if v[0].size == 0:
-                leaves.append(np.zeros((K * E, 0)))
-                continue
-            V, dV = np.stack(v), np.stack(dv)                              # (K, n), (K, n, m)
-            leaves.append((V[:, None, :] + (dV[:, :, col] * coef).transpose(0, 2, 1)).reshape(K * E, -1))
-        out = StepState(*leaves)
+        leaves = (_along(np.stack(v), np.stack(dv), col, coef)            # (K, n), (K, n, m) -> (K, E, n)
+                  for v, dv in zip(zip(*states), zip(*dstates)))
+        out = StepState(*(x.reshape(K * E, x.shape[-1]) for x in leaves))
         self._block_states = (states, out)          # keeps the list alive: identity stays unique
         return out
 
@@ -256,6 +250,12 @@ class DesignPartials:
                 cols.append(np.imag(fn(self._plus[j])) / self.h[j])
         return np.stack(cols, axis=-1) if cols else np.zeros((np.size(base) if base is not None else 0, 0))
 
+
+
+def _along(v: np.ndarray, dv: np.ndarray, col: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """States v + coef[b]·∇v[..., col[b]] for every entry b: (..., B, n) from a state leaf v
+    (..., n) and its sensitivities dv (..., n, m)."""
+    return v[..., None, :] + np.swapaxes(dv[..., col] * coef, -1, -2)
 
 
 def colour_columns(pattern: list[np.ndarray] | None, m: int) -> list[list[int]] | None:

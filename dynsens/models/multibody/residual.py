@@ -63,6 +63,7 @@ class CompiledLinearization(Linearization):
         R_p = self.R_p if self.R_p is not None else np.zeros((self.R_z.shape[0], 0), self.R_z.dtype)
         return cc.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
 
+
 def point_force(pf: Any, t: float, pv: Array) -> Array:
     """Global point force F·φ(t) (B, 3) of a PointForce element for parameter vectors pv (B, n)."""
     val = np.asarray(pf.fn.value(t, pv))
@@ -147,10 +148,6 @@ class Evaluation:
                 f[:, j] -= point_force(pf, self.t, kp.pv)
         self.f = f
 
-    def _inputs(self) -> tuple[Array, Array, Array]:
-        """Element inputs, point loads and gravity at this evaluation's time (:func:`time_inputs`)."""
-        return time_inputs(self.model, self.kp, self.t, self.kin.dtype)
-
     def _compiled_forces_and_residual(self) -> None:
         """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
         time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
@@ -160,7 +157,7 @@ class Evaluation:
             cf, shift, ext, f_ext, g = self._given_inputs
         else:
             cf, shift = m.coefficients(t, kp)
-            ext, f_ext, g = self._inputs()
+            ext, f_ext, g = time_inputs(m, kp, t, dt)
         (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
