@@ -186,6 +186,41 @@ def test_force_elements_are_virtual_work():
         _close(Q([f], q) @ dq, n @ dtheta)
 
 
+def test_closed_form_torques_match_their_context_form_and_jacobian():
+    """Torques (global and body axes) in closed form: Q for a batch of states and parameter
+    sets equals the per-state context evaluation, and ∂Q/∂q equals complex step of Q."""
+    forces = [
+        {"type": "torque", "name": "tq", "body": "b1", "torque": [0.2, 0.1, 1.0],
+         "function": {"type": "harmonic", "frequency": "w"}},
+        {"type": "torque", "name": "tqb", "body": "b2", "torque": [0.5, "w", -1.0], "frame": "body"},
+    ]
+    model = _build(_spec([], forces))
+    prms = [model.parameters(np.array([w])) for w in (2.0, 2.5, 3.0)]
+    states = [_random_state(model, seed, normalise=True) for seed in (3, 4, 5)]
+    q, qd = (np.stack([st[i] for st in states], axis=1) for i in (0, 1))   # (n_q, 3): one per set
+    t = 0.2
+    pv = np.stack([p.pv for p in prms])
+    torques = [f for f in model.forces if getattr(f, "name", "") in ("tq", "tqb")]
+    assert len(torques) == 2
+    for f in torques:
+        assert f.closed_form
+        batch = np.zeros((3, q.shape[0]))
+        f.add_batch(t, q.T, pv, batch)
+        for b, prm in enumerate(prms):
+            ctx = Ctx(q[:, b:b + 1], qd[:, b:b + 1], np.zeros((q.shape[0], 1)), prm, t)
+            ref = np.zeros((q.shape[0], 1))
+            f.add(ctx, ref)
+            _close(batch[b], ref[:, 0])
+            K = np.zeros((q.shape[0], q.shape[0]))
+            f.add_jacobian(t, q[:, b], prm.pv, K)
+            for j in range(q.shape[0]):
+                qc = (q[:, b] + 1j * H * np.eye(q.shape[0])[j])[None]
+                Qc = np.zeros((1, q.shape[0]), complex)
+                f.add_batch(t, qc, prm.pv[None], Qc)
+                _close(K[:, j], np.imag(Qc[0]) / H)
+        assert np.any(batch != 0.0)
+
+
 def _rot(p):
     from dynsens.models.multibody.rotations import rotation_matrix
     return rotation_matrix(p)

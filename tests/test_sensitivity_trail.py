@@ -46,8 +46,9 @@ def _same(a, b, what, tol=1e-12):
     ("truss_impact", []),                                   # bars, column colouring of the partials
     ("hydraulic_lever", []),                                # event: the block ends at the event step
     ("slider_crank", ["integrator.t_end=0.3"]),             # time-dependent constraint coefficients
-    ("four_bar", ["integrator.t_end=0.3"]),                 # Python torque: state-by-state fallback
-])
+    ("four_bar", ["integrator.t_end=0.3"]),                 # closed-form torque, added per step
+    ("hydraulic_lever", ["model.forces[0].frame=body", "integrator.t_end=0.3"]),  # follower force:
+])                                                          # state-by-state fallback
 def test_trailing_sensitivities_match_step_by_step(name, over, monkeypatch):
     case = dynsens.load_case(CASES / f"{name}.yaml", over)
     ref = _run(case, 1, monkeypatch)

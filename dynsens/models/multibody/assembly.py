@@ -55,15 +55,17 @@ def _ctx(q: Array, qd: Array | None, params: MBParams, t: float) -> Ctx:
 
 
 def jacobian_rows(eqs: list, q: Array, params: MBParams, t: float) -> Array:
-    """J (n_eq, n_q) of the equations at q (n_q,), analytic through the terms (complex-safe)."""
-    ctx = _ctx(q, None, params, t)
+    """J (n_eq, n_q) of the equations at q (n_q,), analytic through the terms (complex-safe);
+    for a batch of k configurations q (n_q, k), J (n_eq, n_q, k) in one pass over the equations."""
+    Q = q.reshape(q.shape[0], -1)
+    k = Q.shape[1]
+    ctx = _ctx(Q, None, params, t)
     dt = np.result_type(q, params.pv, float)
-    J = np.zeros((len(eqs), q.shape[0]), dt)
+    J = np.zeros((len(eqs), Q.shape[0], k), dt)
+    ones = np.ones((1, k))
     for i, eq in enumerate(eqs):
-        out = np.zeros((q.shape[0], 1), dt)
-        eq.apply(ctx, np.ones((1, 1)), out)
-        J[i] = out[:, 0]
-    return J
+        eq.apply(ctx, ones, J[i])
+    return J if q.ndim == 2 else J[:, :, 0]
 
 
 def _jac(fn: Callable[[Array], Array], x: Array, real: bool) -> Array:
@@ -216,20 +218,25 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
 
 
 def velocities(model: "MultibodyModel", q: Array, params: MBParams) -> Array:
-    """q̇0 (n_q,) by the least-squares projection of the module docstring (complex-safe)."""
+    """q̇0 (n_q,) by the least-squares projection of the module docstring (complex-safe); for a
+    batch of k configurations q (n_q, k), the k projections (n_q, k) in one pass."""
     t0 = model.assembly.t0
+    Q = q.reshape(q.shape[0], -1)
+    k = Q.shape[1]
     parts = []
     for i, bp in enumerate(params.bodies):
-        p = q[7 * i + 3:7 * i + 7].reshape(4, 1)
-        parts += [bp.v0, 0.5 * ET_mul(p, bp.w0.reshape(3, 1))[:, 0]]
-    qdg = np.concatenate(parts) if parts else np.zeros(0)
-    J = jacobian_rows(model.eqs, q, params, t0)
-    Ja = jacobian_rows(model.assembly.equations, q, params, t0)
-    phi_t = model.constraint_values(_ctx(q, None, params, t0))[1][:, 0]
-    A = np.vstack([J, Ja])
-    b = np.concatenate([-phi_t, Ja @ qdg])
-    y = np.linalg.solve(A @ A.T, b - A @ qdg)
-    return qdg + A.T @ y
+        p = Q[7 * i + 3:7 * i + 7]
+        parts += [np.broadcast_to(bp.v0.reshape(3, 1), (3, k)), 0.5 * ET_mul(p, bp.w0.reshape(3, 1))]
+    qdg = np.concatenate(parts) if parts else np.zeros((0, k))
+    J = jacobian_rows(model.eqs, Q, params, t0)
+    Ja = jacobian_rows(model.assembly.equations, Q, params, t0)
+    phi_t = model.constraint_values(_ctx(Q, None, params, t0))[1]
+    A = np.concatenate([J, Ja]).transpose(2, 0, 1)                  # (k, n_eq + n_a, n_q)
+    qdg_k = qdg.T[:, :, None]                                        # (k, n_q, 1)
+    b = np.concatenate([-phi_t.T[:, :, None], Ja.transpose(2, 0, 1) @ qdg_k], axis=1)
+    y = np.linalg.solve(A @ A.transpose(0, 2, 1), b - A @ qdg_k)
+    qd = (qdg_k + A.transpose(0, 2, 1) @ y)[:, :, 0].T
+    return qd if q.ndim == 2 else qd[:, 0]
 
 
 def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
@@ -303,18 +310,19 @@ def initial_conditions(model: "MultibodyModel", params: MBParams) -> InitialCond
     return InitialConditions(q0, qd0, p0, lam0, pd0, mu)
 
 
-def initial_gradient(model: "MultibodyModel", params0: MBParams, partials: Any
-                     ) -> tuple[Array, Array, Array]:
-    """∇q0, ∇q̇0, ∇p0 (each (n, m)) by implicit differentiation (module docstring)."""
-    ic = initial_conditions(model, params0)
+def initial_gradient(model: "MultibodyModel", params0: MBParams, partials: Any,
+                     ic: InitialConditions | None = None) -> tuple[Array, Array, Array]:
+    """∇q0, ∇q̇0, ∇p0 (each (n, m)) by implicit differentiation (module docstring), at the
+    initial conditions ``ic`` of params0 (assembled here when not given)."""
+    if ic is None:
+        ic = initial_conditions(model, params0)
     q0, mu, qd0 = ic.q0, ic.mu, ic.qd0
     n_q = q0.shape[0]
     K = _F_matrix(model, q0, mu, params0)
     Fx = partials.of(lambda prm: _F(model, q0, mu, prm))
     dqmu = np.linalg.solve(K, -Fx)
     dq = dqmu[:n_q]
-    Vq = _jac(lambda qb: np.stack([velocities(model, qb[:, j], params0)
-                                   for j in range(qb.shape[1])], axis=1), q0, True)
+    Vq = _jac(lambda qb: velocities(model, qb, params0), q0, True)
     dqd = Vq @ dq + partials.of(lambda prm: velocities(model, q0, prm))
     pg = pressures_given(model, params0)
 

@@ -195,10 +195,12 @@ def _driver(rd: Reader, j: dict, jp: str, name: str, by_name: dict[str, Joint]) 
     motion = _motion(rd, j, jp)
     b = body.index
 
+    r0 = body.position[k]
+
     def shift(t: float, prm: Any) -> tuple[Any, Any, Any]:
-        # relative to the given initial COM coordinate
+        # relative to the given initial COM coordinate (read from pv: see joints.Coef)
         x, xd, xdd = motion(t, prm)
-        return prm.bodies[b].r0[k] + x, xd, xdd
+        return prm.pv[..., r0] + x, xd, xdd
     eq = DotEq([(const_coef(1.0), Const(f"e_{coord}"), Point(b, "zero"))], shift=shift)
     return Joint(name, "driving", GROUND, b, [eq], labels=("drive",))
 

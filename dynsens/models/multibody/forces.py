@@ -27,11 +27,26 @@ Array = np.ndarray
 
 
 class ForceElement:
-    """Base class: ``add(ctx, out)`` adds Q_ext; ``name`` for outputs."""
+    """Base class: ``add(ctx, out)`` adds Q_ext; ``name`` for outputs.
+
+    Elements with ``closed_form = True`` also give Q_ext for a batch of entries directly from
+    (t, q, parameter vectors) and its exact q-Jacobian (:meth:`add_batch`, :meth:`add_jacobian`):
+    the residual then needs no per-entry context and the linearization no complex step.
+    """
 
     name: str
+    closed_form = False
 
     def add(self, ctx: Ctx, out: Array) -> None:
+        raise NotImplementedError
+
+    def add_batch(self, t: float, q: Array, pv: Array, out: Array) -> None:
+        """out (E, n_q) += Q_ext at time t (s) of the states q (E, n_q) with the parameter
+        vectors pv (E or 1, n_pv)."""
+        raise NotImplementedError
+
+    def add_jacobian(self, t: float, q: Array, pv: Array, out: Array) -> None:
+        """out (n_q, n_q) += ∂Q_ext/∂q at one state q (n_q,), parameter vector pv (n_pv,)."""
         raise NotImplementedError
 
 
@@ -77,13 +92,22 @@ class PointForce(ForceElement):
 
 @dataclass(eq=False)
 class Torque(ForceElement):
-    """Torque N φ(t) (force·length) on ``body``; ``frame`` is ``global`` or ``body``."""
+    """Torque N φ(t) (force·length) on ``body``; ``frame`` is ``global`` or ``body``.
+
+    Q_p = 2 E(p)ᵀ n (global) or 2 G(p)ᵀ n̄ (body axes) is linear in p, so its Jacobian is the
+    same product applied to the unit quaternions; it has no q̇ dependence.
+    """
 
     name: str
     body: int
     idx: tuple[int, int, int]
     frame: str
     fn: TimeFunction
+    closed_form = True
+
+    def _product(self, p: Array, n: Array) -> Array:
+        """2 E(p)ᵀ n or 2 G(p)ᵀ n (4, k) for p (4, k), n (3, k)."""
+        return 2.0 * (GT_mul(p, n) if self.frame == "body" else ET_mul(p, n))
 
     def add(self, ctx: Ctx, out: Array) -> None:
         if self.body == GROUND:
@@ -91,8 +115,27 @@ class Torque(ForceElement):
         n = _amplitude(ctx, self.idx, self.fn)
         a = 7 * self.body
         p = ctx.q[a + 3:a + 7]
-        out[a + 3:a + 7] += 2.0 * (GT_mul(p, n + 0 * p[:3]) if self.frame == "body"
-                                   else ET_mul(p, n + 0 * p[:3]))
+        out[a + 3:a + 7] += self._product(p, n + 0 * p[:3])
+
+    def _amplitudes(self, t: float, pv: Array) -> Array:
+        """N φ(t) (3, E) for parameter vectors pv (E, n_pv)."""
+        phi = np.asarray(self.fn.value(t, pv))
+        return (pv[:, list(self.idx)] * (phi[:, None] if phi.ndim else phi)).T
+
+    def add_batch(self, t: float, q: Array, pv: Array, out: Array) -> None:
+        if self.body == GROUND:
+            return
+        a = 7 * self.body
+        p = q[:, a + 3:a + 7].T
+        n = self._amplitudes(t, pv)
+        out[:, a + 3:a + 7] += self._product(p, n + 0 * p[:3]).T
+
+    def add_jacobian(self, t: float, q: Array, pv: Array, out: Array) -> None:
+        if self.body == GROUND:
+            return
+        a = 7 * self.body
+        n = self._amplitudes(t, pv[None])                     # (3, 1)
+        out[a + 3:a + 7, a + 3:a + 7] += self._product(np.eye(4, dtype=n.dtype), n + np.zeros((3, 4)))
 
 
 def spring_law(L: Any, Ld: Any, k: Any, k3: Any, cd: Any, L0: Any) -> tuple[Any, Any, Any]:

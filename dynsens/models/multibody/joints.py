@@ -43,8 +43,10 @@ import numpy as np
 from .bodies import GROUND, Const, Ctx, Diff, Direction, MBParams, Point, Term
 
 Array = np.ndarray
-# a time coefficient: (t, params) -> (value, first derivative, second derivative)
-Coef = Callable[[float, MBParams], tuple[Any, Any, Any]]
+# a time coefficient: (t, params) -> (value, first derivative, second derivative).  The
+# coefficients of the model's joints read only params.pv, so that the stacked parameter sets
+# (pv (B, n)) are evaluated in one call, each level a scalar or (B,)
+Coef = Callable[[float, Any], tuple[Any, Any, Any]]
 
 
 def const_coef(value: float) -> Coef:
@@ -59,17 +61,13 @@ def ONE(t: float, prm: Any) -> tuple[float, float, float]:
     return 1.0, 0.0, 0.0
 
 
-def param_coef(index: int, factor: float = 1.0) -> Coef:
-    """A constant coefficient read from the parameter vector (times ``factor``)."""
-    return lambda t, prm: (factor * prm.pv[index], 0.0, 0.0)
-
-
 @dataclass(frozen=True)
 class Motion:
     """Prescribed motion x(t) = offset + rate t + amplitude sin(2π f t + phase).
 
     Indices into the parameter vector; units of the driven coordinate (length or rad),
-    rate per s, f in Hz, phase in rad.
+    rate per s, f in Hz, phase in rad.  Evaluated for one parameter set (pv (n,)) or for
+    stacked ones (pv (B, n)) at once.
     """
 
     offset: int
@@ -78,23 +76,23 @@ class Motion:
     frequency: int
     phase: int
 
-    def __call__(self, t: float, prm: MBParams) -> tuple[Any, Any, Any]:
+    def __call__(self, t: float, prm: Any) -> tuple[Any, Any, Any]:
         pv = prm.pv
-        x0, v, a, f, ph = (pv[self.offset], pv[self.rate], pv[self.amplitude],
-                           pv[self.frequency], pv[self.phase])
+        x0, v, a, f, ph = (pv[..., self.offset], pv[..., self.rate], pv[..., self.amplitude],
+                           pv[..., self.frequency], pv[..., self.phase])
         w = 2.0 * np.pi * f
         s, c = np.sin(w * t + ph), np.cos(w * t + ph)
         return x0 + v * t + a * s, v + a * w * c, -a * w * w * s
 
     def sin(self) -> Coef:
-        def fn(t: float, prm: MBParams) -> tuple[Any, Any, Any]:
+        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
             th, thd, thdd = self(t, prm)
             s, c = np.sin(th), np.cos(th)
             return s, c * thd, -s * thd * thd + c * thdd
         return fn
 
     def cos(self, sign: float = 1.0) -> Coef:
-        def fn(t: float, prm: MBParams) -> tuple[Any, Any, Any]:
+        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
             th, thd, thdd = self(t, prm)
             s, c = np.sin(th), np.cos(th)
             return sign * c, -sign * s * thd, sign * (-c * thd * thd - s * thdd)

@@ -23,7 +23,7 @@ them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -34,8 +34,11 @@ from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
 from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
-from .residual import Evaluation, time_inputs
+from .residual import Evaluation, other_forces_q, time_inputs
 from .rotations import from_axis_angle, rmatmul
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .assembly import InitialConditions
 
 Array = np.ndarray
 Recipe = Callable[[MBParams], Any]
@@ -84,7 +87,7 @@ class MultibodyModel(Model):
         n_q = 7 * len(bodies)
         n_p = sum(c.n_pressures for c in cylinders)     # actuators' first-order states
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p)
-        self._ic_cache: tuple[Any, Any] | None = None
+        self._ic_cache: tuple[MBParams, InitialConditions] | None = None
         grav = [f for f in forces if isinstance(f, Gravity)]
         self.gravity = grav[0] if grav else None
         self.point_forces = [f for f in forces if isinstance(f, PointForce) and f.frame == "global"]
@@ -156,18 +159,26 @@ class MultibodyModel(Model):
 
     def coefficients(self, t: float, kp: KParams) -> tuple[Array, Array]:
         """Time coefficients (c, ċ, c̈) of the constraint products (B, n_cp, 3) and the shifts
-        (s, ṡ, s̈) of the equations (B, n_eq, 3) (1 for the normalisations) at time t (s)."""
+        (s, ṡ, s̈) of the equations (B, n_eq, 3) (1 for the normalisations) at time t (s);
+        read-only arrays."""
         lay = self.layout
         if not lay.coefs and not lay.shifts:
             return self._cf0, self._shift0
+        # kept on kp for the last t: Newton evaluates all iterates of a step at one time
+        hit = kp.__dict__.get("_coefficients")
+        if hit is not None and hit[0] == t:
+            return hit[1]
         dt = np.result_type(kp.pv, float)
         cf = np.repeat(self._cf0, kp.B, axis=0).astype(dt)
         shift = np.repeat(self._shift0, kp.B, axis=0).astype(dt)
-        for b, prm in enumerate(kp.prms):
-            for i, coef in lay.coefs:
-                cf[b, i] = coef(t, prm)
-            for e, sh in lay.shifts:
-                shift[b, e] = sh(t, prm)
+        for i, coef in lay.coefs:                 # each function for all B sets at once
+            for lev, v in enumerate(coef(t, kp)):
+                cf[:, i, lev] = v
+        for e, sh in lay.shifts:
+            for lev, v in enumerate(sh(t, kp)):
+                shift[:, e, lev] = v
+        cf.flags.writeable = shift.flags.writeable = False
+        kp.__dict__["_coefficients"] = (t, (cf, shift))
         return cf, shift
 
     def constraint_levels(self, t: float, kin: Kin) -> tuple[Array, Array]:
@@ -223,11 +234,13 @@ class MultibodyModel(Model):
     def residual_batch_steps(self, ts: Array, states: list[StepState], params_list: list[MBParams]) -> Array:
         """F_R (K, n_z, B) at K states (times ts, s) for B parameter sets: one compiled call for
         all K·B entries (entry k·B + j: state k, set j; the sets are stacked once and repeat
-        cyclically), with the time inputs of each step.  Models with Python "other forces" or
-        without the compiled kernel evaluate state by state."""
+        cyclically), with the time inputs of each step; closed-form other forces (torques) are added
+        per step.  Models with other Python force elements (body-frame point forces) or without
+        the compiled kernel evaluate state by state."""
         kp = self.stack_parameters(params_list)
         lay, K, B = self.layout, len(states), kp.B
-        if not (self._kin.compiled and lay.compiled_laws) or self.other_forces:
+        if not (self._kin.compiled and lay.compiled_laws) or \
+                not all(f.closed_form for f in self.other_forces):
             return super().residual_batch_steps(ts, states, params_list)
         q, qd, qdd, lam, p, pd = (np.repeat(np.stack(v), B, axis=0) for v in zip(*states))
         if not _use_compiled(kp, q, qd, qdd):
@@ -242,7 +255,11 @@ class MultibodyModel(Model):
         f_ext = np.concatenate([x[1] for x in inputs]) if self.point_forces else inputs[0][1]
         ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, inputs[0][2]))
         assert ev.compiled
-        return ev.residual().reshape(K, B, -1).transpose(0, 2, 1)
+        R = ev.residual().reshape(K, B, -1)
+        if self.other_forces:                     # closed-form elements, at each step's time
+            for k, t in enumerate(ts):
+                R[k, :, :lay.n_q] -= other_forces_q(self, t, q[k * B:(k + 1) * B], qd[:1], kp.prms)
+        return R.transpose(0, 2, 1)
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`)."""
@@ -321,20 +338,23 @@ class MultibodyModel(Model):
         self._ic_cache = (params, res)
         return res.q0, res.qd0, res.p0
 
+    def _initial_conditions(self, params: MBParams) -> "InitialConditions":
+        """The assembly of :meth:`initial_state` when it was for the same parameter object."""
+        if self._ic_cache is not None and self._ic_cache[0] is params:
+            return self._ic_cache[1]
+        from .assembly import initial_conditions
+        return initial_conditions(self, params)
+
     def initial_guess(self, params: MBParams) -> tuple[Array, Array]:
         """(λ0, ṗ0) from the static solve of the assembly (good Newton start)."""
-        if self._ic_cache is not None and self._ic_cache[0] is params:
-            res = self._ic_cache[1]
-        else:
-            from .assembly import initial_conditions
-            res = initial_conditions(self, params)
+        res = self._initial_conditions(params)
         return res.lam0, res.pd0
 
     def initial_state_gradient(self, params0: MBParams, partials: Any
                                ) -> tuple[Array, Array, Array]:
         """∇q0, ∇q̇0, ∇p0 by implicit differentiation of the assembly (see :mod:`.assembly`)."""
         from .assembly import initial_gradient
-        return initial_gradient(self, params0, partials)
+        return initial_gradient(self, params0, partials, self._initial_conditions(params0))
 
     def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
         """Resolve a quantity spec (see :mod:`.outputs`)."""

@@ -18,7 +18,8 @@ All functions are complex-safe.  Quantities that are linear in the state and ind
 the design are declared ``linear``; joint reaction forces, body angles and angular
 velocities, cylinder and spring quantities are ``batched`` (evaluated from the kernel's
 kinematics for all gradient directions in one call) and ``autonomous`` (a block of steps in
-one call; reaction forces only without time-dependent constraint coefficients).
+one call; reaction forces only when no product of the joint's own equations has a
+time-dependent coefficient).
 """
 from __future__ import annotations
 
@@ -71,17 +72,25 @@ def _reaction(model: "MultibodyModel", jt: Any) -> Callable[[float, StepState, A
     swapped = np.concatenate([prods + lay.n_prod, prods])                    # rows of ABV[:, (s, p)]
     eq_twice = np.concatenate([eq_of, eq_of])
     prods_twice = np.concatenate([prods, prods])
+    timed = reaction_is_timed(model, jt)
 
     def fn(t: float, s: StepState, prm: Any) -> Any:
         kin, lam, batched = _kin(model, s, prm)
-        cf = model.coefficients(t, kin.kp)[0]
         w = (sign * mab) * lam[:, eq_twice]
-        if cf is not model._cf0:
-            w = w * cf[:, prods_twice, 0]
+        if timed:
+            w = w * model.coefficients(t, kin.kp)[0][:, prods_twice, 0]
         sides = kin.ABV[:, :, :, 0].reshape(kin.ABV.shape[0], -1, 3)[:, swapped]   # (B, 2 n_p, 3)
         f = (w[:, None, :] @ sides)[:, 0]
         return _out(f, batched)
     return fn
+
+
+def reaction_is_timed(model: "MultibodyModel", jt: Any) -> bool:
+    """Whether the reaction of joint jt depends on t beyond the state: some product of its
+    equations has a time-dependent coefficient (a driving joint's own equation)."""
+    lay = model.layout
+    prods = set(np.flatnonzero(lay.S[list(jt.rows)].any(axis=0)).tolist())
+    return any(i in prods for i, _ in lay.coefs)
 
 
 def _axial(model: "MultibodyModel", el: Any, kind: str) -> Callable[[float, StepState, Any], Any]:
@@ -175,8 +184,8 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
                 f = force(t, s, prm)
                 return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
-            # t enters only through time-dependent constraint coefficients (driving joints)
-            return Output(rfn, labs, batched=True, autonomous=not model.layout.coefs)
+            # t enters only through time-dependent coefficients of the joint's own products
+            return Output(rfn, labs, batched=True, autonomous=not reaction_is_timed(model, jt))
 
         def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
             f, n, ctx = _joint_load(model, _jt, t, s, prm)

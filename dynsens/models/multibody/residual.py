@@ -13,7 +13,8 @@ R1_p = 4 G(p)ᵀJ'G(p) p̈ − 8 G(ṗ)ᵀJ'G(ṗ) p, with G(a)b = T_G[:, k, l] 
 ∂(G(a)ᵀv)/∂a = Σ_i v_i T_G[i]ᵀ and ∂(G(a)b)/∂a = T_G·b are constant tensors.
 
 Force elements without a law here (body-frame point forces, torques) are evaluated through
-:mod:`.forces` and differentiated by complex step (central differences for complex data).
+:mod:`.forces`: torques in closed form with their exact Jacobian, the others per state and
+differentiated by complex step (central differences for complex data).
 """
 from __future__ import annotations
 
@@ -165,7 +166,8 @@ class Evaluation:
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
                 *(np.ascontiguousarray(v, dt) for v in (self.lam, self.p, self.pd)), float(m.scale), float(m.alpha),
                 float(m.beta), cc.TG)
-        if m.other_forces:
+        if m.other_forces and self._given_inputs is None:
+            # (a block of steps at different times: Model.residual_batch_steps adds them per step)
             R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
         self.cf, self._R = cf, R
 
@@ -307,25 +309,37 @@ class Evaluation:
         return out[0], out[1], out[2]
 
 
-def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms: list[Any]) -> Array:
-    """Q_ext (B, n_q) of the elements without a law here (q, qd (B or 1, n_q)): the states of one
-    parameter set as the columns of one Ctx, otherwise one Ctx per batch entry."""
+def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms: list[Any],
+                   elements: list[Any] | None = None) -> Array:
+    """Q_ext (B, n_q) of the elements without a law here (default: all of model.other_forces)
+    for q, qd (B or 1, n_q): closed-form elements for the whole batch at once; the others with
+    the states of one parameter set as the columns of one Ctx, otherwise one Ctx per entry."""
+    elements = model.other_forces if elements is None else elements
     B = max(q.shape[0], qd.shape[0], len(prms))
     dt = np.result_type(q, qd, *(p.pv for p in prms), float)
     n_q = model.traits.n_q
+    out = np.zeros((B, n_q), dt)
+    closed = [el for el in elements if el.closed_form]
+    if closed:
+        pv = np.stack([p.pv for p in prms])
+        qb = np.broadcast_to(q, (B, n_q))
+        for el in closed:
+            el.add_batch(t, qb, pv, out)
+    rest = [el for el in elements if not el.closed_form]
+    if not rest:
+        return out
     if len(prms) == 1:
         Q, Qd = (np.broadcast_to(v, (B, n_q)).T for v in (q, qd))
         o = np.zeros((n_q, B), dt)
         ctx = Ctx(Q, Qd, np.zeros((n_q, 1)), prms[0], t)
-        for el in model.other_forces:
+        for el in rest:
             el.add(ctx, o)
-        return o.T
-    out = np.zeros((B, n_q), dt)
+        return out + o.T
     for b in range(B):
         qb, qdb = q[min(b, q.shape[0] - 1)], qd[min(b, qd.shape[0] - 1)]
         ctx = Ctx(qb[:, None], qdb[:, None], np.zeros((qb.shape[0], 1)), prms[min(b, len(prms) - 1)], t)
         o = out[b][:, None].copy()
-        for el in model.other_forces:
+        for el in rest:
             el.add(ctx, o)
         out[b] = o[:, 0]
     return out
@@ -333,9 +347,18 @@ def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms:
 
 def other_forces_jacobians(model: "MultibodyModel", t: float, q: Array, qd: Array, prm: Any
                            ) -> tuple[Array, Array]:
-    """∂Q_ext/∂q and ∂Q_ext/∂q̇ (n_q, n_q) of the elements without a law here."""
+    """∂Q_ext/∂q and ∂Q_ext/∂q̇ (n_q, n_q) of the elements without a law here: exact for the
+    closed-form elements, by complex step (central differences for complex data) for the rest."""
     from .assembly import _jac
-    real = not (np.iscomplexobj(q) or np.iscomplexobj(qd) or np.iscomplexobj(prm.pv))
-    Kq = _jac(lambda qb: other_forces_q(model, t, qb.T, qd[None], [prm]).T, q, real)
-    Kqd = _jac(lambda qb: other_forces_q(model, t, q[None], qb.T, [prm]).T, qd, real)
+    n_q = model.traits.n_q
+    dt = np.result_type(q, qd, prm.pv, float)
+    Kq, Kqd = np.zeros((n_q, n_q), dt), np.zeros((n_q, n_q), dt)
+    rest = [el for el in model.other_forces if not el.closed_form]
+    for el in model.other_forces:
+        if el.closed_form:
+            el.add_jacobian(t, q, prm.pv, Kq)
+    if rest:
+        real = not (np.iscomplexobj(q) or np.iscomplexobj(qd) or np.iscomplexobj(prm.pv))
+        Kq += _jac(lambda qb: other_forces_q(model, t, qb.T, qd[None], [prm], rest).T, q, real)
+        Kqd += _jac(lambda qb: other_forces_q(model, t, q[None], qb.T, [prm], rest).T, qd, real)
     return Kq, Kqd
