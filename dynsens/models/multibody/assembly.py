@@ -241,47 +241,57 @@ def velocities(model: "MultibodyModel", q: Array, params: MBParams) -> Array:
 
 def static_forces(model: "MultibodyModel", q: Array, qd: Array, p_given: Array,
                   params: MBParams) -> tuple[Array, Array]:
-    """(λ0, p0) with the static cylinders' p1 from equilibrium at q̈ = 0 (complex-safe)."""
+    """(λ0, p0) with the static cylinders' p1 from equilibrium at q̈ = 0 (complex-safe); for a
+    batch of k configurations q, qd (n_q, k), the k solutions ((n_λ, k), (n_p, k)) in one pass."""
     t0 = model.assembly.t0
     static = [c for c in model.cylinders if c.initial == "static"]
+    batched = q.ndim == 2
+    Q = q.reshape(q.shape[0], -1)
+    k = Q.shape[1]
+    QD = np.broadcast_to(qd.reshape(qd.shape[0], -1), Q.shape)
+    n_q, n_lam = Q.shape[0], model.traits.n_lam
     if not static:
-        return np.zeros(model.traits.n_lam), p_given
-    ctx = _ctx(q, qd, params, t0)
-    n_q = q.shape[0]
-    dt = np.result_type(q, qd, p_given, params.pv, float)
+        lam0 = np.zeros((n_lam, k))
+        return (lam0, np.repeat(p_given.reshape(-1, 1), k, axis=1)) if batched else (lam0[:, 0], p_given)
+    ctx = _ctx(Q, np.ascontiguousarray(QD), params, t0)
+    dt = np.result_type(Q, QD, p_given, params.pv, float)
     # everything but the unknown cylinder forces, at q̈ = 0, λ = 0
-    p_tmp = p_given.astype(dt).reshape(-1, 1)
+    p_tmp = p_given.astype(dt)
     for c in static:
         # the piston-side pressure force p1 A1 of a static cylinder is the unknown
         p_tmp[c.p_index] = 0.0
-    st = StepState(q, qd, np.zeros(n_q), np.zeros(model.traits.n_lam), p_tmp[:, 0],
-                   np.zeros(p_tmp.shape[0]))
-    R1 = model.residual(t0, st, params)[:n_q]
-    cols = [jacobian_rows(model.eqs, q, params, t0).T]
+    zeros = (np.zeros(n_q), np.zeros(n_lam), np.zeros(p_tmp.shape[0]))
+    states = [StepState(Q[:, j], QD[:, j], zeros[0], zeros[1], p_tmp, zeros[2]) for j in range(k)]
+    R1 = model.residual_batch_steps(np.full(k, t0), states, [params])[:, :n_q, 0]        # (k, n_q)
+    cols = [jacobian_rows(model.eqs, Q, params, t0).transpose(2, 1, 0)]                    # (k, n_q, n_λ)
     for c in static:
         _, _, e = c.kinematics(ctx)
-        Qu = np.zeros((n_q, 1), dt)
+        Qu = np.zeros((n_q, k), dt)
         c.d.apply(ctx, e, Qu)
-        cols.append(-Qu)
-    A = np.hstack(cols)
-    if A.shape[1] == n_q:
-        y = np.linalg.solve(A, -R1)
+        cols.append(-Qu.T[:, :, None])
+    A = np.concatenate(cols, axis=2)                                                       # (k, n_q, n_y)
+    rhs = -R1[:, :, None]
+    if A.shape[2] == n_q:
+        y = np.linalg.solve(A, rhs)
     else:
-        cs = 1.0 / np.sqrt(np.sum(np.real(A) ** 2, axis=0))
-        As = A * cs[None, :]
-        y = np.linalg.solve(As.T @ As, -(As.T @ R1)) * cs
-    resid = A @ y + R1
-    if np.linalg.norm(np.real(resid)) > 1e-6 * (1.0 + np.linalg.norm(np.real(R1))):
+        cs = 1.0 / np.sqrt(np.sum(np.real(A) ** 2, axis=1, keepdims=True))
+        As = A * cs
+        AsT = As.transpose(0, 2, 1)
+        y = np.linalg.solve(AsT @ As, AsT @ rhs) * cs.transpose(0, 2, 1)
+    resid = np.linalg.norm(np.real(A @ y + R1[:, :, None])[:, :, 0], axis=1)
+    bound = 1e-6 * (1.0 + np.linalg.norm(np.real(R1), axis=1))
+    if np.any(resid > bound):
+        worst = float(np.max(resid))
         raise CaseError(
             f"initial pressures 'static': no static equilibrium at the initial pose (residual "
-            f"{np.linalg.norm(np.real(resid)):.3e}); the cylinders with static initial pressures "
+            f"{worst:.3e}); the cylinders with static initial pressures "
             "must hold all degrees of freedom, or give the pressures explicitly")
-    n_lam = model.traits.n_lam
+    y = y[:, :, 0].T                                                                       # (n_y, k)
     lam0 = y[:n_lam]
-    p0 = p_given.astype(dt).copy()
+    p0 = np.repeat(p_given.astype(dt).reshape(-1, 1), k, axis=1)
     for j, c in enumerate(static):
         p0[c.p_index] = y[n_lam + j] / c.areas(params)[0]
-    return lam0, p0
+    return (lam0, p0) if batched else (lam0[:, 0], p0[:, 0])
 
 
 def pressures_given(model: "MultibodyModel", params: MBParams) -> Array:
@@ -324,17 +334,13 @@ def initial_gradient(model: "MultibodyModel", params0: MBParams, partials: Any,
     dq = dqmu[:n_q]
     Vq = _jac(lambda qb: velocities(model, qb, params0), q0, True)
     dqd = Vq @ dq + partials.of(lambda prm: velocities(model, q0, prm))
-    pg = pressures_given(model, params0)
 
     def P(qq: Array, qqd: Array, prm: MBParams) -> Array:
         return static_forces(model, qq, qqd, pressures_given(model, prm), prm)[1]
 
     if model.traits.n_p == 0:
         return dq, dqd, np.zeros((0, dq.shape[1]))
-    Pq = _jac(lambda qb: np.stack([P(qb[:, j], qd0, params0) for j in range(qb.shape[1])], axis=1),
-              q0, True)
-    Pqd = _jac(lambda qb: np.stack([P(q0, qb[:, j], params0) for j in range(qb.shape[1])], axis=1),
-               qd0, True)
+    Pq = _jac(lambda qb: P(qb, qd0, params0), q0, True)
+    Pqd = _jac(lambda qb: P(np.repeat(q0[:, None], qb.shape[1], axis=1), qb, params0), qd0, True)
     dp = Pq @ dq + Pqd @ dqd + partials.of(lambda prm: P(q0, qd0, prm))
-    del pg
     return dq, dqd, dp
