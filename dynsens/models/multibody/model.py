@@ -34,7 +34,7 @@ from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
 from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
-from .residual import Evaluation, other_forces_q, time_inputs
+from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotations import from_axis_angle, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -221,6 +221,8 @@ class MultibodyModel(Model):
 
     def stack_parameters(self, params_list: list[MBParams]) -> KParams:
         """The kernel parameters of all sets stacked along a leading batch axis (cached on the list)."""
+        if len(params_list) == 1:                # one set: its own kernel parameters (cached on it)
+            return kernel_params(self.layout, params_list[0])
         # the entry keeps its list alive: a new list cannot take over its identity
         if self._stacked is None or self._stacked[0] is not params_list:
             self._stacked = (params_list, stack_kernel_params(
@@ -250,10 +252,8 @@ class MultibodyModel(Model):
         coef = [self.coefficients(t, kp) for t in ts]
         cf = coef[0][0] if coef[0][0] is self._cf0 else np.concatenate([c[0] for c in coef])
         shift = coef[0][1] if coef[0][1] is self._shift0 else np.concatenate([c[1] for c in coef])
-        inputs = [time_inputs(self, kp, t, dt) for t in ts]
-        ext = np.concatenate([x[0] for x in inputs])
-        f_ext = np.concatenate([x[1] for x in inputs]) if self.point_forces else inputs[0][1]
-        ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, inputs[0][2]))
+        ext, f_ext, g = time_inputs_steps(self, kp, ts, dt)
+        ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, g))
         assert ev.compiled
         R = ev.residual().reshape(K, B, -1)
         if self.other_forces:                     # closed-form elements, at each step's time

@@ -75,26 +75,40 @@ def time_inputs(model: "MultibodyModel", kp: Any, t: float, dtype: Any) -> tuple
     """Element inputs (B, n_ax), applied point forces on the primitives (·, n_t, 3) and gravity
     (·, 3) of the parameter sets kp at time t (s), in dtype; kept on kp for the last t (Newton
     evaluates all iterates of a step at one time; the arrays are read-only)."""
-    lay = model.layout
     dt = np.dtype(dtype)
     cache = kp.__dict__.setdefault("_inputs", {})
     hit = cache.get(dt.char)
     if hit is not None and hit[0] == t:
         return hit[1]
-    ext = np.zeros((kp.B, len(lay.axial)), dt)
+    out = time_inputs_steps(model, kp, np.array([t]), dt)
+    cache[dt.char] = (t, out)
+    return out
+
+
+def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -> tuple[Array, Array, Array]:
+    """The inputs of :func:`time_inputs` at the K times ts (s), entry k·B + j for step k and
+    parameter set j: element inputs (K·B, n_ax), point forces (K·B, n_t, 3) — (B, n_t, 3) when
+    they are constant in time, (1, n_t, 3) without any; the compiled kernel repeats leading
+    entries cyclically — and gravity (B or 1, 3)."""
+    lay = model.layout
+    dt = np.dtype(dtype)
+    K, B = len(ts), kp.B
+    ext = np.zeros((K, B, len(lay.axial)), dt)
     for i, el in enumerate(lay.axial):
-        ext[:, i] = el.external(t, kp.pv)
-    f_ext = np.zeros((kp.B if model.point_forces else 1, lay.n_t, 3), dt)
-    for pf, j in zip(model.point_forces, lay.point_prim):
-        if j >= 0:
-            f_ext[:, j] -= point_force(pf, t, kp.pv)
-    if hit is not None:
-        g = hit[1][2]                                   # gravity does not depend on t
-    else:
+        for k, t in enumerate(ts):
+            ext[k, :, i] = el.external(t, kp.pv)
+    forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
+    steady = all(pf.fn.kind == "constant" for pf, _ in forces)
+    f_ext = np.zeros((B * (1 if steady else K) if forces else 1, lay.n_t, 3), dt)
+    for pf, j in forces:
+        for k, t in enumerate(ts[:1] if steady else ts):
+            f_ext[k * B:(k + 1) * B, j] -= point_force(pf, t, kp.pv)
+    g = kp.__dict__.setdefault("_gravity", {}).get(dt.char)
+    if g is None:                                        # gravity does not depend on t
         g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
             else np.zeros((1, 3), dt)
-    cache[dt.char] = (t, (ext, f_ext, g))
-    return ext, f_ext, g
+        kp.__dict__["_gravity"][dt.char] = g
+    return ext.reshape(K * B, -1), f_ext, g
 
 
 class Evaluation:
