@@ -112,6 +112,10 @@ def _check_finite(s: StepState, t: float, step: int, labels: list[str]) -> None:
 
 TRAIL_STEPS = 128
 TRAIL_BYTES = 32 * 2**20
+# Largest sensitivity state (∇q, ∇q̇, ∇q̈, ∇λ, ∇p, ∇ṗ and the scheme's ∇a, ∇b stacked) for
+# which constant-matrix steps advance by a transition matrix (its product costs n_x² m; above
+# this size the step's own solve is cheaper)
+TRANSITION_MAX = 32
 
 
 def _trail_length(traits: Any, m: int) -> int:
@@ -213,6 +217,38 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     # the block's converged states take one batched residual call (Model.residual_batch_steps),
     # then each step solves S ∇z = −P with its own converged linearization and factor, in step
     # order (method.md §4).  Sub-steps of step cuts are in the trail; the grid steps are marked.
+    def sensitivity_step(ds: StepState, daux: Aux, design_part: np.ndarray, lin: Any, factor: Any,
+                         h: float) -> tuple[StepState, Aux]:
+        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct."""
+        dpred = scheme.predict(ds, daux, h)
+        P = pseudo_load_with(design_part, lin, dpred.q, dpred.qd, dpred.p)
+        dz = solver.solve_sensitivity(factor, P)
+        ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
+        return ds, scheme.advance(dpred, ds)
+
+    # Constant matrices (linear models): every step with the same step size applies the same
+    # linear map, X' = T X + U ∂_xF_R on the stacked sensitivity state X; T and U are that very
+    # step applied to unit columns, so a step costs one small product instead of a solve.
+    sizes = [n_q, n_q, n_q, n_lam, tr.n_p, tr.n_p, n_q, tr.n_p]
+    ends = np.cumsum(sizes).tolist()
+    pieces = [slice(a, b) for a, b in zip([0] + ends[:-1], ends)]
+    use_transitions = tr.constant_matrices and sum(sizes) <= TRANSITION_MAX
+    transitions: dict[tuple[int, int, float], tuple[Any, Any, np.ndarray, np.ndarray]] = {}
+
+    def unpack(X: np.ndarray) -> tuple[StepState, Aux]:
+        parts = [X[sl] for sl in pieces]
+        return StepState(*parts[:6]), Aux(*parts[6:])
+
+    def transition(lin: Any, factor: Any, h: float) -> tuple[np.ndarray, np.ndarray]:
+        key = (id(lin), id(factor), h)
+        if key not in transitions:    # (the entry holds lin and factor: their ids stay theirs)
+            n_x = sum(sizes)
+            ds_T, daux_T = sensitivity_step(*unpack(np.eye(n_x)), np.zeros((tr.n_z, n_x)), lin, factor, h)
+            ds_U, daux_U = sensitivity_step(*unpack(np.zeros((n_x, tr.n_z))), np.eye(tr.n_z), lin, factor, h)
+            transitions[key] = (lin, factor, np.concatenate([*ds_T, *daux_T]),
+                                np.concatenate([*ds_U, *daux_U]))
+        return transitions[key][2], transitions[key][3]
+
     trail: list[tuple[float, float, StepState, Any, Any]] = []      # (t, h, s, lin, factor)
     marks: list[tuple[int, float, StepState, float, Any, int]] = []  # (i, t, s, h, event, trail index)
     trail_length = _trail_length(tr, m) if partials is not None else 1
@@ -255,13 +291,25 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
             design_part = partials.residual_partials_steps(np.array([e[0] for e in trail]),
                                                            [e[2] for e in trail])
             counters.sensitivity_residual_evaluations += partials.evaluations_per_call * len(trail)
-            for k, (_, h, _, lin, factor) in enumerate(trail):
-                dpred = scheme.predict(ds, daux, h)
-                P = pseudo_load_with(design_part[k], lin, dpred.q, dpred.qd, dpred.p)
-                dz = solver.solve_sensitivity(factor, P)
-                ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
-                daux = scheme.advance(dpred, ds)
-                ds_of[k] = ds
+            k = 0
+            while k < len(trail):
+                _, h, _, lin, factor = trail[k]
+                end = k + 1
+                while use_transitions and end < len(trail) and trail[end][3] is lin and \
+                        trail[end][4] is factor and trail[end][1] == h:
+                    end += 1
+                if end - k == 1:
+                    ds, daux = sensitivity_step(ds, daux, design_part[k], lin, factor, h)
+                    ds_of[k] = ds
+                else:
+                    T, U = transition(lin, factor, h)
+                    W = U @ design_part[k:end]
+                    X = np.concatenate([*ds, *daux])
+                    for j in range(end - k):
+                        X = T @ X + W[j]
+                        ds_of[k + j] = unpack(X)[0]
+                    ds, daux = unpack(X)
+                k = end
         for i, t, s, h, event, k in marks:
             dst = ds_of[k] if k >= 0 else None
             if store_sens and dst is not None:

@@ -43,6 +43,8 @@ def _same(a, b, what, tol=1e-12):
 @pytest.mark.parametrize("name, over", [
     ("duffing_chain", []),                                  # structural, vectorized block partials
     ("sdof_step", ["integrator.t_end=2"]),                  # linear, one factor for the whole run
+    ("sdof_step", ["integrator.t_end=2.0015",               # transition matrices of a dissipative
+                   "integrator.scheme=generalized_alpha"]), # scheme, and a shortened last step
     ("truss_impact", []),                                   # bars, column colouring of the partials
     ("hydraulic_lever", []),                                # event: the block ends at the event step
     ("slider_crank", ["integrator.t_end=0.3"]),             # time-dependent constraint coefficients
@@ -54,7 +56,15 @@ def test_trailing_sensitivities_match_step_by_step(name, over, monkeypatch):
     ref = _run(case, 1, monkeypatch)
     for trail in (7, 128):
         res = _run(case, trail, monkeypatch)
-        assert res.counters == ref.counters
+        if case.model.traits.constant_matrices:
+            # constant-matrix steps of a block advance by their transition matrix (one solve
+            # builds it); the reference of one-step blocks solves every step
+            solves = {"solves", "solve_columns"}
+            assert res.counters["solves"] < ref.counters["solves"]
+            assert {k: v for k, v in res.counters.items() if k not in solves} == \
+                {k: v for k, v in ref.counters.items() if k not in solves}
+        else:
+            assert res.counters == ref.counters
         for f, v in ref.sensitivity_history.items():
             _same(res.sensitivity_history[f], v, f"{name}: ∇{f} with a trail of {trail}")
         for r, rv in ref.responses.items():

@@ -90,12 +90,22 @@ class PointForce(ForceElement):
         self.point.apply(ctx, self.force(ctx), out)
 
 
+def _bilinear_tensor(product: Any) -> Array:
+    """T (3, 16) with product(p, n) = M(n) p, M(n) = (n @ T).reshape(4, 4), for a quaternion
+    product linear in p and in n (E(p)ᵀn, G(p)ᵀn): the images of the unit quaternions."""
+    eye = np.eye(4)
+    return np.stack([product(eye, np.repeat(e[:, None], 4, axis=1)) for e in np.eye(3)]).reshape(3, 16)
+
+
+_T_ET, _T_GT = _bilinear_tensor(ET_mul), _bilinear_tensor(GT_mul)
+
+
 @dataclass(eq=False)
 class Torque(ForceElement):
     """Torque N φ(t) (force·length) on ``body``; ``frame`` is ``global`` or ``body``.
 
-    Q_p = 2 E(p)ᵀ n (global) or 2 G(p)ᵀ n̄ (body axes) is linear in p, so its Jacobian is the
-    same product applied to the unit quaternions; it has no q̇ dependence.
+    Q_p = 2 E(p)ᵀ n (global) or 2 G(p)ᵀ n̄ (body axes) is linear in p: Q_p = 2 M(n) p, and
+    ∂Q_p/∂p = 2 M(n); there is no q̇ dependence.
     """
 
     name: str
@@ -105,37 +115,32 @@ class Torque(ForceElement):
     fn: TimeFunction
     closed_form = True
 
-    def _product(self, p: Array, n: Array) -> Array:
-        """2 E(p)ᵀ n or 2 G(p)ᵀ n (4, k) for p (4, k), n (3, k)."""
-        return 2.0 * (GT_mul(p, n) if self.frame == "body" else ET_mul(p, n))
-
     def add(self, ctx: Ctx, out: Array) -> None:
         if self.body == GROUND:
             return
         n = _amplitude(ctx, self.idx, self.fn)
         a = 7 * self.body
         p = ctx.q[a + 3:a + 7]
-        out[a + 3:a + 7] += self._product(p, n + 0 * p[:3])
+        n = n + 0 * p[:3]
+        out[a + 3:a + 7] += 2.0 * (GT_mul(p, n) if self.frame == "body" else ET_mul(p, n))
 
-    def _amplitudes(self, t: float, pv: Array) -> Array:
-        """N φ(t) (3, E) for parameter vectors pv (E, n_pv)."""
+    def _matrices(self, t: float, pv: Array) -> Array:
+        """2 M(n) (E, 4, 4) for the torques n = N φ(t) of parameter vectors pv (E, n_pv)."""
         phi = np.asarray(self.fn.value(t, pv))
-        return (pv[:, list(self.idx)] * (phi[:, None] if phi.ndim else phi)).T
+        n = pv[:, list(self.idx)] * (phi[:, None] if phi.ndim else phi)
+        return (2.0 * n @ (_T_GT if self.frame == "body" else _T_ET)).reshape(-1, 4, 4)
 
     def add_batch(self, t: float, q: Array, pv: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
-        p = q[:, a + 3:a + 7].T
-        n = self._amplitudes(t, pv)
-        out[:, a + 3:a + 7] += self._product(p, n + 0 * p[:3]).T
+        out[:, a + 3:a + 7] += (self._matrices(t, pv) @ q[:, a + 3:a + 7, None])[..., 0]
 
     def add_jacobian(self, t: float, q: Array, pv: Array, out: Array) -> None:
         if self.body == GROUND:
             return
         a = 7 * self.body
-        n = self._amplitudes(t, pv[None])                     # (3, 1)
-        out[a + 3:a + 7, a + 3:a + 7] += self._product(np.eye(4, dtype=n.dtype), n + np.zeros((3, 4)))
+        out[a + 3:a + 7, a + 3:a + 7] += self._matrices(t, pv[None])[0]
 
 
 def spring_law(L: Any, Ld: Any, k: Any, k3: Any, cd: Any, L0: Any) -> tuple[Any, Any, Any]:
