@@ -258,7 +258,7 @@ class MultibodyModel(Model):
         R = ev.residual().reshape(K, B, -1)
         if self.other_forces:                     # closed-form elements, at each step's time
             for k, t in enumerate(ts):
-                R[k, :, :lay.n_q] -= other_forces_q(self, t, q[k * B:(k + 1) * B], qd[:1], kp.prms)
+                R[k, :, :lay.n_q] -= other_forces_q(self, t, q[k * B:(k + 1) * B], qd[k * B:(k + 1) * B], kp.prms)
         return R.transpose(0, 2, 1)
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
