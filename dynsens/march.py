@@ -40,9 +40,10 @@ class RunPlan:
     partials : ``forward`` | ``central`` | ``complex`` for the design partials.
     partials_step : relative perturbation of the design partials (None: per-method default).
     sensitivity_matrix : ``reuse`` (default: the factor of the last Newton iteration, taken one
-        correction before convergence; its error is of the size of that correction, i.e. the
-        Newton tolerance, and tests/test_sensitivities.py shows it stays ~1e-12 relative, far
-        below the error of forward partials) or ``converged`` (re-linearize and factor S at the
+        correction before convergence; its error is of the size of that correction: the Newton
+        tolerance, or, with forward partials, up to their own error ≈ 3e-8 relative, when Newton
+        stops on a round-off residual; tests/test_sensitivities.py shows the gradient moves less
+        than the partials' own error) or ``converged`` (re-linearize and factor S at the
         converged state: exact, one more factorization per step for nonlinear models).
     history : which state histories to store (subset of q, qd, qdd, lam, p, pd).
     sensitivity_history : store the sensitivity histories of the same fields.
@@ -151,7 +152,8 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     solver = StepSolver(model, plan.newton, counters, newton=not tr.linear,
                         refactor=not tr.constant_matrices,
                         need_converged_factor=sens and plan.sensitivity_matrix == "converged",
-                        sensitivities=sens)
+                        sensitivities=sens,
+                        reuse_tolerance=partials.relative_error if partials is not None else 0.0)
     labels = model.dof_labels()
     n_steps = plan.n_steps
 

@@ -52,6 +52,7 @@ class DesignPartials:
             ref = np.maximum(ref, 1e-3 * np.abs(scale))
         ref = np.where(ref > 0, ref, 1.0)
         self.h = rel * ref
+        self.rel_step = rel
         self.params0 = model.parameters(self.x)
         eye = np.eye(self.m)
         if method == "forward":
@@ -86,6 +87,18 @@ class DesignPartials:
         pattern = model.design_pattern()
         self.colours = colour_columns(pattern, m)
         self._residual_batch = self._batch if self.colours is None else self._colour_batch(pattern)
+
+    @property
+    def relative_error(self) -> float:
+        """Expected relative error of the partials (dimensionless): truncation plus round-off,
+        h + ε/h for forward and h² + ε/h for central differences of relative step h; 0 for
+        complex step (exact to round-off)."""
+        eps, h = float(np.finfo(float).eps), self.rel_step
+        if self.method == "forward":
+            return h + eps / h
+        if self.method == "central":
+            return h * h + eps / h
+        return 0.0
 
     def _colour_batch(self, pattern: list[np.ndarray]) -> list[Any]:
         """The parameter sets of the coloured perturbations, and the index arrays that put

@@ -94,6 +94,7 @@ class StructuralModel(Model):
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
+        self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
         """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
@@ -209,7 +210,7 @@ class StructuralModel(Model):
             rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
             cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
             vals.append(ke.reshape(len(idx), -1).ravel())
-        return self._assemble(rows, cols, vals, np.result_type(q, pv))
+        return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
         rows, cols, vals = [], [], []
@@ -219,7 +220,7 @@ class StructuralModel(Model):
             rows += [a, b, a, b]
             cols += [a, b, b, a]
             vals += [c, c, -c, -c]
-        D = self._assemble(rows, cols, vals, np.result_type(dtype, params["pv"]))
+        D = self._assemble("damping", rows, cols, vals, np.result_type(dtype, params["pv"]))
         if self.rayleigh is not None:
             pv = params["pv"]
             alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
@@ -227,20 +228,28 @@ class StructuralModel(Model):
             D = D + alpha * (sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)) + beta * params["K0"]
         return D
 
-    def _assemble(self, rows: list, cols: list, vals: list, dtype: Any) -> Any:
+    def _assemble(self, site: str, rows: list, cols: list, vals: list, dtype: Any) -> Any:
+        """Sum the element entries vals at (rows, cols) into an (n, n) matrix; index n is the
+        slot of fixed DOFs and ground, dropped.  The indices of a call ``site`` are the same
+        every call (element DOFs), so their filtered flat positions are kept per site."""
         n = self.n
         if not rows:
             return sp.csc_matrix((n, n), dtype=dtype) if self.traits.sparse else np.zeros((n, n), dtype)
-        r = np.concatenate([np.ravel(x) for x in rows])
-        c = np.concatenate([np.ravel(x) for x in cols])
-        v = np.concatenate([np.ravel(x) for x in vals])
-        keep = (r < n) & (c < n)
-        r, c, v = r[keep], c[keep], v[keep]
+        plan = self._assembly_plans.get(site)
+        if plan is None:
+            r = np.concatenate([np.ravel(x) for x in rows])
+            c = np.concatenate([np.ravel(x) for x in cols])
+            keep = (r < n) & (c < n)
+            plan = self._assembly_plans[site] = (keep, r[keep], c[keep], r[keep] * n + c[keep])
+        keep, r, c, flat = plan
+        v = np.concatenate([np.ravel(x) for x in vals])[keep]
         if self.traits.sparse:
             return sp.csc_matrix((v, (r, c)), shape=(n, n))
-        K = np.zeros((n + 1) * (n + 1), dtype=np.result_type(dtype, v))
-        np.add.at(K, r * (n + 1) + c, v)
-        return K.reshape(n + 1, n + 1)[:n, :n]
+        # bincount sums repeated positions (as np.add.at) at a fraction of its cost
+        K = np.bincount(flat, v.real, n * n)
+        if np.iscomplexobj(v) or np.dtype(dtype).kind == "c":
+            K = K + 1j * np.bincount(flat, v.imag, n * n)
+        return K.reshape(n, n)
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
         """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis."""
@@ -273,12 +282,10 @@ class StructuralModel(Model):
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
-        """Parameter arrays stacked along a leading batch axis.  Sparse models leave out their
-        (sparse) damping matrix: their residuals are evaluated set by set, and the outputs,
-        which are evaluated in batches, do not need it."""
-        keys = [k for k in ("pv", "mass", "D", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
-        if self.traits.sparse:
-            keys = [k for k in keys if k != "D"]
+        """Parameter arrays stacked along a leading batch axis, without the damping matrix: the
+        outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
+        set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
+        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -294,7 +301,10 @@ class StructuralModel(Model):
         if self.traits.sparse:
             return super().residual_batch_steps(ts, states, params_list)
         if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
-            self._stacked = (params_list, self.stack_parameters(params_list))
+            st = self.stack_parameters(params_list)
+            if self.traits.has_damping:
+                st["D"] = np.stack([p["D"] for p in params_list])
+            self._stacked = (params_list, st)
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))

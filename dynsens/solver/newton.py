@@ -79,10 +79,15 @@ class StepSolver:
     need_converged_factor : always factor S at the converged state for the sensitivity solve
         (``sensitivity.matrix: converged``).
     sensitivities : sensitivities follow each step (a stale factor must then be renewed).
+    reuse_tolerance : relative size of the last Newton correction up to which the factor of
+        the iterate before it still serves the sensitivity solve when Newton stops on a
+        round-off residual (its error is of that size); at most the Newton tolerance unless
+        the design partials are themselves no more accurate (forward differences).
     """
 
     def __init__(self, model: Model, settings: NewtonSettings, counters: Counters, *,
-                 newton: bool, refactor: bool, need_converged_factor: bool, sensitivities: bool = False):
+                 newton: bool, refactor: bool, need_converged_factor: bool, sensitivities: bool = False,
+                 reuse_tolerance: float = 0.0):
         self.model = model
         self.settings = settings
         self.counters = counters
@@ -90,6 +95,7 @@ class StepSolver:
         self.refactor = refactor
         self.need_converged_factor = need_converged_factor
         self.sensitivities = sensitivities
+        self.reuse_tolerance = max(reuse_tolerance, settings.rtol)
         t = model.traits
         self._blocks = [slice(0, t.n_q), slice(t.n_q, t.n_q + t.n_lam),
                         slice(t.n_q + t.n_lam, t.n_z)]
@@ -140,8 +146,10 @@ class StepSolver:
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
             if it > 1 and self._at_roundoff(R, z):
                 # each residual entry is within round-off of the terms that make it up (Oettli-
-                # Prager backward error): no correction can improve z, whatever the conditioning
-                return self._accept(t, s, params, coeffs, lin, factor, it - 1, fresh=False)
+                # Prager backward error): no correction can improve z, whatever the conditioning.
+                # The last factor is one correction dz away from z
+                fresh = self._within(z, dz, self.reuse_tolerance)
+                return self._accept(t, s, params, coeffs, lin, factor, it - 1, fresh=fresh)
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
             except SingularMatrixError as exc:
@@ -172,8 +180,8 @@ class StepSolver:
                 fresh: bool) -> StepOutcome:
         """Converged at s.  The sensitivity solve needs S at the converged state (method.md §4):
         in ``reuse`` mode the last factor serves when it is ``fresh`` (its iterate is one
-        correction within the tolerance away from s); otherwise, and always in ``converged``
-        mode, S is factorized again at s."""
+        correction within the Newton tolerance, or the reuse tolerance, away from s); otherwise,
+        and always in ``converged`` mode, S is factorized again at s."""
         if self.sensitivities and self.refactor and (self.need_converged_factor or not fresh):
             lin, factor = self._linearize_and_factor(t, s, params, coeffs)
         return StepOutcome(s, lin, factor, iterations)
@@ -212,16 +220,21 @@ class StepSolver:
                 [_real_norm(dz[self._blocks[k]]) for k in self._present])
 
     def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
-        st = self.settings
+        return self._within(z, dz, self.settings.rtol)
+
+    def _within(self, z: np.ndarray, dz: np.ndarray, rtol: float) -> bool:
+        """The block test of :class:`NewtonSettings` with relative tolerance rtol (updates the
+        block scales)."""
         ok = True
         zn, dzn = self._block_norms(z, dz)
         scales = self._scales
+        atol = self.settings.atol
         for i, k in enumerate(self._present):
             scales[k] = max(scales[k], zn[i])
             # a block that has been exactly zero so far (accelerations of a static start) has
             # no scale of its own: measure its correction against the whole unknown vector
             ref = max(zn[i], scales[k]) if scales[k] > 0 else _real_norm(z)
-            if dzn[i] > st.rtol * ref + st.atol:
+            if dzn[i] > rtol * ref + atol:
                 ok = False
         return ok
 

@@ -44,8 +44,9 @@ from .bodies import GROUND, Const, Ctx, Diff, Direction, MBParams, Point, Term
 
 Array = np.ndarray
 # a time coefficient: (t, params) -> (value, first derivative, second derivative).  The
-# coefficients of the model's joints read only params.pv, so that the stacked parameter sets
-# (pv (B, n)) are evaluated in one call, each level a scalar or (B,)
+# coefficients of the model's joints read only params.pv and use only broadcasting arithmetic,
+# so that the stacked parameter sets (pv (B, n)) are evaluated in one call, each level a scalar
+# or (B,), and a block of times t (K, 1) with them, each level (K, B)
 Coef = Callable[[float, Any], tuple[Any, Any, Any]]
 
 

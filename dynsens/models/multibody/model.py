@@ -168,17 +168,27 @@ class MultibodyModel(Model):
         hit = kp.__dict__.get("_coefficients")
         if hit is not None and hit[0] == t:
             return hit[1]
-        dt = np.result_type(kp.pv, float)
-        cf = np.repeat(self._cf0, kp.B, axis=0).astype(dt)
-        shift = np.repeat(self._shift0, kp.B, axis=0).astype(dt)
-        for i, coef in lay.coefs:                 # each function for all B sets at once
-            for lev, v in enumerate(coef(t, kp)):
-                cf[:, i, lev] = v
-        for e, sh in lay.shifts:
-            for lev, v in enumerate(sh(t, kp)):
-                shift[:, e, lev] = v
+        cf, shift = self.coefficients_steps(np.array([t]), kp)
         cf.flags.writeable = shift.flags.writeable = False
         kp.__dict__["_coefficients"] = (t, (cf, shift))
+        return cf, shift
+
+    def coefficients_steps(self, ts: Array, kp: KParams) -> tuple[Array, Array]:
+        """:meth:`coefficients` at K times ts (s) for all B sets: (K·B, n_cp, 3) and
+        (K·B, n_eq, 3), entry k·B + j for time k and set j; each function is evaluated once,
+        for the times (K, 1) against the sets (B,)."""
+        lay = self.layout
+        if not lay.coefs and not lay.shifts:
+            return self._cf0, self._shift0
+        K, B = len(ts), kp.B
+        T = np.asarray(ts, float)[:, None]
+        dt = np.result_type(kp.pv, float)
+        cf = np.repeat(self._cf0, K * B, axis=0).astype(dt)
+        shift = np.repeat(self._shift0, K * B, axis=0).astype(dt)
+        for target, funcs in ((cf, lay.coefs), (shift, lay.shifts)):
+            for i, fn in funcs:
+                for lev, v in enumerate(fn(T, kp)):
+                    target[:, i, lev] = np.broadcast_to(v, (K, B)).reshape(K * B)
         return cf, shift
 
     def constraint_levels(self, t: float, kin: Kin) -> tuple[Array, Array]:
@@ -249,9 +259,7 @@ class MultibodyModel(Model):
             return super().residual_batch_steps(ts, states, params_list)
         kin = CompiledKin(lay, kp, q, qd, qdd)
         dt = kin.dtype
-        coef = [self.coefficients(t, kp) for t in ts]
-        cf = coef[0][0] if coef[0][0] is self._cf0 else np.concatenate([c[0] for c in coef])
-        shift = coef[0][1] if coef[0][1] is self._shift0 else np.concatenate([c[1] for c in coef])
+        cf, shift = self.coefficients_steps(ts, kp)
         ext, f_ext, g = time_inputs_steps(self, kp, ts, dt)
         ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, g))
         assert ev.compiled
