@@ -156,3 +156,54 @@ def test_switch_off_by_environment(monkeypatch):
     assert not compiled.enabled()
     monkeypatch.setenv("DYNSENS_KERNEL", "compiled")
     assert compiled.enabled()
+
+
+def test_buffer_pool_hands_out_only_unreferenced_memory():
+    """A pooled buffer is reused only once no array made from it is alive."""
+    from dynsens.models.multibody.kernel import BufferPool
+    pool = BufferPool(limit=2)
+    a = pool.take(12, float)
+    view = a.reshape(3, 4)[:, 1]           # a derived view keeps the buffer in use
+    a_id = id(a.base)
+    del a
+    b = pool.take(12, float)
+    assert id(b.base) != a_id
+    c = pool.take(12, float)               # both pooled buffers in use: an ordinary array
+    assert id(c.base) not in (a_id, id(b.base))
+    del view
+    d = pool.take(12, complex)             # another dtype never shares a buffer
+    assert d.dtype == complex and id(d.base) != a_id
+    e = pool.take(24, float)               # free again, grown to the size asked for
+    assert e.size == 24 and len(pool._buffers) == 2
+
+
+@pytest.mark.parametrize("name", ["slider_crank", "tyrolean_weir"])
+def test_block_kinematics_from_the_pool_are_exact_and_stay_valid(name, monkeypatch):
+    """Block kinematics written into pooled buffers equal freshly allocated ones, a Kin still
+    held keeps its values while later blocks are evaluated, and whole runs (real and complex
+    partials) give bit-identical gradients with and without the pool."""
+    from dynsens.models.multibody import kernel
+    case = dynsens.load_case(CASES / f"{name}.yaml", ["integrator.t_end=0.3"])
+    res = dynsens.run_case(case, sensitivities=False, history=FIELDS)
+    model = case.model
+    kp = model.stack_parameters([model.parameters(case.x0)] * 2)
+    blocks = [[res.history[f][i:i + 80] for f in ("q", "qd", "qdd")] for i in (0, 40, 80)]
+    held = model._kin.get(kp, *blocks[0])
+    assert any(held.C.base is b for b in model._kin.pool._buffers)     # taken from the pool
+    first = {k: getattr(held, k).copy() for k in ("Lp", "C", "ABV", "X")}
+    for q, qd, qdd in blocks[1:]:
+        later = model._kin.get(kp, q, qd, qdd)
+        fresh = CompiledKin(model.layout, kp, q, qd, qdd)           # no pool: its own arrays
+        for k in first:
+            assert np.array_equal(getattr(later, k), getattr(fresh, k)), k
+    for k, v in first.items():
+        assert np.array_equal(getattr(held, k), v), f"{k} of a held Kin changed"
+
+    for partials in ("forward", "complex"):
+        over = ["integrator.t_end=0.3", f"sensitivity.partials={partials}"]
+        pooled = dynsens.run_case(dynsens.load_case(CASES / f"{name}.yaml", over))
+        monkeypatch.setattr(kernel, "POOL_MIN_ENTRIES", 10**9)
+        plain = dynsens.run_case(dynsens.load_case(CASES / f"{name}.yaml", over))
+        monkeypatch.undo()
+        for r, v in plain.responses.items():
+            assert np.array_equal(pooled.responses[r].gradient, v.gradient), (partials, r)

@@ -177,11 +177,21 @@ def kinematics(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4:
     ABV = np.empty((B, 2, n_prod, 3, 3), Q.dtype)
     X = np.empty((B, n_prod, 3), Q.dtype)
     N = np.empty((B, norm_body.shape[0], 3), Q.dtype)
-    for b in range(B):
+    kinematics_into(Q, Qd, Qdd, pb, is_point, Ts4, side_ptr, side_prim, side_coef, cAB, norm_body,
+                    Lp, Lr, C, PV, ABV, X, N)
+    return Lp, Lr, C, PV, ABV, X, N
+
+
+@jit
+def kinematics_into(Q: Array, Qd: Array, Qdd: Array, pb: Array, is_point: Array, Ts4: Array,
+                    side_ptr: Array, side_prim: Array, side_coef: Array, cAB: Array, norm_body: Array,
+                    Lp: Array, Lr: Array, C: Array, PV: Array, ABV: Array, X: Array, N: Array) -> None:
+    """:func:`kinematics` into given arrays (leading axis B = max(Bs, Bp), the dtype of Q)."""
+    Bs, Bp = Q.shape[0], Ts4.shape[0]
+    for b in range(Lp.shape[0]):
         i, k = b % Bs, b % Bp
         _kinematics_one(Q[i], Qd[i], Qdd[i], pb, is_point, Ts4[k], side_ptr, side_prim, side_coef,
                         cAB[k], norm_body, Lp[b], Lr[b], C[b], PV[b], ABV[b], X[b], N[b])
-    return Lp, Lr, C, PV, ABV, X, N
 
 
 @jit

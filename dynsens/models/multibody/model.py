@@ -257,7 +257,7 @@ class MultibodyModel(Model):
         q, qd, qdd, lam, p, pd = (np.repeat(np.stack(v), B, axis=0) for v in zip(*states))
         if not _use_compiled(kp, q, qd, qdd):
             return super().residual_batch_steps(ts, states, params_list)
-        kin = CompiledKin(lay, kp, q, qd, qdd)
+        kin = CompiledKin(lay, kp, q, qd, qdd, self._kin.pool)
         dt = kin.dtype
         cf, shift = self.coefficients_steps(ts, kp)
         ext, f_ext, g = time_inputs_steps(self, kp, ts, dt)
