@@ -148,7 +148,7 @@ class StepSolver:
                 # each residual entry is within round-off of the terms that make it up (Oettli-
                 # Prager backward error): no correction can improve z, whatever the conditioning.
                 # The last factor is one correction dz away from z
-                fresh = self._within(z, dz, self.reuse_tolerance)
+                fresh = self.sensitivities and self._within(z, dz, self.reuse_tolerance)
                 return self._accept(t, s, params, coeffs, lin, factor, it - 1, fresh=fresh)
             try:
                 lin, factor = self._linearize_and_factor(t, s, params, coeffs)
