@@ -181,14 +181,16 @@ class MultibodyModel(Model):
         if not lay.coefs and not lay.shifts:
             return self._cf0, self._shift0
         K, B = len(ts), kp.B
-        T = np.asarray(ts, float)[:, None]
+        # one time is a scalar (cheaper arithmetic than a (1, 1) array)
+        T = float(ts[0]) if K == 1 else np.asarray(ts, float)[:, None]
         dt = np.result_type(kp.pv, float)
         cf = np.repeat(self._cf0, K * B, axis=0).astype(dt)
         shift = np.repeat(self._shift0, K * B, axis=0).astype(dt)
         for target, funcs in ((cf, lay.coefs), (shift, lay.shifts)):
+            by_step = target.reshape((K, B) + target.shape[1:])     # a view: target is contiguous
             for i, fn in funcs:
                 for lev, v in enumerate(fn(T, kp)):
-                    target[:, i, lev] = np.broadcast_to(v, (K, B)).reshape(K * B)
+                    by_step[:, :, i, lev] = v
         return cf, shift
 
     def constraint_levels(self, t: float, kin: Kin) -> tuple[Array, Array]:
