@@ -6,7 +6,8 @@ form the pseudo load P at the converged state and solve S ∇z = −P with the f
 the converged Newton matrix → correct.  The sensitivity steps trail the state steps by a
 block (each step keeps its converged linearization and factor), so that the explicit design
 partials of a whole block take one batched residual call; the arithmetic per step is the
-same (small constant-matrix models advance the block by the transition matrix of that very step).  What a case does not need is decided once in :class:`RunPlan` and never re-tested
+same (small constant-matrix models advance the block by the transition matrix of that very
+step).  What a case does not need is decided once in :class:`RunPlan` and never re-tested
 inside the loop's numerics.
 """
 from __future__ import annotations

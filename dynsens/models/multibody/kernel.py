@@ -357,6 +357,11 @@ class BufferPool:
 POOL_MIN_ENTRIES = 64
 
 
+def _is_block(n_states: int, n_sets: int) -> bool:
+    """Whether kinematics of n_states states and n_sets parameter sets form a pooled block."""
+    return max(n_states, n_sets) >= POOL_MIN_ENTRIES
+
+
 class CompiledKin(Kin):
     """:class:`Kin` of states and parameter sets (real or complex) evaluated by the compiled
     kernel (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp)).  With
@@ -374,7 +379,7 @@ class CompiledKin(Kin):
         args = (q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,
                 cl.norm_body)
         B = max(q.shape[0], ck.Ts4.shape[0])
-        if pool is None or B < POOL_MIN_ENTRIES:
+        if pool is None or not _is_block(q.shape[0], ck.Ts4.shape[0]):
             (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = cc.kinematics(*args)
         else:
             n_b, n_t, n_prod = lay.n_b, lay.n_t, ck.cAB.shape[2]
@@ -468,9 +473,9 @@ class KinCache:
         for k, _, kin in self._items:
             if k == key and kin.kp is kp:
                 return kin
-        if max(q2.shape[0], kp.B) >= POOL_MIN_ENTRIES:
+        if _is_block(q2.shape[0], kp.B):
             # an earlier block's states are not evaluated again: release their arrays to the pool
-            self._items = [it for it in self._items if max(it[2].q.shape[0], it[2].kp.B) < POOL_MIN_ENTRIES]
+            self._items = [it for it in self._items if not _is_block(it[2].q.shape[0], it[2].kp.B)]
         kin = CompiledKin(self.lay, kp, q2, qd2, qdd2, self.pool) \
             if self.compiled and _use_compiled(kp, q2, qd2, qdd2) else Kin(self.lay, kp, q2, qd2, qdd2)
         self._items.insert(0, (key, (q, qd, qdd), kin))
