@@ -16,6 +16,8 @@ __version__ = "0.1.0"
 from .case.load import Case, load_case, load_case_dict  # noqa: E402
 from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
 from .simulation import run_case  # noqa: E402
+from .api import OptimizeResult, Simulation, check_gradients, optimize, simulate  # noqa: E402
 
-__all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "__version__",
-           "load_case", "load_case_dict", "run_case"]
+# The public API; everything else (dynsens.models, dynsens.march, ...) may change between versions.
+__all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Simulation",
+           "__version__", "check_gradients", "load_case", "load_case_dict", "optimize", "run_case", "simulate"]

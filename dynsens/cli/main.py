@@ -22,7 +22,7 @@ class DynsensGroup(click.Group):
             sys.exit(2)
 
 
-@click.group(cls=DynsensGroup)
+@click.group(cls=DynsensGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dynsens")
 @click.option("-v", "--verbose", count=True, help="More log output.")
 def cli(verbose: int) -> None:
@@ -39,4 +39,4 @@ def main() -> None:
         pass
     # plain one-line warnings for users of the console script (not for library callers)
     warnings.formatwarning = lambda msg, cat, *a, **k: f"Warning: {msg}\n"  # type: ignore[assignment]
-    cli()
+    cli(prog_name="dynsens")

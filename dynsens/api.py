@@ -1,0 +1,266 @@
+"""The Python API: simulate, optimize and check gradients from a script or a notebook.
+
+Each function takes a case as a loaded :class:`~dynsens.Case`, a path to a YAML file or a
+mapping (as a script builds it), plus overrides by key path, exactly like ``--set`` on the
+command line::
+
+    import dynsens
+    sim = dynsens.simulate("cases/sdof_step.yaml", **{"integrator.t_end": 2.0})
+    sim.values["q_end"], sim.gradients["q_end"]      # value (m) and d/d[m, c, k]
+
+Keyword names may also use ``__`` for the dots (``integrator__t_end=2.0``).
+"""
+from __future__ import annotations
+
+import json
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence, Union
+
+import numpy as np
+import yaml
+from scipy.optimize import OptimizeResult as _ScipyResult
+
+from .case.load import Case, load_case, load_case_dict
+from .gradcheck import GradientReport
+from .gradcheck import check_gradients as _check_gradients
+from .march import RunResult
+# imported here, before dynsens/__init__.py binds the name ``dynsens.optimize`` to the function below:
+# a first import of the subpackage after that would rebind the name to the module
+from .optimize.runner import optimize_case as _optimize_case
+from .optimize.store import read_history as _read_history
+from .responses import ResponseValue
+from .simulation import run_case
+
+CaseLike = Union[Case, str, Path, Mapping[str, Any]]
+
+__all__ = ["CaseLike", "OptimizeResult", "Simulation", "as_case", "check_gradients", "optimize", "simulate"]
+
+
+def _override_strings(overrides: Mapping[str, Any]) -> list[str]:
+    """``{"integrator.dt": 5e-4}`` -> ``["integrator.dt=0.0005"]`` (values as YAML/JSON)."""
+    out = []
+    for key, value in overrides.items():
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        elif isinstance(value, np.generic):
+            value = value.item()
+        out.append(f"{key.replace('__', '.')}={json.dumps(value)}")
+    return out
+
+
+def as_case(case: CaseLike, overrides: Mapping[str, Any] | None = None) -> Case:
+    """A validated :class:`Case` from a case, a YAML path or a mapping, with ``overrides`` applied.
+
+    Raises :class:`~dynsens.CaseError` (file, key path, expected, found) for bad input.
+    """
+    sets = _override_strings(overrides or {})
+    if isinstance(case, Case):
+        if not sets:
+            return case
+        return load_case_dict(yaml.safe_load(case.text), case.source, sets)
+    if isinstance(case, (str, Path)):
+        return load_case(case, sets)
+    if isinstance(case, Mapping):
+        return load_case_dict(dict(case), "<dict>", sets)
+    raise TypeError(f"expected a Case, a path or a mapping, found {type(case).__name__}")
+
+
+@dataclass
+class Simulation:
+    """One simulation of a case: responses with gradients, histories and run statistics.
+
+    Attributes
+    ----------
+    case : the validated case that ran (overrides applied).
+    x : design (m,), in the case's units; ``design_names`` names its entries.
+    time : (N,) time points of the stored histories (s, or the case's time unit).
+    history : state histories by field (``q``, ``qd``, ``qdd``, ``lam``, ``p``, ``pd``), each (N, n);
+        ``labels[field]`` names their columns.
+    responses : name -> :class:`~dynsens.responses.ResponseValue` (value, gradient, unit, missing).
+    values, gradients, units : the same as plain dicts (a missing response has value NaN).
+    monitors : per-step diagnostics, e.g. constraint drift of mechanisms.
+    counters : steps, Newton iterations, factorizations, solves, ...
+    wall_time : seconds of this run (numba compilation excluded once the cache is warm).
+    status, message : ``completed`` / ``terminated`` and why.
+    run : the raw run record.
+    """
+
+    case: Case
+    run: RunResult
+
+    @property
+    def x(self) -> np.ndarray:
+        return np.real(self.run.x)
+
+    @property
+    def design_names(self) -> tuple[str, ...]:
+        return self.case.design_names
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.run.time
+
+    @property
+    def history(self) -> dict[str, np.ndarray]:
+        return self.run.history
+
+    @property
+    def labels(self) -> dict[str, list[str]]:
+        return self.run.labels
+
+    @property
+    def monitors(self) -> dict[str, np.ndarray]:
+        return self.run.monitors
+
+    @property
+    def responses(self) -> dict[str, ResponseValue]:
+        return self.run.responses
+
+    @property
+    def values(self) -> dict[str, float]:
+        return {n: (np.nan if r.missing else float(np.real(r.value))) for n, r in self.responses.items()}
+
+    @property
+    def gradients(self) -> dict[str, np.ndarray]:
+        m = len(self.design_names)
+        return {n: (np.full(m, np.nan) if r.gradient is None else np.real(np.asarray(r.gradient)))
+                for n, r in self.responses.items()}
+
+    @property
+    def units(self) -> dict[str, str]:
+        return {n: r.unit for n, r in self.responses.items()}
+
+    @property
+    def counters(self) -> dict[str, int]:
+        return self.run.counters
+
+    @property
+    def wall_time(self) -> float:
+        return self.run.wall_time
+
+    @property
+    def status(self) -> str:
+        return self.run.status
+
+    @property
+    def message(self) -> str:
+        return self.run.message
+
+    def save(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """Write the HDF5 result file (the layout of ``dynsens simulate``); returns its path."""
+        from .io.hdf5 import write_result
+        write_result(str(path), self.run, self.case, overwrite=overwrite)
+        return Path(path)
+
+    def __repr__(self) -> str:
+        vals = ", ".join(f"{n}={v:.6g}" for n, v in self.values.items())
+        return f"<Simulation {self.case.name}: {self.status}; {vals}>"
+
+
+def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
+             sensitivities: bool | None = None, history: Sequence[str] | None = None,
+             **overrides: Any) -> Simulation:
+    """Simulate ``case`` at design ``x`` (default: the case's initial design).
+
+    Parameters
+    ----------
+    case : a :class:`Case`, a path to a case file or a mapping.
+    x : design values (m,) in the case's units, in the order of ``design.variables``.
+    sensitivities : override ``sensitivity.enabled`` (False: primal run only, no gradients).
+    history : which state histories to keep (``("q", "qd")``, ``()`` for none).
+    **overrides : case entries by key path, as ``--set`` (``**{"integrator.dt": 5e-4}``
+        or ``integrator__dt=5e-4``).
+
+    Returns
+    -------
+    Simulation
+        Responses (``values``, ``gradients``, ``units``), histories and run statistics.
+    """
+    c = as_case(case, overrides)
+    xx = None if x is None else np.asarray(x)
+    if xx is not None and xx.shape != (len(c.design_names),):
+        raise ValueError(f"x: expected {len(c.design_names)} values for {list(c.design_names)}, "
+                         f"found shape {xx.shape}")
+    run = run_case(c, xx, sensitivities=sensitivities, history=None if history is None else tuple(history))
+    return Simulation(c, run)
+
+
+class OptimizeResult(_ScipyResult):
+    """Result of :func:`optimize`, with scipy's names (a dict with attribute access).
+
+    ``x`` (optimum, case units), ``fun`` (objective there, its unit), ``jac`` (∂f/∂x there,
+    objective unit per design unit), ``nit`` (SLSQP iterations), ``nfev`` (simulations),
+    ``success``, ``status`` (SLSQP's exit mode), ``message``; and ``feasible``,
+    ``max_violation`` (scaled), ``constraints`` (name -> value of the constrained response),
+    ``design_names``, ``starts`` (one dict per start), ``history`` (the best start's
+    per-iteration arrays) and ``path`` (the OPT.h5 file, None when run in memory).
+    """
+
+
+def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[str, float] | None = None,
+             starts: int | None = None, seed: int | None = None, maxiter: int | None = None,
+             ftol: float | None = None, workers: int | None = None, scheduler: str | None = None,
+             overwrite: bool = False, resume: bool = False, **overrides: Any) -> OptimizeResult:
+    """Minimize the case's objective subject to its constraints (SLSQP, exact gradients).
+
+    Parameters
+    ----------
+    case : a case with an ``optimization`` section (Case, path or mapping).
+    output : OPT.h5 to write as ``dynsens optimize -o`` does; None runs in memory (the file is
+        kept in a temporary directory for the run and removed afterwards).
+    x0 : start values by design-variable name, replacing the case's initial design.
+    starts, seed, maxiter, ftol, workers, scheduler, overwrite, resume : as the command's options.
+    **overrides : case entries by key path, as ``--set``.
+
+    Returns
+    -------
+    OptimizeResult
+        scipy's names for the best start; see :class:`OptimizeResult`.
+    """
+    c = as_case(case, overrides)
+    tmp = tempfile.TemporaryDirectory(prefix="dynsens-opt-") if output is None else None
+    path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
+    try:
+        res = _optimize_case(c, path, starts=starts, seed=seed, x0=x0, maxiter=maxiter, ftol=ftol,
+                            workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite)
+        best = res.best_outcome
+        hist = _read_history(path, best.index)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    problem = res.problem
+    jac = np.full(len(c.design_names), np.nan)
+    if len(hist.get("x", ())):
+        # the recorded iterate at the optimum: ∂f_s/∂u -> ∂f/∂x (f = f_s·f_ref, x = lower + u·dx/du)
+        gap = np.max(np.abs(hist["x"] - best.x) / problem.dx_du, axis=1)
+        k = int(np.argmin(gap))
+        if gap[k] <= 1e-12 and np.all(np.isfinite(hist["grad_f"][k])):
+            jac = hist["grad_f"][k] * problem.f_ref / problem.dx_du
+    constrained = {t.response for t in problem.constraints}
+    resp = dict(zip(problem.response_names, np.asarray(best.responses, dtype=float)))
+    return OptimizeResult(
+        x=np.asarray(best.x, dtype=float), fun=float(best.f), jac=jac, nit=int(best.nit),
+        nfev=int(best.n_sim), success=bool(best.success), status=int(best.status), message=str(best.message),
+        feasible=bool(best.feasible), max_violation=float(best.max_violation),
+        constraints={n: resp[n] for n in problem.response_names if n in constrained},
+        design_names=c.design_names,
+        starts=[{"x_start": o.x_start, "x": o.x, "fun": o.f, "success": o.success, "feasible": o.feasible,
+                 "nit": o.nit, "nfev": o.n_sim, "message": o.message} for o in res.starts],
+        history=hist, path=None if tmp is not None else path)
+
+
+def check_gradients(case: CaseLike, steps: Sequence[float] = (1e-3, 1e-4, 1e-5, 1e-6), scheme: str = "forward",
+                    *, x: Sequence[float] | np.ndarray | None = None, workers: int | None = None,
+                    **overrides: Any) -> GradientReport:
+    """The semi-analytical gradient beside finite differences of the whole simulation.
+
+    ``steps`` are relative (Δx_j = h·|x_j|, or h·scale_j at x_j = 0); ``scheme`` is ``forward``,
+    ``central`` or ``complex``.  The report holds ``semi_analytical`` and ``columns`` (one per
+    step, with ``gradients`` and ``rel_diff``); ``report.passes(rtol)`` is the command's exit test
+    and :func:`dynsens.gradcheck.to_markdown` its table.
+    """
+    c = as_case(case, overrides)
+    return _check_gradients(c, list(steps), scheme, x=None if x is None else np.asarray(x, dtype=float),
+                            workers=workers)
