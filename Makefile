@@ -6,12 +6,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test example reproduce-table1 report bench bench-peers cases clean
+.PHONY: setup test example reproduce-table1 figures report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
+	$(PY) -m dynsens.warmup   # compile the multibody kernels into numba's cache (~1 min, once)
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -26,6 +27,10 @@ example: $(STAMP)
 
 reproduce-table1: $(STAMP)
 	$(PY) scripts/reproduce_table1.py
+
+# the figures the README shows, regenerated from the current code by the scripts that make them
+figures: $(STAMP)
+	$(PY) scripts/reproduce_table1.py --figure docs/fig5.png
 
 # work-precision study of the shipped cases -> results/convergence/ (tables and plots)
 report: $(STAMP)

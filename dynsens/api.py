@@ -244,7 +244,7 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
         x=np.asarray(best.x, dtype=float), fun=float(best.f), jac=jac, nit=int(best.nit),
         nfev=int(best.n_sim), success=bool(best.success), status=int(best.status), message=str(best.message),
         feasible=bool(best.feasible), max_violation=float(best.max_violation),
-        constraints={n: resp[n] for n in problem.response_names if n in constrained},
+        constraints={n: float(resp[n]) for n in problem.response_names if n in constrained},
         design_names=c.design_names,
         starts=[{"x_start": o.x_start, "x": o.x, "fun": o.f, "success": o.success, "feasible": o.feasible,
                  "nit": o.nit, "nfev": o.n_sim, "message": o.message} for o in res.starts],

@@ -83,6 +83,8 @@ def _evaluate(case: Case, method: str) -> tuple[dict[str, float], dict[str, np.n
 def work_precision(case: Case, dts: list[float], methods: list[str]) -> tuple[list[Row], dict, dict]:
     """Run the ladder; returns the rows and the reference values and gradients."""
     dts = sorted(dts, reverse=True)
+    from .warmup import warm_case
+    warm_case(case)  # compile first: no reported wall time includes numba compilation
     refs = []
     for dt in dts[-2:]:
         vals, grads, _ = _evaluate(_with(case, [f"integrator.dt={dt}"]), "ddm-complex")

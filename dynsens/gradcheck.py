@@ -88,6 +88,8 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
         raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
     x = case.x0 if x is None else np.asarray(x, dtype=float)
     m = x.size
+    from .warmup import warm_case
+    warm_case(case)  # compile first: no reported wall time includes numba compilation
     t0 = time.perf_counter()
     sa_run = run_case(case, x, sensitivities=True, history=())
     sa_time = time.perf_counter() - t0

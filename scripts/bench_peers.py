@@ -340,7 +340,7 @@ def bench_dynsens(case: Any, resp: str, repeats: int, cols: np.ndarray, extra: l
     t: dict[str, list[float]] = {"primal": [], "ddm": []}
     t.update({name: [] for name, _ in extra})
     dynsens.run_case(case, sensitivities=False, history=())   # warm-up
-    for name, fn in extra:
+    for _name, fn in extra:
         fn()
     res: dict[str, Any] = {}
     for r in range(repeats):
@@ -591,8 +591,9 @@ def main() -> None:
                       f"repeats {cr.info.get('repeats')}" for cr in results)
     cal = "\n".join(f"- N = {n}: dynsens (Newmark) tip value error {t['dynsens_value_err']:.1e}, gradient error "
                     f"{t['dynsens_grad_err']:.1e} vs continuous; solve_ivp rtol {t['ivp_rtol']:g} (FD gradient error "
-                    f"{t['ivp_grad_err']:.1e}, value error {t['ivp_value_err']:.1e})" + (f"; CasADi rtol {t['casadi_rtol']:g} (gradient error "
-                                                    f"{t['casadi_grad_err']:.1e})" if "casadi_rtol" in t else "")
+                    f"{t['ivp_grad_err']:.1e}, value error {t['ivp_value_err']:.1e})"
+                    + (f"; CasADi rtol {t['casadi_rtol']:g} (gradient error {t['casadi_grad_err']:.1e})"
+                       if "casadi_rtol" in t else "")
                     for n, t in tols.items())
     doc = (f"# Peer comparison ({mach['date']})\n\nMachine: {mach['cpu']}, {mach['cores']} cores; Python "
            f"{mach['python']}, numpy {mach['numpy']}, scipy {mach['scipy']}, casadi {mach['casadi']}, dynsens "

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import dynsens
+from dynsens.warmup import warm_case
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -37,6 +38,7 @@ def bench(path: Path, repeats: int, partials: str, fd: bool = True) -> dict:
     m = case.x0.size
     h = 1e-7 * np.maximum(np.abs(case.x0), case.scale)
     runs: dict[str, list[float]] = {"primal": [], "ddm": [], "fd": []}
+    warm_case(case)  # numba compilation (real and complex) is never inside a measured time
     dynsens.run_case(case, sensitivities=False)  # warm-up (imports, caches)
     for _ in range(repeats):
         runs["primal"].append(timed(lambda: dynsens.run_case(case, sensitivities=False)))

@@ -11,7 +11,8 @@ from extreme_cases import exact_two_dof, hard_step_case, sdof_in_units, two_dof
 
 
 def stiff_rows() -> list[str]:
-    rows = ["| stiffness ratio | Δt·ω_max | Δt·ω_slow | scheme | max \\|q\\| | slow-mode error | stiff-mode amplitude at end | Newton it./step |",
+    rows = ["| stiffness ratio | Δt·ω_max | Δt·ω_slow | scheme | max \\|q\\| | slow-mode error "
+            "| stiff-mode amplitude at end | Newton it./step |",
             "|---|---|---|---|---|---|---|---|"]
     for ratio, omega_dt in ((1e6, 1e2), (1e8, 1e3), (1e8, 1e4)):
         dt = omega_dt / np.sqrt(2 * ratio)

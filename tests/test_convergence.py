@@ -9,7 +9,8 @@ from dynsens.convergence import observed_order, work_precision
 from conftest import CASES
 
 
-@pytest.mark.parametrize("over,order", [([], 2.0), (["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.8"], 2.0),
+@pytest.mark.parametrize("over,order", [([], 2.0),
+                                        (["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.8"], 2.0),
                                         (["integrator.gamma=0.6", "integrator.beta=0.3025"], 1.0)])
 def test_observed_order_matches_scheme(over, order):
     case = dynsens.load_case(CASES / "sdof_step.yaml", ["integrator.t_end=2"] + over)

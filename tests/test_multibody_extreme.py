@@ -59,7 +59,8 @@ def test_stiff_oil_column_stays_stable():
             "model.forces[1].dead_volume_2=1.0e4", "integrator.t_end=0.3", "sensitivity.enabled=false",
             "output.history=[p]"]
     ring = {}
-    for label, extra in (("newmark", []), ("galpha", ["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.2"])):
+    for label, extra in (("newmark", []),
+                         ("galpha", ["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.2"])):
         res = dynsens.run_case(dynsens.load_case(CASES / "hydraulic_lever.yaml", over + extra))
         p1 = res.history["p"][:, 0]
         assert np.all(np.isfinite(p1)) and np.max(p1) < 50.0            # MPa: bounded

@@ -62,7 +62,8 @@ def test_units_spanning_1e_minus6_to_1e9_give_the_same_solution(L, M, T):
         assert other.responses[name].value / L == pytest.approx(base.responses[name].value, rel=1e-9)
         g_other = other.responses[name].gradient * k_scale / L
         assert rel_err(g_other, base.responses[name].gradient) < 1e-8
-    assert abs(other.counters["newton_iterations"] - base.counters["newton_iterations"]) <= 0.01 * base.counters["steps"]
+    assert abs(other.counters["newton_iterations"] - base.counters["newton_iterations"]) \
+        <= 0.01 * base.counters["steps"]
 
 
 def test_newton_failure_is_recovered_by_step_cutting_with_consistent_sensitivities():

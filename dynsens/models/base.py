@@ -339,7 +339,7 @@ class Model(ABC):
         """Total mass of the structure (model mass unit); complex-safe."""
         raise NotImplementedError(f"{type(self).__name__} does not define a structural mass")
 
-    def check_state(self, t: float, s: StepState, params: Any) -> None:
+    def check_state(self, t: float, s: StepState, params: Any) -> None:  # noqa: B027 (optional hook)
         """Raise ModelError when the state leaves the model's range of validity."""
 
     def diagnose_singular(self, t: float, s: StepState, params: Any) -> str:

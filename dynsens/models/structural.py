@@ -381,7 +381,7 @@ class StructuralModel(Model):
                                              f"(known: {', '.join(field_of)})")
                 return None
             idx = []
-            for i, nm in enumerate(names):
+            for nm in names:
                 if nm not in self.dof_names:
                     problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
                 else:
@@ -403,7 +403,8 @@ class StructuralModel(Model):
         names = names if isinstance(names, list) else [names]
         kinds = ("force", "stress", "strain")
         if kind not in kinds:
-            problems.add(f"{path}.kind", f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
+            problems.add(f"{path}.kind",
+                         f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
             return None
         bars, springs = [], []
         for nm in names:

@@ -69,5 +69,6 @@ from .store import read_history, set_status
 
 __all__ = ["ACTIVE_TOL", "ConstraintTerm", "Evaluation", "Evaluator", "FAIL_PENALTY", "FEAS_TOL",
            "OptimizationError", "OptimizationResult", "ScaledProblem", "StartOutcome", "build_problem",
-           "evaluate", "kkt_measure", "max_violation", "optimize_case", "plot_optimization", "read_history", "resolve_x0",
+           "evaluate", "kkt_measure", "max_violation", "optimize_case", "plot_optimization", "read_history",
+           "resolve_x0",
            "run_start", "scaled_evaluation", "set_status", "simulate", "start_points"]

@@ -107,7 +107,7 @@ def build_problem(case: Case, ref_responses: Mapping[str, float]) -> ScaledProbl
     for c in spec.constraints:
         r0 = float(ref_responses[c.response])
 
-        def divisor(b: float) -> float:
+        def divisor(b: float, r0: float = r0) -> float:
             if b != 0:
                 return abs(float(b))
             return abs(r0) if np.isfinite(r0) and r0 != 0 else 1.0

@@ -136,6 +136,7 @@ class StepSolver:
         history: list[float] = []
         lin: Linearization | None = None
         factor: Factor | None = None
+        dz = np.zeros_like(z)   # the last correction; read only from the second iteration on
         for it in range(1, st.max_iterations + 1):
             s = correct(pred, *self._split(z))
             R = self.model.residual(t, s, params)

@@ -18,7 +18,8 @@ Velocity level: q̇0 = q̇_g + Aᵀ (A Aᵀ)⁻¹ (b − A q̇_g), A = [J_Φ; J_
 
 Pressures: given, or ``static``: with q̈ = 0 the equations of motion
 Jᵀλ − Q_other − Q_v − Σ_c (p1 A1)_c Q_unit,c = 0 are solved for λ and the piston-side
-forces p1 A1 (Q_other includes the rod-side pressure p2 = given or p_T, and the damping).  λ0 and ṗ0 = h(t0) are returned as Newton guesses.
+forces p1 A1 (Q_other includes the rod-side pressure p2 = given or p_T, and the damping).
+λ0 and ṗ0 = h(t0) are returned as Newton guesses.
 """
 from __future__ import annotations
 
@@ -178,7 +179,7 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
         return float(np.linalg.norm(np.real(_F(model, qq, mm, params))))
 
     best = (np.inf, q)
-    for it in range(a.max_iterations):
+    for _ in range(a.max_iterations):
         F = _F(model, q, mu, params)
         f0 = float(np.linalg.norm(np.real(F)))
         phin = float(np.linalg.norm(np.real(F[n_q:])))

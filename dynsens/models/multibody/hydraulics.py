@@ -60,7 +60,8 @@ def cylinder_law(L: Any, Ld: Any, p1: Any, p2: Any, QP: Any, A1: Any, A2: Any, L
 
 @dataclass(eq=False)
 class HydraulicCylinder(AxialElement):
-    """One cylinder, an :class:`.actuators.AxialElement` with two states; ``p_index`` is the position of p1 in the first-order state (p2 follows).
+    """One cylinder, an :class:`.actuators.AxialElement` with two states; ``p_index`` is the position
+    of p1 in the first-order state (p2 follows).
 
     ``idx`` maps the names of :data:`CYLINDER_PARAMS` to parameter-vector indices
     (areas are stored derived in params.scal under ``name + '.A1'`` / ``'.A2'``).

@@ -40,7 +40,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .bodies import GROUND, Const, Ctx, Diff, Direction, MBParams, Point, Term
+from .bodies import GROUND, Const, Ctx, Diff, Direction, Point, Term
 
 Array = np.ndarray
 # a time coefficient: (t, params) -> (value, first derivative, second derivative).  The
