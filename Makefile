@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test example reproduce-table1 figures report bench bench-peers cases clean
+.PHONY: setup test lint test-min example reproduce-table1 figures report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,34 @@ setup: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+# ruff and mypy with the configuration in pyproject.toml (CI runs this)
+LINT_STAMP := $(VENV)/.lint-installed
+$(LINT_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e ".[lint]"
+	touch $(LINT_STAMP)
+
+lint: $(LINT_STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
+# the lowest versions pyproject.toml allows, in a venv of their own (CI runs this); a subset of
+# the suite: the API, closed forms, case errors, the optimizer (multi-start sampling) and the
+# compiled kernel against numpy. Its own numba cache keeps the main environment's warm.
+MIN_VENV ?= .venv-min
+MIN_PINS := numpy==1.24.0 scipy==1.10.0 h5py==3.8.0 click==8.1.0 pyyaml==6.0.1 numba==0.60.0 \
+	matplotlib==3.7.0 pytest==7.4.0
+MIN_TESTS := tests/test_api.py tests/test_sdof_closed_form.py tests/test_case_errors.py tests/test_optimize.py \
+	tests/test_compiled_kernel.py tests/test_newmark.py
+test-min:
+	test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
+	$(MIN_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS)
+	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps -e .
+	$(MIN_VENV)/bin/python -c "import numpy, scipy, h5py, click, yaml, numba; \
+		print('minimum versions:', numpy.__version__, scipy.__version__, h5py.__version__, click.__version__, \
+		yaml.__version__, numba.__version__)"
+	NUMBA_CACHE_DIR=$(MIN_VENV)/numba-cache $(MIN_VENV)/bin/python -m pytest -q -k "not dask" $(MIN_TESTS)
 
 example: $(STAMP)
 	mkdir -p results
@@ -58,4 +86,4 @@ cases: $(STAMP)
 	$(PY) scripts/make_cases.py
 
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) $(MIN_VENV) results .pytest_cache

@@ -16,7 +16,8 @@ __version__ = "0.1.0"
 from .case.load import Case, load_case, load_case_dict  # noqa: E402
 from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
 from .simulation import run_case  # noqa: E402
-from .api import OptimizeResult, Simulation, check_gradients, optimize, simulate  # noqa: E402
+from .api import OptimizeResult, Simulation, check_gradients, simulate  # noqa: E402
+from . import optimize  # noqa: E402  (the subpackage; calling it runs dynsens.api.optimize)
 
 # The public API; everything else (dynsens.models, dynsens.march, ...) may change between versions.
 __all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Simulation",

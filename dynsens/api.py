@@ -26,8 +26,6 @@ from .case.load import Case, load_case, load_case_dict
 from .gradcheck import GradientReport
 from .gradcheck import check_gradients as _check_gradients
 from .march import RunResult
-# imported here, before dynsens/__init__.py binds the name ``dynsens.optimize`` to the function below:
-# a first import of the subpackage after that would rebind the name to the module
 from .optimize.runner import optimize_case as _optimize_case
 from .optimize.store import read_history as _read_history
 from .responses import ResponseValue

@@ -54,7 +54,7 @@ def _evaluate(case: Case, method: str) -> tuple[dict[str, float], dict[str, np.n
         c = _with(case, [f"sensitivity.partials={method[4:]}"])
         res = run_case(c, history=())
         vals = {n: float(np.real(r.value)) for n, r in res.responses.items()}
-        grads = {n: np.real(r.gradient) for n, r in res.responses.items()}
+        grads = {n: np.real(np.asarray(r.gradient)) for n, r in res.responses.items()}
         return vals, grads, time.perf_counter() - t0
     x0 = case.x0
     m = x0.size

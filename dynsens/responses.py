@@ -191,7 +191,7 @@ class KSAggregate(Response):
         w = np.exp(self.rho * (v - self._gmax))
         self._sum = self._sum + np.sum(w)
         if all(g is not None for g in grads):
-            G = np.concatenate([g[:, comp] for g, comp in zip(grads, self.components)], axis=1)
+            G = np.concatenate([np.asarray(g)[:, comp] for g, comp in zip(grads, self.components)], axis=1)
             contrib = w @ G.reshape(v.size, -1)
             self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
 
@@ -421,7 +421,9 @@ class ResponseSet:
         frac = theta if ev.location == "interpolate" else 1.0
         t_event = prev.t[0] + frac * dt
         dt_dx = None if dtheta is None else dt * dtheta
-        value, grad, grad_fixed = {}, {}, {}
+        value: dict[Any, Any] = {}
+        grad: dict[Any, Any] = {}
+        grad_fixed: dict[Any, Any] = {}
         for k in cur.value:
             dv = cur.value[k] - prev.value[k]
             value[k] = prev.value[k] + frac * dv

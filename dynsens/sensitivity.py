@@ -38,7 +38,7 @@ class DesignPartials:
     scale : typical magnitude of each design variable (the case's ``scale``), used when x_j ≈ 0.
     """
 
-    def __init__(self, model: Model, x: np.ndarray, method: PartialsMethod = "forward",
+    def __init__(self, model: Model, x: np.ndarray, method: PartialsMethod | str = "forward",
                  rel_step: float | None = None, scale: np.ndarray | None = None):
         if method not in METHODS:
             raise ValueError(f"partials method {method!r}: expected one of {', '.join(METHODS)}")
@@ -86,7 +86,8 @@ class DesignPartials:
         # (column colouring, as for sparse Jacobians) when the model knows its pattern
         pattern = model.design_pattern()
         self.colours = colour_columns(pattern, m)
-        self._residual_batch = self._batch if self.colours is None else self._colour_batch(pattern)
+        self._residual_batch = (self._batch if self.colours is None or pattern is None
+                                else self._colour_batch(pattern))
 
     @property
     def relative_error(self) -> float:

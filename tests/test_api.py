@@ -113,3 +113,11 @@ def test_subcommand_short_help() -> None:
     out = subprocess.run([sys.executable, "-m", "dynsens", "simulate", "-h"], capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0 and "--output" in out.stdout
+
+
+def test_optimize_subpackage_still_importable() -> None:
+    # dynsens.optimize is both the API function (called) and the subpackage (imported from)
+    code = ("import dynsens, dynsens.optimize.problem as p; import dynsens.optimize.jobs as j; "
+            "from dynsens.optimize import optimize_case; assert callable(dynsens.optimize) and p.FEAS_TOL > 0")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr

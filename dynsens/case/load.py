@@ -20,6 +20,8 @@ from ..errors import CaseError, ProblemCollector
 from ..expressions import ExpressionError, compile_expression
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
 from ..march import HISTORY_FIELDS, RunPlan
+from .. import case_keys
+from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
@@ -30,9 +32,8 @@ from ..solver.newton import NewtonSettings
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 
-TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
-            "events", "responses", "optimization")
-RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
+TOP_KEYS = allowed("case")
+RESPONSE_TYPES = case_keys.RESPONSE_TYPES
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -208,13 +209,13 @@ def _number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = Fal
 
 
 def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tuple[str, ...]]:
-    if not check_keys(spec, "design", ("variables",), pc):
+    if not check_keys(spec, "design", allowed("design"), pc):
         return [], ()
     out = []
     declared: list[str] = []
     for i, v in enumerate(spec.get("variables", []) or []):
         p = f"design.variables[{i}]"
-        if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
+        if not check_keys(v, p, allowed("design.variable"), pc, required=("name", "value")):
             continue
         name = v.get("name")
         if not isinstance(name, str) or not _IDENT.match(name):
@@ -242,14 +243,13 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
 
 def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                 ) -> tuple[Newmark | None, RunPlan | None, str]:
-    ok = check_keys(spec, "integrator", ("scheme", "beta", "gamma", "alpha", "rho_inf", "dt", "t0", "t_end",
-                                        "solver", "event_location", "max_step_cuts"), pc, required=("dt", "t_end"))
+    ok = check_keys(spec, "integrator", allowed("integrator"), pc, required=("dt", "t_end"))
     if sens is None:
         sens = {}
-    ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
+    ok &= check_keys(sens, "sensitivity", allowed("sensitivity"), pc)
     if output is None:
         output = {}
-    ok &= check_keys(output, "output", ("history", "sensitivity_history"), pc)
+    ok &= check_keys(output, "output", allowed("output"), pc)
     if not ok:
         return None, None, "interpolate"
     beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
@@ -272,7 +272,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
             pc.add("integrator", str(exc))
     solver = spec.get("solver", {}) or {}
     newton = NewtonSettings()
-    if check_keys(solver, "integrator.solver", ("rtol", "atol", "max_iterations"), pc):
+    if check_keys(solver, "integrator.solver", allowed("integrator.solver"), pc):
         rtol = _number(solver.get("rtol", newton.rtol), "integrator.solver.rtol", pc, positive=True)
         atol = _number(solver.get("atol", newton.atol), "integrator.solver.atol", pc)
         mi = solver.get("max_iterations", newton.max_iterations)
@@ -316,6 +316,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
         pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
     if None in (dt, t0, t_end) or pc.problems:
         return scheme, None, str(loc)
+    assert t0 is not None and t_end is not None and dt is not None  # checked above
     plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
                    partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
                    history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts)
@@ -345,7 +346,7 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
     names: list[str] = []
     for i, ev in enumerate(spec):
         p = f"events[{i}]"
-        if not check_keys(ev, p, ("name", "quantity", "component", "value", "direction", "action", "location"),
+        if not check_keys(ev, p, allowed("event"),
                           pc, required=("name", "quantity", "value")):
             continue
         names.append(str(ev.get("name")))
@@ -373,9 +374,8 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
     if not isinstance(spec, list):
         pc.add("responses", "expected a list")
         spec = []
-    makers: list[Callable[[], Response]] = []
+    makers: list[Callable[..., Response]] = []  # called without arguments
     names: list[str] = []
-    common = ("name", "type", "unit")
     for i, r in enumerate(spec):
         p = f"responses[{i}]"
         if not isinstance(r, dict):
@@ -391,7 +391,7 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
         names.append(name)
         unit = str(r.get("unit", ""))
         if kind == "value":
-            check_keys(r, p, common + ("quantity", "component", "at", "time", "event", "derivative"), pc,
+            check_keys(r, p, allowed("response.value"), pc,
                        required=("quantity",))
             oid = output_id(r.get("quantity"), f"{p}.quantity")
             deriv = r.get("derivative", "total")
@@ -413,7 +413,7 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             makers.append(lambda n=name, o=oid, c=comp, u=u, tm=time, e=event, f=(deriv == "fixed_time"):
                           ValueAt(n, o, c, u, time=tm, event=e, fixed_time=f))
         elif kind == "ks":
-            check_keys(r, p, common + ("quantity", "quantities", "rho", "components"), pc, required=("rho",))
+            check_keys(r, p, allowed("response.ks"), pc, required=("rho",))
             qs = r.get("quantities", [r["quantity"]] if "quantity" in r else None)
             if not isinstance(qs, list) or not qs:
                 pc.add(p, "a KS response needs 'quantity' or a list 'quantities'")
@@ -426,7 +426,7 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             u = unit or outputs[oids[0]].unit
             makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
         elif kind == "integral":
-            check_keys(r, p, common + ("quantity", "component"), pc, required=("quantity",))
+            check_keys(r, p, allowed("response.integral"), pc, required=("quantity",))
             oid = output_id(r.get("quantity"), f"{p}.quantity")
             if oid is None:
                 continue
@@ -434,19 +434,19 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             u = unit or f"{outputs[oid].unit}*s"
             makers.append(lambda n=name, o=oid, c=comp, u=u: TimeIntegral(n, o, c, u))
         elif kind in ("event_time", "end_time"):
-            check_keys(r, p, common + (("event",) if kind == "event_time" else ()), pc,
+            check_keys(r, p, allowed(f"response.{kind}"), pc,
                        required=("event",) if kind == "event_time" else ())
             event = r.get("event")
             if kind == "event_time" and event not in event_names:
                 pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
             makers.append(lambda n=name, e=event: EventTime(n, e))
         elif kind == "mass":
-            check_keys(r, p, common, pc)
+            check_keys(r, p, allowed("response.mass"), pc)
             if model is not None and type(model).structural_mass is Model.structural_mass:
                 pc.add(f"{p}.type", f"model type {type(model).__name__} defines no structural mass")
             makers.append(lambda n=name, u=unit or "mass": StructuralMass(n, u))
         elif kind == "expression":
-            check_keys(r, p, common + ("expression",), pc, required=("expression",))
+            check_keys(r, p, allowed("response.expression"), pc, required=("expression",))
             try:
                 expr = compile_expression(str(r.get("expression")), set(names[:-1]) | set(design_names))
             except ExpressionError as exc:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import ProblemCollector
+from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 
 
@@ -37,7 +38,7 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
     """Check the ``optimization`` mapping against the case's responses; None if absent or invalid."""
     if spec is None:
         return None
-    if not check_keys(spec, "optimization", ("objective", "constraints", "method", "maxiter", "ftol"), pc,
+    if not check_keys(spec, "optimization", allowed("optimization"), pc,
                       required=("objective",)):
         return None
     n0 = len(pc.problems)
@@ -48,7 +49,7 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
     cons = []
     for i, c in enumerate(spec.get("constraints", []) or []):
         p = f"optimization.constraints[{i}]"
-        if not check_keys(c, p, ("response", "lower", "upper"), pc, required=("response",)):
+        if not check_keys(c, p, allowed("optimization.constraint"), pc, required=("response",)):
             continue
         name = c.get("response")
         if name not in response_names:

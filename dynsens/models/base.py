@@ -136,7 +136,7 @@ class Linearization:
         return out
 
 
-OutputFn = Callable[[float, StepState, Any], Array]
+OutputFn = Callable[..., Array]  # fn(t, state, params); "..." admits lambdas with bound defaults
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ProblemCollector
+from ..case_keys import allowed
 from ._keys import check_keys, did_you_mean
 from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .registry import register
@@ -302,6 +303,7 @@ class StructuralModel(Model):
             return super().residual_batch_steps(ts, states, params_list)
         if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
             st = self.stack_parameters(params_list)
+            assert st is not None  # dense models always stack
             if self.traits.has_damping:
                 st["D"] = np.stack([p["D"] for p in params_list])
             self._stacked = (params_list, st)
@@ -370,7 +372,7 @@ class StructuralModel(Model):
     def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
         """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
         ``{element: NAME|[NAMES]|all, kind: force|stress|strain}``."""
-        if not check_keys(spec, path, ("dof", "element", "kind"), problems):
+        if not check_keys(spec, path, allowed("structural.quantity"), problems):
             return None
         kind = spec.get("kind", "displacement" if "dof" in spec else "force")
         if "dof" in spec:
@@ -440,7 +442,7 @@ class StructuralModel(Model):
 
 
 # ---------------------------------------------------------------------- builder
-_MODEL_KEYS = ("type", "dofs", "dim", "nodes", "elements", "loads", "initial", "damping", "linear_algebra")
+_MODEL_KEYS = allowed("model.structural")
 
 
 @register("structural")
@@ -467,7 +469,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         nodes = {}
     for name, nd in nodes.items():
         npath = f"{path}.nodes.{name}"
-        if not check_keys(nd, npath, ("coords", "fixed"), problems, required=("coords",)):
+        if not check_keys(nd, npath, allowed("structural.node"), problems, required=("coords",)):
             continue
         node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
         fx = nd.get("fixed", [])
@@ -519,7 +521,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             problems.add(f"{ep}.name", f"duplicate element name {name!r}")
         names_seen.add(name)
         if kind == "mass":
-            check_keys(el, ep, ("type", "name", "dof", "node", "mass"), problems, required=("mass",))
+            check_keys(el, ep, allowed("structural.mass"), problems, required=("mass",))
             pi = table.add(el.get("mass"), f"{ep}.mass", problems, positive=True)
             targets = [dof(el["dof"], f"{ep}.dof")] if "dof" in el else \
                 node_dofs(el.get("node"), f"{ep}.node") if "node" in el else []
@@ -527,7 +529,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                 problems.add(ep, "a mass needs 'dof' or 'node'")
             mass_terms += [(d, pi) for d in targets]
         elif kind in ("spring", "damper"):
-            keys = ("type", "name", "dofs", "k", "k2", "k3") if kind == "spring" else ("type", "name", "dofs", "c")
+            keys = allowed(f"structural.{kind}")
             check_keys(el, ep, keys, problems, required=("dofs", "k" if kind == "spring" else "c"))
             pair = el.get("dofs", [])
             if not isinstance(pair, list) or len(pair) not in (1, 2):
@@ -548,7 +550,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             else:
                 dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
         elif kind == "bar":
-            check_keys(el, ep, ("type", "name", "nodes", "area", "E", "density"), problems,
+            check_keys(el, ep, allowed("structural.bar"), problems,
                        required=("nodes", "area", "E"))
             pair = el.get("nodes", [])
             if not isinstance(pair, list) or len(pair) != 2:
@@ -565,7 +567,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     loads = []
     for k, ld in enumerate(spec.get("loads", []) or []):
         lp = f"{path}.loads[{k}]"
-        if not check_keys(ld, lp, ("dof", "node", "direction", "value", "function"), problems, required=("value",)):
+        if not check_keys(ld, lp, allowed("structural.load"), problems, required=("value",)):
             continue
         if "dof" in ld:
             target = dof(ld["dof"], f"{lp}.dof")
@@ -584,7 +586,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             loads.append((target, amp, fn))
     init = spec.get("initial", {}) or {}
     init_lists: tuple[list[tuple[int, int]], list[tuple[int, int]]] = ([], [])
-    if check_keys(init, f"{path}.initial", ("displacement", "velocity"), problems):
+    if check_keys(init, f"{path}.initial", allowed("structural.initial"), problems):
         for j, key in enumerate(("displacement", "velocity")):
             entries = init.get(key, {}) or {}
             if not isinstance(entries, dict):
@@ -596,9 +598,9 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                 init_lists[j].append((di, table.add(v, ip, problems)))
     rayleigh = None
     damping = spec.get("damping")
-    if damping is not None and check_keys(damping, f"{path}.damping", ("rayleigh",), problems):
+    if damping is not None and check_keys(damping, f"{path}.damping", allowed("structural.damping"), problems):
         ry = damping.get("rayleigh")
-        if check_keys(ry, f"{path}.damping.rayleigh", ("alpha", "beta"), problems):
+        if check_keys(ry, f"{path}.damping.rayleigh", allowed("structural.rayleigh"), problems):
             rayleigh = (table.add(ry.get("alpha", 0.0), f"{path}.damping.rayleigh.alpha", problems, nonnegative=True),
                         table.add(ry.get("beta", 0.0), f"{path}.damping.rayleigh.beta", problems, nonnegative=True))
     la = spec.get("linear_algebra", "auto")

@@ -12,19 +12,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import ProblemCollector
+from ..case_keys import TIME_FUNCTION_TYPES, allowed
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
 
-KINDS = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
-_KEYS = {
-    "constant": set(),
-    "step": {"t0"},
-    "ramp": {"t0", "t1"},
-    "smoothstep": {"t0", "t1"},
-    "harmonic": {"frequency", "phase"},
-    "pulse": {"t0", "duration"},
-    "table": {"t", "values"},
-}
+KINDS = TIME_FUNCTION_TYPES   # the keys of each: dynsens/case_keys.py
 
 
 @dataclass(frozen=True)
@@ -96,7 +88,7 @@ def build_time_function(spec: Any, path: str, table: ParameterTable,
         problems.add(f"{path}.type", f"unknown time function {kind!r}{did_you_mean(kind, KINDS)} "
                                      f"(known: {', '.join(KINDS)})")
         return None
-    check_keys(spec, path, _KEYS[kind] | {"type"}, problems)
+    check_keys(spec, path, allowed(f"function.{kind}"), problems)
     if kind == "constant":
         return TimeFunction(kind, ())
     if kind == "step":

@@ -59,6 +59,10 @@ from the identity, so the resumed path differs from an uninterrupted one.
 """
 from __future__ import annotations
 
+import sys as _sys
+import types as _types
+from typing import Any as _Any
+
 from .jobs import StartOutcome, run_start
 from .plots import plot_optimization
 from .problem import (ACTIVE_TOL, FAIL_PENALTY, FEAS_TOL, ConstraintTerm, Evaluation, Evaluator, OptimizationError,
@@ -72,3 +76,15 @@ __all__ = ["ACTIVE_TOL", "ConstraintTerm", "Evaluation", "Evaluator", "FAIL_PENA
            "evaluate", "kkt_measure", "max_violation", "optimize_case", "plot_optimization", "read_history",
            "resolve_x0",
            "run_start", "scaled_evaluation", "set_status", "simulate", "start_points"]
+
+
+class _CallableModule(_types.ModuleType):
+    """``dynsens.optimize(...)`` is the API function :func:`dynsens.api.optimize`, while
+    ``dynsens.optimize.<name>`` (and ``import dynsens.optimize.problem``) stay this subpackage."""
+
+    def __call__(self, *args: _Any, **kwargs: _Any) -> _Any:
+        from ..api import optimize
+        return optimize(*args, **kwargs)
+
+
+_sys.modules[__name__].__class__ = _CallableModule

@@ -99,7 +99,7 @@ def run_start(job: StartJob) -> StartOutcome:
     sink = _make_sink(job)
     sent: list[dict[str, Any]] = []
     seq = [0]
-    state = {"n_sim": 0, "failed": 0, "message": "", "t_last": t_begin, "it": job.iteration0}
+    state: dict[str, Any] = {"n_sim": 0, "failed": 0, "message": "", "t_last": t_begin, "it": job.iteration0}
 
     def emit(kind: str, row: dict[str, Any]) -> None:
         msg = {"start": job.index, "kind": kind, "seq": seq[0], "row": {k: _plain(v) for k, v in row.items()}}
@@ -125,7 +125,7 @@ def run_start(job: StartJob) -> StartOutcome:
         on_eval(seed)
     u0 = problem.to_u(job.x_start)
     ev0 = evaluator(u0)
-    prev = {"u": ev0.u, "f": ev0.f_scaled}
+    prev: dict[str, Any] = {"u": ev0.u, "f": ev0.f_scaled}
 
     def iteration_row(ev: Evaluation) -> dict[str, Any]:
         now = time.perf_counter()

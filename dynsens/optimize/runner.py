@@ -9,7 +9,7 @@ import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, cast
 
 import h5py
 import numpy as np
@@ -60,7 +60,12 @@ def start_points(case: Case, n: int, seed: int, x0: np.ndarray) -> np.ndarray:
             raise OptimizationError(f"--starts {n} needs finite bounds for every design variable "
                                     f"(unbounded: {', '.join(bad)})")
         from scipy.stats import qmc
-        sample = qmc.LatinHypercube(d=len(lo), rng=seed).random(n - 1)
+        gen = np.random.default_rng(seed)   # the same sample as rng=seed on SciPy >= 1.15
+        try:
+            lhs = qmc.LatinHypercube(d=len(lo), rng=gen)
+        except TypeError:  # SciPy < 1.15 calls the argument seed
+            lhs = qmc.LatinHypercube(d=len(lo), seed=gen)
+        sample = lhs.random(n - 1)
         pts += list(lo + sample * (up - lo))
     return np.array(pts)
 
@@ -129,7 +134,7 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
             raise OptimizationError(f"--starts must be >= 1, found {n}")
         x_ref = resolve_x0(case, x0)
         if seed is None:
-            seed = int(np.random.SeedSequence().entropy % (2 ** 31))
+            seed = int(cast(int, np.random.SeedSequence().entropy) % (2 ** 31))
         pts = start_points(case, n, seed, x_ref)
         _init_file(path, case, x_ref, overwrite)
         # the reference start is simulated here: it fixes the normalizations (one simulation,

@@ -95,7 +95,7 @@ class Ctx:
 
     def __init__(self, q: Array, qd: Array, qdd: Array, params: MBParams, t: float):
         self.q, self.qd, self.qdd, self.params, self.t = q, qd, qdd, params, t
-        self.cache: dict[int, tuple[Array, Array, Array]] = {}
+        self.cache: dict[int, Array] = {}   # Term.kin: (3, 3, k) per term
         self.forces: dict[int, tuple["Term", Array]] = {}
         self.pending: list[tuple[Any, Array]] = []
         self._ps: dict[int, Array] = {}
@@ -164,13 +164,12 @@ class Term:
         key = id(self)
         hit = ctx.cache.get(key)
         if hit is None:
-            hit = self._kin(ctx)
-            if not isinstance(hit, np.ndarray):
-                hit = np.stack(np.broadcast_arrays(*hit))
+            parts = self._kin(ctx)
+            hit = parts if isinstance(parts, np.ndarray) else np.stack(np.broadcast_arrays(*parts))
             ctx.cache[key] = hit
         return hit
 
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array] | Array:
         raise NotImplementedError
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
@@ -196,7 +195,7 @@ class Direction(Term):
     body: int
     key: str
 
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array] | Array:
         if self.body == GROUND:
             return _constant_kin(ctx, self.key)
         return _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
@@ -220,7 +219,7 @@ class Direction(Term):
 class Point(Direction):
     """Point fixed in body ``body`` at body-frame offset params.vec[key] from the COM."""
 
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array] | Array:
         if self.body == GROUND:
             return _constant_kin(ctx, self.key)
         return ctx.rstack(self.body) + _quad_kin(ctx.ts(self.key), ctx.pstack(self.body))
@@ -237,7 +236,7 @@ class Const(Term):
 
     key: str
 
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array] | Array:
         return _constant_kin(ctx, self.key)
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:
@@ -251,7 +250,7 @@ class Diff(Term):
     a: Term
     b: Term
 
-    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array]:
+    def _kin(self, ctx: Ctx) -> tuple[Array, Array, Array] | Array:
         return self.a.kin(ctx) - self.b.kin(ctx)
 
     def apply(self, ctx: Ctx, f: Array, out: Array) -> None:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ProblemCollector
+from ...case_keys import FORCE_TYPES, allowed
 from .._keys import check_keys, did_you_mean
 from ..base import ParameterTable
 from ..registry import register
@@ -23,21 +24,11 @@ from .model import Assembly, MultibodyModel
 from .rotations import rotate, atan2_cs
 from .spec import Reader
 
-TOP_KEYS = ("type", "units", "gravity", "bodies", "joints", "forces", "initial", "stabilization",
-            "constraint_scale", "drift_limit")
-JOINT_KEYS = ("name", "type", "body_1", "body_2", "point", "marker_1", "marker_2", "axis")
-DRIVER_KEYS = ("name", "type", "joint", "body", "coordinate", "offset", "rate", "amplitude",
-               "frequency", "phase")
-FORCE_KEYS = {
-    "point_force": ("type", "name", "body", "point", "force", "frame", "function"),
-    "torque": ("type", "name", "body", "torque", "frame", "function"),
-    "spring_damper": ("type", "name", "body_1", "body_2", "point_1", "point_2", "stiffness",
-                      "damping", "cubic_stiffness", "free_length"),
-    "hydraulic_cylinder": ("type", "name", "body_1", "body_2", "point_1", "point_2", "bore", "rod",
-                           "area_1", "area_2", "length_0", "stroke_max", "bulk_modulus",
-                           "dead_volume_1", "dead_volume_2", "tank_conductance", "tank_pressure",
-                           "damping", "pump_flow", "pump_function", "initial_pressures"),
-}
+# the accepted keys live in the case language's key table (dynsens/case_keys.py)
+TOP_KEYS = allowed("model.multibody")
+JOINT_KEYS = allowed("multibody.joint")
+DRIVER_KEYS = allowed("multibody.driver")
+FORCE_KEYS = {kind: allowed(f"multibody.{kind}") for kind in FORCE_TYPES}
 
 
 @register("multibody")
@@ -58,7 +49,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     assembly = _initial(rd, spec.get("initial", {}), f"{path}.initial")
     alpha = beta = 0.0
     st = spec.get("stabilization")
-    if st is not None and check_keys(st, f"{path}.stabilization", ("alpha", "beta"), problems):
+    if st is not None and check_keys(st, f"{path}.stabilization", allowed("multibody.stabilization"), problems):
         for key in ("alpha", "beta"):
             v = st.get(key, 0.0)
             if not isinstance(v, (int, float)) or v < 0:
@@ -77,7 +68,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.bodies", "no moving body")
     if len(problems.problems) > n0:
         return None
-    model = MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
+    model = MultibodyModel(table, rd.bodies, rd.ground, joints, [*forces, *springs], cylinders,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
     model.drift_limit = None if drift_limit is None else float(drift_limit)
     return model
@@ -322,7 +313,7 @@ def _cylinder(rd: Reader, f: dict, fp: str, name: str, d: Diff, p_index: int) ->
 
 def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
     a = Assembly()
-    if not check_keys(spec, path, ("hold", "distances", "time", "tolerance"), rd.problems):
+    if not check_keys(spec, path, allowed("multibody.initial"), rd.problems):
         return a
     for key, default in (("time", 0.0), ("tolerance", 1e-12)):
         v = spec.get(key, default)
@@ -361,7 +352,7 @@ def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
         a.labels.append(f"hold {h}")
     for i, dspec in enumerate(spec.get("distances", []) or []):
         dp = f"{path}.distances[{i}]"
-        if not check_keys(dspec, dp, ("between", "value"), rd.problems, required=("between", "value")):
+        if not check_keys(dspec, dp, allowed("multibody.distance"), rd.problems, required=("between", "value")):
             continue
         pair = dspec.get("between")
         if not isinstance(pair, list) or len(pair) != 2:

@@ -47,7 +47,7 @@ Array = np.ndarray
 # coefficients of the model's joints read only params.pv and use only broadcasting arithmetic,
 # so that the stacked parameter sets (pv (B, n)) are evaluated in one call, each level a scalar
 # or (B,), and a block of times t (K, 1) with them, each level (K, B)
-Coef = Callable[[float, Any], tuple[Any, Any, Any]]
+Coef = Callable[..., tuple[Any, Any, Any]]  # coef(t, params) -> value, rate, acceleration
 
 
 def const_coef(value: float) -> Coef:
@@ -124,7 +124,9 @@ class DotEq(Equation):
 
     def evaluate(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         t, prm = ctx.t, ctx.params
-        phi = phid = phidd = 0.0
+        phi: Any = 0.0
+        phid: Any = 0.0
+        phidd: Any = 0.0
         for coef, a, b in self.terms:
             c, cd, cdd = coef(t, prm)
             D = (a.kin(ctx)[:, None] * b.kin(ctx)[None]).sum(2)      # all 9 dot products
@@ -228,10 +230,10 @@ def make_joint(name: str, kind: str, b1: int, b2: int, keys: dict[str, str]) -> 
     u1, v1, w1 = Direction(b1, keys["u1"]), Direction(b1, keys["v1"]), Direction(b1, keys["w1"])
     u2, v2, w2 = Direction(b2, keys["u2"]), Direction(b2, keys["v2"]), Direction(b2, keys["w2"])
     ex, ey, ez = Const(keys["ex"]), Const(keys["ey"]), Const(keys["ez"])
-    sph = [DotEq([(one, ex, d)]), DotEq([(one, ey, d)]), DotEq([(one, ez, d)])]
-    par = [DotEq([(one, u1, w2)]), DotEq([(one, v1, w2)])]
-    tra = [DotEq([(one, u1, d)]), DotEq([(one, v1, d)])]
-    lock = [DotEq([(one, u1, v2)])]
+    sph: list[Equation] = [DotEq([(one, ex, d)]), DotEq([(one, ey, d)]), DotEq([(one, ez, d)])]
+    par: list[Equation] = [DotEq([(one, u1, w2)]), DotEq([(one, v1, w2)])]
+    tra: list[Equation] = [DotEq([(one, u1, d)]), DotEq([(one, v1, d)])]
+    lock: list[Equation] = [DotEq([(one, u1, v2)])]
     eqs = {"spherical": sph, "revolute": sph + par, "cylindrical": tra + par,
            "prismatic": tra + par + lock, "fixed": sph + par + lock, "planar_pin": tra}[kind]
     return Joint(name, kind, b1, b2, eqs, point_2=P2, frame_1=(u1, v1, w1),

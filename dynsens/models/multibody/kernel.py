@@ -68,7 +68,9 @@ class Layout:
         sides: list[tuple[dict[int, float], list[tuple[str, float]]]] = []
         self.coefs: list[tuple[int, Any]] = []           # (product, coefficient) when not ONE
         self.shifts: list[tuple[int, Any]] = []          # (equation, shift)
-        prod_eq, norm_eq, norm_body = [], [], []
+        prod_eq: list[int] = []
+        norm_eq: list[int] = []
+        norm_body: list[int] = []
         for e, eq in enumerate(eqs):
             if isinstance(eq, NormEq):
                 norm_eq.append(e)
@@ -89,8 +91,8 @@ class Layout:
         self.compiled_laws = all(getattr(el, "law_kind", None) is not None for el in axial)
         for el in axial:
             sides += [self._side(el.d), self._side(el.d)]
-        self.point_prim = [self._side(P)[0] for P in points]
-        self.point_prim = [next(iter(m)) if m else -1 for m in self.point_prim]
+        point_sides = [self._side(P)[0] for P in points]
+        self.point_prim = [next(iter(m)) if m else -1 for m in point_sides]
         n_t, n_p = len(self.prims), len(sides) // 2
         self.n_t, self.n_prod = n_t, n_p
         self.MAB = np.zeros((2 * n_p, n_t))                # [MA; MB]: sides from primitives
@@ -103,7 +105,7 @@ class Layout:
         self.S = np.zeros((self.n_eq, self.n_cp))
         self.S[prod_eq, np.arange(self.n_cp)] = 1.0
         self.norm_eq, self.norm_body = np.array(norm_eq, int), np.array(norm_body, int)
-        self.pb = np.array([t.body for t in self.prims], int)              # type: ignore[attr-defined]
+        self.pb = np.array([t.body for t in self.prims], np.int_)          # type: ignore[attr-defined]
         self.is_point = np.array([isinstance(t, Point) for t in self.prims], float)
         self.point_idx = np.flatnonzero(self.is_point)
         self.point_body = self.pb[self.point_idx]

@@ -41,7 +41,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
 
 Array = np.ndarray
-Recipe = Callable[[MBParams], Any]
+Recipe = Callable[..., Any]  # recipe(params); "..." admits lambdas with bound defaults
 
 
 @dataclass
@@ -317,12 +317,13 @@ class MultibodyModel(Model):
         that stepped through a dead-centre configuration) must not report success."""
         Phi = self.constraint_levels(t, self.kinematics(s, params))[0][0]
         drift = float(np.linalg.norm(np.real(Phi[:, 0])))
-        limit = self.drift_limit
+        limit: Any = self.drift_limit
         if limit is None:
             limit = params.ts.get("__drift_limit__")
             if limit is None:
                 size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
-                limit = params.ts["__drift_limit__"] = 1e-2 * (size if size > 0 else 1.0)
+                limit = 1e-2 * (size if size > 0 else 1.0)
+                params.ts["__drift_limit__"] = limit
         if drift > limit:
             raise ModelError(
                 f"constraint drift ‖Φ‖ = {drift:.3g} exceeds {limit:.3g} at t = {t:.6g} s: the mechanism has "

@@ -207,13 +207,13 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             return None
         a = 7 * body.index
 
-        labs = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
-                "acceleration": ("ax", "ay", "az"), "angle_z": ("angle_z",),
-                "angular_velocity": ("wx", "wy", "wz"), "angular_velocity_z": ("wz",)}[kind]
-        labels = tuple(f"{name}.{c}" for c in labs)
+        comps = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
+                 "acceleration": ("ax", "ay", "az"), "angle_z": ("angle_z",),
+                 "angular_velocity": ("wx", "wy", "wz"), "angular_velocity_z": ("wz",)}[kind]
+        body_labels = tuple(f"{name}.{c}" for c in comps)
         if kind in ("position", "velocity", "acceleration"):
             field = {"position": "q", "velocity": "qd", "acceleration": "qdd"}[kind]
-            return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], labels, linear=True)
+            return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], body_labels, linear=True)
 
         def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
             p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
@@ -225,7 +225,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
                 v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
                 v = v if _k == "angular_velocity" else v[2:3]
             return v.T if s.q.ndim == 2 else v[:, 0]
-        return Output(fn, labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
+        return Output(fn, body_labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
     if head == "marker":
         from .spec import Reader
         if not isinstance(name, str) or "." not in name:

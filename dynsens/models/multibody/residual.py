@@ -18,7 +18,7 @@ differentiated by complex step (central differences for complex data).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -166,7 +166,8 @@ class Evaluation:
     def _compiled_forces_and_residual(self) -> None:
         """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
         time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
-        m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
+        m, kp, lay = self.model, self.kp, self.model.layout
+        kin = cast(CompiledKin, self.kin)   # the compiled path runs on compiled kinematics
         cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
         if self._given_inputs is not None:
             cf, shift, ext, f_ext, g = self._given_inputs
@@ -285,7 +286,8 @@ class Evaluation:
 
     def _compiled_linearization(self) -> Linearization:
         """:meth:`linearization` by the compiled kernel; the axial laws' partials enter as arrays."""
-        m, kin, lay = self.model, self.kin, self.model.layout
+        m, lay = self.model, self.model.layout
+        kin = cast(CompiledKin, self.kin)   # the compiled path runs on compiled kinematics
         tr = m.traits
         cl, ck = kin.arrays, kin.params
         G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,

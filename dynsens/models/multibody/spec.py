@@ -12,13 +12,14 @@ from typing import Any, Callable
 import numpy as np
 
 from ...errors import ProblemCollector
+from ...case_keys import allowed
 from .._keys import check_keys, did_you_mean
 from ..base import ParameterTable
 from .bodies import GROUND, BodyDef, MBParams
 from .rotations import perpendicular_pair, rotate
 
-BODY_KEYS = ("mass", "inertia", "position", "orientation", "velocity", "angular_velocity", "markers")
-Recipe = Callable[[MBParams], Any]
+BODY_KEYS = allowed("multibody.body")
+Recipe = Callable[..., Any]  # recipe(params); "..." admits lambdas with bound defaults
 
 
 class Reader:
@@ -82,10 +83,10 @@ class Reader:
         if o is None:
             return ("identity",)
         if isinstance(o, dict) and "euler_parameters" in o:
-            check_keys(o, path, ("euler_parameters",), self.problems)
+            check_keys(o, path, allowed("multibody.orientation.euler"), self.problems)
             return ("ep", tuple(self.table.add_many(o["euler_parameters"], f"{path}.euler_parameters",
                                                     self.problems, length=4)))
-        if not check_keys(o, path, ("axis", "angle"), self.problems, required=("angle",)):
+        if not check_keys(o, path, allowed("multibody.orientation.axis_angle"), self.problems, required=("angle",)):
             return ("identity",)
         return ("axis", self.vec3(o.get("axis"), f"{path}.axis", [0.0, 0.0, 1.0]),
                 self.num(o.get("angle"), f"{path}.angle"))
@@ -100,7 +101,7 @@ class Reader:
             mp = f"{path}.{mname}"
             frame = "body"
             if isinstance(m, dict):
-                if not check_keys(m, mp, ("position", "frame"), self.problems, required=("position",)):
+                if not check_keys(m, mp, allowed("multibody.marker"), self.problems, required=("position",)):
                     continue
                 frame = m.get("frame", "body")
                 if frame not in ("body", "global"):
