@@ -138,7 +138,8 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path) -> list[Path]:
                             f"{r.value_error[n]:.3e}", f"{r.gradient_error[n]:.3e}"])
     files.append(csv_path)
     lines = [f"# Work-precision study: `{case.name}` (scheme {case.scheme.name}, order {case.scheme.order})", "",
-             "Relative errors against the reference (finest Δt, complex-step partials, Richardson-extrapolated).", ""]
+             "Relative errors against the reference (finest Δt, complex-step partials, Richardson-extrapolated). "
+             "Wall times exclude numba compilation (the kernels are compiled before the first timed run).", ""]
     first = rows[0].method
     for n in names:
         lines += [f"## {n}", "", f"Observed order (value, {first}): {observed_order(rows, n, first):.2f}; "

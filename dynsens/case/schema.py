@@ -20,11 +20,11 @@ ROOT = Path(__file__).resolve().parents[2]
 SCHEMA_PATH = ROOT / "docs" / "case.schema.json"
 REFERENCE_PATH = ROOT / "docs" / "case-reference.md"
 
-_EXPR = {"anyOf": [{"type": "number"}, {"type": "string"}]}
+_EXPR: dict[str, Any] = {"anyOf": [{"type": "number"}, {"type": "string"}]}
 # YAML 1.1 reads 5.0e5 (no exponent sign) as text; the loader takes it as the number it spells
-_NUMBER = {"anyOf": [{"type": "number"},
+_NUMBER: dict[str, Any] = {"anyOf": [{"type": "number"},
                      {"type": "string", "pattern": "^[+-]?([0-9]+[.]?[0-9]*|[.][0-9]+)([eE][+-]?[0-9]+)?$"}]}
-_SCALAR = {"number": _NUMBER, "expr": _EXPR, "string": {"type": "string"},
+_SCALAR: dict[str, dict[str, Any]] = {"number": _NUMBER, "expr": _EXPR, "string": {"type": "string"},
            "name": {"type": "string"}, "bool": {"type": "boolean"}, "integer": {"type": "integer"}, "any": {}}
 
 
