@@ -121,3 +121,10 @@ def test_optimize_subpackage_still_importable() -> None:
             "from dynsens.optimize import optimize_case; assert callable(dynsens.optimize) and p.FEAS_TOL > 0")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
+
+
+def test_warmup_runs_each_arithmetic_mode_of_a_mechanism(capsys) -> None:
+    from dynsens import warmup
+    assert warmup.warm([REPO / "cases" / "pendulum_3d.yaml", SDOF_FILE], steps=3) >= 0.0
+    out = capsys.readouterr().out
+    assert "warmed pendulum_3d.yaml" in out and "warmed sdof_step.yaml: 0.0 s" in out   # structural: nothing
