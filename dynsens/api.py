@@ -217,6 +217,8 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     OptimizeResult
         scipy's names for the best start; see :class:`OptimizeResult`.
     """
+    if resume and output is None:
+        raise ValueError("resume=True continues the run recorded in an output file: give output")
     c = as_case(case, overrides)
     tmp = tempfile.TemporaryDirectory(prefix="dynsens-opt-") if output is None else None
     path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
