@@ -15,7 +15,8 @@ __version__ = "0.1.0"
 
 from .case.load import Case, load_case, load_case_dict  # noqa: E402
 from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
-from .simulation import run_case  # noqa: E402
+from .io.reader import Result, read_result  # noqa: E402
+from .simulation import SimulationResult, run_case  # noqa: E402
 
 __all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "__version__",
-           "load_case", "load_case_dict", "run_case"]
+           "Result", "SimulationResult", "load_case", "load_case_dict", "read_result", "run_case"]

@@ -27,8 +27,10 @@ from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Respons
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
+from ..records import QuantitySpec, Recorder
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
+from .quantities import parse_quantities
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
             "events", "responses", "optimization")
@@ -60,10 +62,11 @@ class Case:
     scheme: Newmark
     plan: RunPlan
     overrides: tuple[str, ...]
-    _make_responses: Callable[[], ResponseSet]
+    _make_responses: Callable[[bool], ResponseSet]
     response_names: tuple[str, ...]
     event_names: tuple[str, ...]
     optimization: OptimizationSpec | None = None
+    quantities: tuple[QuantitySpec, ...] = ()
 
     @property
     def design_names(self) -> tuple[str, ...]:
@@ -90,9 +93,9 @@ class Case:
         """Typical magnitudes of the design variables (m,)."""
         return np.array([v.scale for v in self.design], dtype=float)
 
-    def new_response_set(self) -> ResponseSet:
-        """Fresh accumulators for one run."""
-        return self._make_responses()
+    def new_response_set(self, record: bool = True) -> ResponseSet:
+        """Fresh accumulators for one run (``record``: keep the recorded quantities)."""
+        return self._make_responses(record)
 
 
 def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
@@ -162,6 +165,9 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     events, event_names = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
     factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, event_names,
                                  declared, model, plan, pc)
+    output_spec = raw.get("output")
+    quantities = parse_quantities(output_spec.get("quantities") if isinstance(output_spec, dict) else None,
+                                  output_id, outputs, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
@@ -169,9 +175,11 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
-                _make_responses=lambda: ResponseSet(outputs, factory(), ev),
+                _make_responses=lambda record: ResponseSet(
+                    outputs, factory(), ev, recorder=Recorder(quantities) if record and quantities else None,
+                    stack_parameters=model.stack_parameters),
                 response_names=rnames, event_names=tuple(e.name for e in events),
-                optimization=optimization)
+                optimization=optimization, quantities=quantities)
 
 
 def _plain(node: Any) -> Any:
@@ -249,7 +257,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
     if output is None:
         output = {}
-    ok &= check_keys(output, "output", ("history", "sensitivity_history"), pc)
+    ok &= check_keys(output, "output", ("history", "sensitivity_history", "quantities"), pc)
     if not ok:
         return None, None, "interpolate"
     beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
