@@ -84,6 +84,7 @@ def write_series(g: h5py.Group, result: Any, design_names: Sequence[str]) -> Non
         for k, v in result.monitors.items():
             attach(mg.create_dataset(k, data=v), time)
     quantities: dict[str, RecordedQuantity] = getattr(result, "quantities", {}) or {}
+    g.attrs["quantities"] = np.array(list(quantities), dtype=_TEXT)   # the case's order
     for name, rq in quantities.items():
         if len(rq.value) != n:    # cannot happen: the recorder sees every grid step
             raise ValueError(f"recorded quantity {name} has {len(rq.value)} instants, the run {n}")
@@ -106,7 +107,9 @@ def read_series(g: h5py.Group) -> dict[str, Any]:
         if grp in g:
             out[grp] = {k: v[()] for k, v in g[grp].items()}
     out["dof_labels"] = decode(g["state"].attrs.get("q_labels", [])) if "state" in g else []
-    for k, v in g.items():
+    order = decode(g.attrs.get("quantities", []))
+    for k in order + sorted(set(g) - set(order)):
+        v = g[k]
         if not isinstance(v, h5py.Dataset) or v.is_scale or v.ndim == 0 or not on_time(v):
             continue
         out["quantities"][k] = v[()]
