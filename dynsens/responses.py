@@ -291,8 +291,11 @@ class Combination(Response):
             else:
                 env[sym] = ctx.design[sym]
         value = self.expr.evaluate(env)
+        # a combination of a fixed-time gradient is one too (e.g. g2_fixed_time = stroke_fixed_time/500 − 1)
+        kind = "fixed_time" if any(ctx.values[s].kind == "fixed_time" for s in self.expr.symbols
+                                   if s in ctx.values) else ""
         if ctx.m == 0 or any(ctx.values[s].gradient is None for s in self.expr.symbols if s in ctx.values):
-            return ResponseValue(value, None, self.unit)
+            return ResponseValue(value, None, self.unit, kind=kind)
         grad = np.zeros(ctx.m, dtype=np.result_type(value, float))
         h = 1e-30
         for sym in self.expr.symbols:
@@ -303,7 +306,7 @@ class Combination(Response):
                 grad = grad + partial * ctx.values[sym].gradient
             else:
                 grad[self.design_names.index(sym)] += partial
-        return ResponseValue(value, grad, self.unit)
+        return ResponseValue(value, grad, self.unit, kind=kind)
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """Run a loaded case: the library entry point behind ``dynsens simulate``."""
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field, fields, replace
 from typing import Callable
 
@@ -10,6 +11,8 @@ from .case.load import Case
 from .march import RunResult, integrate
 from .records import RecordedQuantity
 
+log = logging.getLogger(__name__)
+
 
 @dataclass
 class SimulationResult(RunResult):
@@ -17,6 +20,15 @@ class SimulationResult(RunResult):
     (``output.quantities``), by name, on the run's time grid."""
 
     quantities: dict[str, RecordedQuantity] = field(default_factory=dict)
+    events: dict[str, float] = field(default_factory=dict)   # fired events: name -> time (s)
+
+    @property
+    def ended_by(self) -> str:
+        """How the run ended, in words: "reached t_end = 12 s" or "ended by event E1 at t = 7.78 s"."""
+        if self.events:
+            name, t = next(reversed(self.events.items()))
+            return f"ended by event {name} at t = {t:.6g} s"
+        return self.message
 
 
 def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
@@ -49,4 +61,7 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
     run = integrate(case.model, x, case.scheme, plan, responses,
                     design_names=case.design_names, design_scale=case.scale, progress=progress)
     quantities = responses.recorder.result() if responses.recorder is not None else {}
-    return SimulationResult(**{f.name: getattr(run, f.name) for f in fields(run)}, quantities=quantities)
+    events = {k: float(np.real(e.t)) for k, e in responses.fired.items()}
+    log.debug("run at x = %s: %s, %.3f s", np.real(x), run.message, run.wall_time)
+    return SimulationResult(**{f.name: getattr(run, f.name) for f in fields(run)}, quantities=quantities,
+                            events=events)
