@@ -30,12 +30,14 @@ def progress_enabled(stream: TextIO | None = None) -> bool:
 class Progress:
     """A progress line for ``total`` units of work; use as a context manager.
 
-    ``update(done, note)`` reports the units done so far (absolute, not increments).
+    ``update(done, note)`` reports the units done so far (absolute, not increments).  With
+    ``total=None`` (work of unknown size, e.g. SLSQP iterations) the line shows the elapsed
+    time and the note only.
     """
 
-    def __init__(self, total: float, label: str, stream: TextIO | None = None,
+    def __init__(self, total: float | None, label: str, stream: TextIO | None = None,
                  interval: float = 0.5, enabled: bool | None = None):
-        self.total = max(float(total), 1e-300)
+        self.total = None if total is None else max(float(total), 1e-300)
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
         self.interval = interval
@@ -47,6 +49,8 @@ class Progress:
     def line(self, done: float, note: str = "") -> str:
         """The text shown for ``done`` units (also used by tests)."""
         elapsed = time.perf_counter() - self.start
+        if self.total is None:
+            return f"{self.label}  {_fmt_seconds(elapsed)} elapsed" + (f"  {note}" if note else "")
         frac = min(max(done / self.total, 0.0), 1.0)
         left = f", ~{_fmt_seconds(elapsed * (1 - frac) / frac)} left" if 0 < frac < 1 else ""
         return f"{self.label}  {100 * frac:3.0f} %  {_fmt_seconds(elapsed)} elapsed{left}" + \

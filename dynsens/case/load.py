@@ -40,13 +40,15 @@ _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 @dataclass(frozen=True)
 class DesignVariable:
-    """A design variable: name, initial value, bounds and scale (units of the case)."""
+    """A design variable: name, initial value, bounds and scale (units of the case); ``unit``
+    names that unit in summaries and plots."""
 
     name: str
     value: float
     lower: float
     upper: float
     scale: float
+    unit: str = ""
 
 
 @dataclass
@@ -72,6 +74,16 @@ class Case:
     def design_names(self) -> tuple[str, ...]:
         """Names of the design variables, in order."""
         return tuple(v.name for v in self.design)
+
+    @property
+    def design_units(self) -> tuple[str, ...]:
+        """Units of the design variables (empty where the case names none)."""
+        return tuple(v.unit for v in self.design)
+
+    @property
+    def response_units(self) -> dict[str, str]:
+        """Unit of every response, by name."""
+        return {r.name: r.unit for r in self._make_responses(False).responses}
 
     @property
     def x0(self) -> np.ndarray:
@@ -222,7 +234,8 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
     declared: list[str] = []
     for i, v in enumerate(spec.get("variables", []) or []):
         p = f"design.variables[{i}]"
-        if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
+        if not check_keys(v, p, ("name", "value", "lower", "upper", "scale", "unit"), pc,
+                          required=("name", "value")):
             continue
         name = v.get("name")
         if not isinstance(name, str) or not _IDENT.match(name):
@@ -244,7 +257,11 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
             pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")
         if scale is None:
             scale = abs(value) if value != 0 else 1.0
-        out.append(DesignVariable(name, value, lower, upper, scale))
+        unit = v.get("unit", "")
+        if not isinstance(unit, str):
+            pc.add(f"{p}.unit", f"expected text such as 'mm', found {unit!r}")
+            unit = ""
+        out.append(DesignVariable(name, value, lower, upper, scale, unit))
     return out, tuple(declared)
 
 
