@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 from typing import Any, Callable
 
 import click
@@ -35,6 +36,18 @@ def compose(*decorators: Callable) -> Callable:
     return deco
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to the current ``sys.stderr`` (not the one at creation: tests and wrappers swap it)."""
+
+    @property  # type: ignore[override]
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
+
+
 def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
     """Level of the ``dynsens`` logger: WARNING, INFO with -v, DEBUG with -vv, ERROR with -q
     (which also hides the progress lines)."""
@@ -42,7 +55,7 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
     logger = logging.getLogger("dynsens")
     logger.setLevel(level)
     if not any(getattr(h, "_dynsens", False) for h in logger.handlers):
-        handler = logging.StreamHandler()    # stderr; the results go to stdout
+        handler = _StderrHandler()    # stderr; the results go to stdout
         handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
         handler._dynsens = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
