@@ -80,8 +80,9 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
             for ev, t in run.events.items():
                 ax.axvline(t, color="grey", ls=styles[k % len(styles)], lw=0.8)
                 if ax is axes[0, 0]:
-                    ax.annotate(f"{ev}" + (f" ({run.name})" if len(runs) > 1 else ""), (t, 1.0),
-                                xycoords=("data", "axes fraction"), fontsize=7, ha="right", va="bottom")
+                    ax.annotate(f"{ev} at {t:.4g} s" + (f" ({run.name})" if len(runs) > 1 else ""),
+                                (t, 1.0 + 0.08 * k), xycoords=("data", "axes fraction"), fontsize=7,
+                                ha="right", va="bottom", annotation_clip=False)
         shown: dict[tuple[float | None, float], list[str]] = {}    # one label per point or level
         for mk in markers:
             if mk.quantity in names and np.isfinite(mk.value) and mk.name not in shown.get((mk.t, mk.value), []):
