@@ -87,15 +87,15 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
         for mk in markers:
             if mk.quantity in names and np.isfinite(mk.value) and mk.name not in shown.get((mk.t, mk.value), []):
                 shown.setdefault((mk.t, mk.value), []).append(mk.name)
-        for (t, value), who in shown.items():
+        for (at, value), who in shown.items():
             text = f"{', '.join(who)} = {value:.5g} {unit}"
-            if t is None:
+            if at is None:
                 ax.axhline(value, color="k", ls=":", lw=0.8)
                 ax.annotate(text, (0.01, value), xycoords=("axes fraction", "data"), fontsize=7, va="bottom")
             else:
-                ax.plot([t], [value], "ko", ms=4)
-                ax.annotate(" " + text, (t, value), fontsize=7,
-                            ha="right" if t > 0.5 * (ax.get_xlim()[0] + ax.get_xlim()[1]) else "left")
+                ax.plot([at], [value], "ko", ms=4)
+                ax.annotate(" " + text, (at, value), fontsize=7,
+                            ha="right" if at > 0.5 * (ax.get_xlim()[0] + ax.get_xlim()[1]) else "left")
         ax.set_ylabel(f"[{unit}]" if unit else "(case units)")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")

@@ -64,10 +64,10 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
         runs = [r for r in (_stored_run(opt, "initial", "start"), _stored_run(opt, "optimum", "optimum"))
                 if r is not None and r.quantities]
         if len(runs) == 2:
-            p = plot_runs(runs, outdir / f"{path.stem}_optimum.png",
-                          f"{path.name}: recorded quantities at the start (solid) and the optimum (dashed)")
-            if p is not None:
-                written.append(p)
+            drawn = plot_runs(runs, outdir / f"{path.stem}_optimum.png",
+                              f"{path.name}: recorded quantities at the start (solid) and the optimum (dashed)")
+            if drawn is not None:
+                written.append(drawn)
         elif "optimum" in opt and "state" in opt["optimum"] and "q" in opt["optimum/state"]:
             t = opt["optimum/time"][()]
             q = opt["optimum/state/q"][()]
