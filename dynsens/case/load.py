@@ -23,11 +23,11 @@ from ..march import HISTORY_FIELDS, RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
+from ..records import QuantitySpec, Recorder
 from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
-from ..records import QuantitySpec, Recorder
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 from .quantities import parse_quantities
