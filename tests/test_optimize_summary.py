@@ -46,6 +46,15 @@ def test_summary_names_kkt_active_constraints_bounds_and_the_objective_change(tm
     assert f"q_ks = {q_ks:.6g} m  (bound <= 0.2 m): active" in text
     assert "c = " in text and "N s/m in [0.1, 20]" in text
     assert "\nactive: q_ks" in text
+    best = dynsens.read_result(out, "optimization/optimum")
+    start = dynsens.read_result(out, "optimization/initial")
+    assert best.units["u"] == "m" and best.responses["cost"]["value"] == pytest.approx(f1, rel=1e-12)
+    assert start.responses["cost"]["value"] == pytest.approx(f0, rel=1e-12)
+    # the displacement limit (KS, ρ = 50) is active at the optimum: the recorded peak lies within
+    # the KS bounds max u ≤ KS ≤ max u + ln(N)/ρ of 0.2 m
+    peak = best.to_dataframe()["u"].max()
+    assert peak <= 0.2 <= peak + np.log(len(best.time)) / 50.0
+    assert not np.array_equal(best.quantities["u"], start.quantities["u"])
     for name in ("opt_history", "opt_design", "opt_constraints", "opt_optimum"):
         p = tmp_path / "plots" / f"{name}.png"
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000

@@ -118,16 +118,23 @@ def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:
         rg.attrs["missing"] = r.missing or ""
 
 
-def read_result_dict(path: str | Path) -> dict[str, Any]:
-    """Read a result file into plain Python/numpy objects (behind :func:`dynsens.read_result`)."""
+def read_result_dict(path: str | Path, group: str = "/") -> dict[str, Any]:
+    """Read a result file into plain Python/numpy objects (behind :func:`dynsens.read_result`);
+    ``group`` names a run stored inside an optimization file (``optimization/optimum``)."""
     with h5py.File(path, "r") as f:
-        out: dict[str, Any] = read_series(f)
-        out["attrs"] = dict(f.attrs)
+        if group not in f:
+            raise DynsensError(f"{path} has no group {group!r}")
+        g = f[group]
+        out: dict[str, Any] = read_series(g)
+        out["attrs"] = {**dict(f.attrs), **dict(g.attrs)}
         out["design"] = {k: v[()] for k, v in f["design"].items()} if "design" in f else {}
         if "names" in out["design"]:
             out["design"]["names"] = decode(out["design"]["names"])
         out["responses"] = {}
-        if "responses" in f:
+        if g.name != "/" and "responses" in g:      # a stored run: values only, as attributes
+            out["responses"] = {n: {"value": v, "gradient": None, "unit": "", "missing": ""}
+                                for n, v in g["responses"].attrs.items()}
+        elif "responses" in f:
             for name, rg in f["responses"].items():
                 out["responses"][name] = {
                     "value": rg["value"][()], "gradient": rg["gradient"][()] if "gradient" in rg else None,

@@ -134,12 +134,14 @@ class Result:
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-def read_result(path: str | Path) -> Result:
-    """Read a ``dynsens simulate`` result file (HDF5) into a :class:`Result`."""
+def read_result(path: str | Path, group: str = "/") -> Result:
+    """Read a ``dynsens simulate`` result file (HDF5) into a :class:`Result`; with
+    ``group="optimization/optimum"`` (or ``"optimization/initial"``) the run an optimization
+    file stores for its best (or start) design."""
     path = Path(path)
     if not path.exists():
         raise DynsensError(f"file not found: {path}")
-    d = read_result_dict(path)
+    d = read_result_dict(path, group)
     return Result(path=path, time=d["time"], quantities=d["quantities"], units=d["units"],
                   labels=d["labels"], components=d["components"],
                   quantity_gradients=d["quantity_gradients"], state=d.get("state", {}),
