@@ -32,8 +32,10 @@ def format_run_notes(result: Any) -> list[str]:
 
 def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
     """Responses with gradients, then the run statistics, as plain text."""
-    ended = getattr(result, "ended_by", result.message)
-    lines = [f"status: {result.status}, {ended}", "",
+    # a run stopped by its event says which one and when (the file's status stays "terminated")
+    events = getattr(result, "events", {})
+    head = f"status: {result.ended_by}" if events else f"status: {result.status} ({result.message})"
+    lines = [head, "",
              f"{'response':<16}{'value':>16}  {'unit':<8}gradient d/d[{', '.join(design_names)}]"]
     for name, r in result.responses.items():
         if r.missing:
