@@ -15,6 +15,7 @@ allows, else the finest run itself.  Methods:
 from __future__ import annotations
 
 import csv
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,8 @@ import yaml
 
 from .case.load import Case, load_case_dict
 from .simulation import run_case
+
+log = logging.getLogger(__name__)
 
 METHODS = ("ddm-forward", "ddm-central", "ddm-complex", "fd-forward", "fd-central", "cs")
 FD_STEPS = {"fd-forward": 1e-6, "fd-central": 1e-4, "cs": 1e-20}
@@ -103,6 +106,7 @@ def work_precision(case: Case, dts: list[float], methods: list[str],
     def tick(dt: float, method: str) -> None:
         nonlocal done
         done += cost(dt, method)
+        log.info("convergence: Δt = %g s, %s done", dt, method)
         if progress is not None:
             progress(done, total, f"Δt = {dt:g} s, {method}")
     refs = []
