@@ -114,8 +114,8 @@ def response_markers(case: Any, result: Any) -> list[Marker]:
     at a time, at an event or at the end as points, KS maxima as levels."""
     from .responses import KSAggregate, ValueAt
     by_output: dict[int, list[str]] = {}
-    for q in case.quantities:
-        by_output.setdefault(q.output_id, []).append(q.name)
+    for name, q in result.quantities.items():
+        by_output.setdefault(q.output_id, []).append(name)
     out = []
     for r in case.new_response_set(record=False).responses:
         rv = result.responses.get(r.name)

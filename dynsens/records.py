@@ -10,10 +10,19 @@ are on the run's own time grid (the step at which an event fires included).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .responses import Samples
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .responses import ResponseSet
+
+
+# names the result file uses for its own members (a recorded quantity is a root-level dataset)
+RESERVED = ("time", "state", "sensitivity", "monitors", "design", "responses", "stats", "dof",
+            "multiplier", "pressure", "design_variable", "quantity_gradients", "optimization", "x")
 
 
 @dataclass(frozen=True)
@@ -55,6 +64,7 @@ class RecordedQuantity:
     value: np.ndarray
     gradient: np.ndarray | None = None
     components: tuple[str, ...] = ()
+    output_id: int = -1      # the case's output it records (-1: not known, e.g. read from a file)
 
 
 class Recorder:
@@ -93,5 +103,30 @@ class Recorder:
                 v = v[:, 0]
                 g = None if g is None else g[:, 0]
             out[s.name] = RecordedQuantity(s.name, s.unit, s.label or s.name, t, v, g,
-                                           () if s.scalar else s.component_labels)
+                                           () if s.scalar else s.component_labels, s.output_id)
         return out
+
+
+def quantities_read_by(responses: "ResponseSet") -> tuple[QuantitySpec, ...]:
+    """What the responses of a case read over time (each output once, all its components, in
+    the response's unit), for a case that names no ``output.quantities`` of its own.  Each is
+    named after its output's label (``u.displacement``, ``Z.F``) or, for an output of several
+    components, after the first response reading it (``sigma_ks_quantity``)."""
+    specs: list[QuantitySpec] = []
+    seen: set[int] = set()
+    names: set[str] = set()
+    for r in responses.responses:
+        for oid in r.output_ids:
+            if oid in seen:
+                continue
+            seen.add(oid)
+            out = responses.outputs[oid]
+            name = out.labels[0] if len(out.labels) == 1 else f"{r.name}_quantity"
+            if name in RESERVED or name.endswith("_component"):
+                name = f"{r.name}_quantity"
+            while name in names:
+                name += "_"
+            names.add(name)
+            specs.append(QuantitySpec(name, oid, tuple(range(len(out.labels))), tuple(out.labels),
+                                      r.unit or out.unit, f"{name} (read by {r.name})"))
+    return tuple(specs)

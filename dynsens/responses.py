@@ -370,6 +370,11 @@ class ResponseSet:
         self._partials: Any = None
         self._params_one: Any = None
 
+    def attach_recorder(self, recorder: "Recorder") -> None:
+        """Record quantities in this run (before :meth:`start`)."""
+        self.recorder = recorder
+        self._grad_oids |= recorder.gradient_outputs
+
     def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int) -> None:
         """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
         sensitivities), ``stacked_one`` = ``model.stack_parameters([params])`` (None when the

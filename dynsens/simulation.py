@@ -9,7 +9,7 @@ import numpy as np
 
 from .case.load import Case
 from .march import RunResult, integrate
-from .records import RecordedQuantity
+from .records import RecordedQuantity, Recorder, quantities_read_by
 
 log = logging.getLogger(__name__)
 
@@ -43,9 +43,10 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
     sensitivities : override the case's ``sensitivity.enabled``.
     history : override which state histories are stored.
     progress : called as ``progress(step, n_steps)`` while the run advances.
-    record : keep the recorded quantities (``output.quantities``); default: yes, unless
-        ``history=()`` asks for a run that stores no time histories (as the finite-difference,
-        optimization and convergence runs do).
+    record : keep the recorded quantities (``output.quantities``; for a case that names none,
+        the quantities its responses read); default: yes, unless ``history=()`` asks for a run
+        that stores no time histories (as the finite-difference, optimization and convergence
+        runs do).
     """
     x = case.x0 if x is None else np.asarray(x)
     plan = case.plan
@@ -58,6 +59,10 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
     if record is None:
         record = history is None or bool(history)
     responses = case.new_response_set(record=record)
+    if record and not case.quantities:
+        specs = quantities_read_by(responses)
+        if specs:
+            responses.attach_recorder(Recorder(specs))
     run = integrate(case.model, x, case.scheme, plan, responses,
                     design_names=case.design_names, design_scale=case.scale, progress=progress)
     quantities = responses.recorder.result() if responses.recorder is not None else {}

@@ -135,14 +135,37 @@ def test_xarray_opens_the_file_on_a_real_time_axis(sdof_file):
     assert float(ds["u"].sel(time=0.5, method="nearest")) == pytest.approx(res.responses["u_at_half"].value)
 
 
-def test_a_file_without_quantities_still_reads(tmp_path):
+def test_a_case_without_quantities_records_what_its_responses_read(tmp_path):
     raw = yaml.safe_load((CASES / "sdof_step.yaml").read_text())
     raw["integrator"]["t_end"] = 0.1
-    raw.pop("output", None)                 # a case that records nothing
+    raw.pop("output", None)                 # the case names no quantities of its own
     case = dynsens.load_case_dict(copy.deepcopy(raw), "plain")
-    write_result(tmp_path / "plain.h5", dynsens.run_case(case), case)
+    res = dynsens.run_case(case)
+    assert list(res.quantities) == ["u.displacement"]          # read by q_end and q_ks, recorded once
+    assert res.quantities["u.displacement"].unit == "m"
+    assert res.quantities["u.displacement"].value[-1] == res.responses["q_end"].value
+    assert dynsens.run_case(case, record=False).quantities == {}
+    write_result(tmp_path / "plain.h5", dynsens.run_case(case, record=False), case)
     out = dynsens.read_result(tmp_path / "plain.h5")
     assert out.quantities == {} and out.state["q"].shape == (101, 1)
+
+
+def test_a_file_of_the_earlier_layout_still_reads(tmp_path):
+    """Files written before the dimension scales: /time, /state, /design, /responses, /stats."""
+    import h5py
+    with h5py.File(tmp_path / "old.h5", "w") as f:
+        f.attrs["status"] = "completed"
+        f.create_dataset("time", data=np.linspace(0, 1, 11))
+        f.create_group("state").create_dataset("q", data=np.ones((11, 2)))
+        f.create_group("design").create_dataset("names", data=np.array(["a"], dtype=h5py.string_dtype()))
+        rg = f.create_group("responses").create_group("r")
+        rg.create_dataset("value", data=2.0)
+        rg.attrs["unit"] = "m"
+        f.create_group("stats").attrs["steps"] = 10
+    out = dynsens.read_result(tmp_path / "old.h5")
+    assert out.quantities == {} and out.state["q"].shape == (11, 2) and out.responses["r"]["value"] == 2.0
+    assert out.design_names == ["a"] and out.stats["steps"] == 10
+    assert list(out.to_dataframe("state").columns) == ["q[0]", "q[1]"]
 
 
 def test_recorded_gradient_histories_match_central_differences_of_the_whole_run():

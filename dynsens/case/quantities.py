@@ -19,12 +19,9 @@ from typing import Any, Callable
 from ..errors import ProblemCollector
 from ..models._keys import check_keys
 from ..models.base import Output
-from ..records import QuantitySpec
+from ..records import RESERVED, QuantitySpec
 
 QUANTITY_KEYS = ("name", "quantity", "component", "unit", "label", "sensitivity")
-# names the result file uses for its own members (a recorded quantity is a root-level dataset)
-RESERVED = ("time", "state", "sensitivity", "monitors", "design", "responses", "stats", "dof",
-            "multiplier", "pressure", "design_variable", "quantity_gradients", "optimization", "x")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
