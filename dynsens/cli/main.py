@@ -25,7 +25,7 @@ class DynsensGroup(click.Group):
 @click.group(cls=DynsensGroup)
 @click.version_option(__version__, prog_name="dynsens")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv: debugging detail).")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors: no progress, no warnings.")
+@click.option("-q", "--quiet", is_flag=True, help="Quiet: no progress lines, no log messages below errors.")
 def cli(verbose: int, quiet: bool) -> None:
     """dynsens: transient simulation with exact design gradients, and optimization."""
     configure_logging(verbose, quiet)

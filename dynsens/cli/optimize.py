@@ -10,9 +10,9 @@ import numpy as np
 from ..case.load import load_case
 from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, optimize_case,
                         plot_optimization)
-from .main import cli
 from ..optimize.summary import decision_summary
 from ..progress import Progress
+from .main import cli
 from .options import case_argument, overwrite_option, set_option, verbosity_options
 
 

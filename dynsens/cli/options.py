@@ -74,6 +74,6 @@ def _set_verbosity(ctx: click.Context, param: Any, value: Any) -> Any:
 def verbosity_options(fn: Callable) -> Callable:
     """-v/--verbose (repeatable) and -q/--quiet on a command, through the logging module."""
     fn = click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_set_verbosity,
-                      help="Only errors: no progress, no warnings.")(fn)
+                      help="Quiet: no progress lines, no log messages below errors.")(fn)
     return click.option("-v", "--verbose", count=True, expose_value=False, callback=_set_verbosity,
                         help="More log output (-vv: debugging detail).")(fn)
