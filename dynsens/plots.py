@@ -98,7 +98,13 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
                             ha="right" if at > 0.5 * (ax.get_xlim()[0] + ax.get_xlim()[1]) else "left")
         ax.set_ylabel(f"[{unit}]" if unit else "(case units)")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+        handles, labels = ax.get_legend_handles_labels()
+        if len(handles) <= 12:
+            ax.legend(fontsize=7, loc="best")
+        else:    # e.g. the stresses of every bar: name the quantities, not each curve
+            ax.legend(handles[:1], [", ".join(dict.fromkeys(run.quantities[n].label for n in names
+                                                            if n in run.quantities)) +
+                                    f" ({len(handles)} curves)"], fontsize=7, loc="best")
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
