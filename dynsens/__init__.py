@@ -15,10 +15,12 @@ __version__ = "0.1.0"
 
 from .case.load import Case, load_case, load_case_dict  # noqa: E402
 from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
-from .simulation import run_case  # noqa: E402
+from .simulation import SimulationResult, run_case  # noqa: E402
+from .io.reader import Result, read_result  # noqa: E402
 from .api import OptimizeResult, Simulation, check_gradients, simulate  # noqa: E402
 from . import optimize  # noqa: E402  (the subpackage; calling it runs dynsens.api.optimize)
 
 # The public API; everything else (dynsens.models, dynsens.march, ...) may change between versions.
-__all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Simulation",
-           "__version__", "check_gradients", "load_case", "load_case_dict", "optimize", "run_case", "simulate"]
+__all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Result",
+           "Simulation", "SimulationResult", "__version__", "check_gradients", "load_case", "load_case_dict",
+           "optimize", "read_result", "run_case", "simulate"]

@@ -97,6 +97,7 @@ SECTIONS: dict[str, Section] = {
         _k("upper", "number", "upper bound", default="inf"),
         _k("scale", "number", "typical magnitude (relative finite-difference steps at x = 0; unbounded scaling)",
            default="|value|, or 1"),
+        _k("unit", "string", "unit of the variable, shown in summaries and plots", default="''"),
     )),
     "integrator": Section("integrator", "Time integration and the Newton solver.", (
         _k("scheme", "enum", "Newmark-β, HHT-α or generalized-α", values=("newmark", "hht", "generalized_alpha"),
@@ -131,6 +132,16 @@ SECTIONS: dict[str, Section] = {
         _k("history", "any", "state histories: a list from q qd qdd lam p pd, or 'all' or 'none'",
            default="[q, qd, qdd]"),
         _k("sensitivity_history", "bool", "store the (N, n, m) sensitivity histories too", default=False),
+        _k("quantities", "list", "quantities recorded over time with unit and label (see Recorded quantities)",
+           item="output.quantity"),
+    )),
+    "output.quantity": Section("output.quantities[i]", "A quantity recorded at every step.", (
+        _req("name", "name", "name of the recorded series (an identifier)"),
+        _req("quantity", "any", "the quantity (see Quantities), as responses and events name it"),
+        _k("component", "any", "a component or a list of them: index or label", default="all"),
+        _k("unit", "string", "unit shown in plots and stored in the file (default: the quantity's)"),
+        _k("label", "string", "label for plots (default: the name)"),
+        _k("sensitivity", "bool", "also store the design gradient at every step", default=False),
     )),
     "event": Section("events[i]", "An event ends the run when its quantity crosses `value`.", (
         _req("name", "name", "event name (responses refer to it)"),

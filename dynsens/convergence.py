@@ -15,9 +15,11 @@ allows, else the finest run itself.  Methods:
 from __future__ import annotations
 
 import csv
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -25,6 +27,8 @@ import yaml
 
 from .case.load import Case, load_case_dict
 from .simulation import run_case
+
+log = logging.getLogger(__name__)
 
 METHODS = ("ddm-forward", "ddm-central", "ddm-complex", "fd-forward", "fd-central", "cs")
 FD_STEPS = {"fd-forward": 1e-6, "fd-central": 1e-4, "cs": 1e-20}
@@ -80,15 +84,38 @@ def _evaluate(case: Case, method: str) -> tuple[dict[str, float], dict[str, np.n
     return vals, grads, time.perf_counter() - t0
 
 
-def work_precision(case: Case, dts: list[float], methods: list[str]) -> tuple[list[Row], dict, dict]:
-    """Run the ladder; returns the rows and the reference values and gradients."""
+# cost of a method in simulations per design variable (ddm: one run in all; an estimate)
+_RUNS = {"fd-forward": 1.0, "fd-central": 2.0, "cs": 1.5}
+
+
+def work_precision(case: Case, dts: list[float], methods: list[str],
+                   progress: Callable[[float, float, str], None] | None = None
+                   ) -> tuple[list[Row], dict, dict]:
+    """Run the ladder; returns the rows and the reference values and gradients.
+
+    ``progress(done, total, note)`` is called after every (Δt, method) run with the work done so
+    far in estimated simulation-step units (a run costs ∝ 1/Δt)."""
     dts = sorted(dts, reverse=True)
     from .warmup import warm_case
     warm_case(case)  # compile first: no reported wall time includes numba compilation
+    m = case.x0.size
+
+    def cost(dt: float, method: str) -> float:
+        return (1.0 + m * _RUNS.get(method, 0.2)) / dt
+    total = sum(cost(dt, "ddm-complex") for dt in dts[-2:]) + sum(cost(dt, me) for dt in dts for me in methods)
+    done = 0.0
+
+    def tick(dt: float, method: str) -> None:
+        nonlocal done
+        done += cost(dt, method)
+        log.info("convergence: Δt = %g s, %s done", dt, method)
+        if progress is not None:
+            progress(done, total, f"Δt = {dt:g} s, {method}")
     refs = []
     for dt in dts[-2:]:
         vals, grads, _ = _evaluate(_with(case, [f"integrator.dt={dt}"]), "ddm-complex")
         refs.append((dt, vals, grads))
+        tick(dt, "ddm-complex")
     (dt1, v1, g1), (dt2, v2, g2) = refs if len(refs) == 2 else (refs[0], refs[0])
     p = case.scheme.order
     ratio = dt1 / dt2 if dt2 < dt1 else 1.0
@@ -103,6 +130,7 @@ def work_precision(case: Case, dts: list[float], methods: list[str]) -> tuple[li
         c = _with(case, [f"integrator.dt={dt}"])
         for method in methods:
             vals, grads, wall = _evaluate(c, method)
+            tick(dt, method)
             rows.append(Row(dt, method, wall, vals, grads,
                             {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
                             {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))

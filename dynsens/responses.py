@@ -20,12 +20,15 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from .expressions import Expression
 from .models.base import Output, StepState
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .records import Recorder
 
 
 @dataclass
@@ -288,8 +291,11 @@ class Combination(Response):
             else:
                 env[sym] = ctx.design[sym]
         value = self.expr.evaluate(env)
+        # a combination of a fixed-time gradient is one too (e.g. g2_fixed_time = stroke_fixed_time/500 − 1)
+        kind = "fixed_time" if any(ctx.values[s].kind == "fixed_time" for s in self.expr.symbols
+                                   if s in ctx.values) else ""
         if ctx.m == 0 or any(ctx.values[s].gradient is None for s in self.expr.symbols if s in ctx.values):
-            return ResponseValue(value, None, self.unit)
+            return ResponseValue(value, None, self.unit, kind=kind)
         grad = np.zeros(ctx.m, dtype=np.result_type(value, float))
         h = 1e-30
         for sym in self.expr.symbols:
@@ -300,7 +306,7 @@ class Combination(Response):
                 grad = grad + partial * ctx.values[sym].gradient
             else:
                 grad[self.design_names.index(sym)] += partial
-        return ResponseValue(value, grad, self.unit)
+        return ResponseValue(value, grad, self.unit, kind=kind)
 
 
 @dataclass(frozen=True)
@@ -331,6 +337,9 @@ class ResponseSet:
     block : most steps evaluated together (fewer when many gradient directions, a large state
         or large parameter sets make the batch large: at most ``BATCH_STATES`` states,
         ``BATCH_VALUES`` state entries and ``BATCH_BYTES`` of stacked parameter sets per call).
+    recorder : keeps recorded quantities (``output.quantities``) at every step; outputs only
+        it reads, without their sensitivity, are evaluated for values alone.
+    stack_parameters : the model's ``stack_parameters`` (values of batched outputs in one call).
     """
 
     BATCH_STATES = 2048
@@ -338,8 +347,15 @@ class ResponseSet:
     BATCH_BYTES = 32 * 2**20
 
     def __init__(self, outputs: list[Output], responses: list[Response], events: list[EventSpec],
-                 block: int = 128):
+                 block: int = 128, recorder: "Recorder | None" = None,
+                 stack_parameters: Callable[[list[Any]], Any] | None = None):
         self.outputs = outputs
+        self.recorder = recorder
+        self._stack_parameters = stack_parameters
+        # outputs whose gradients something reads: responses, events (at their crossing) and
+        # quantities recorded with their sensitivity
+        self._grad_oids = {oid for r in responses for oid in r.output_ids} | \
+            {ev.output_id for ev in events} | (recorder.gradient_outputs if recorder else set())
         self.responses = responses
         self.events = events
         self.block = block
@@ -354,11 +370,19 @@ class ResponseSet:
         self._partials: Any = None
         self._params_one: Any = None
 
+    def attach_recorder(self, recorder: "Recorder") -> None:
+        """Record quantities in this run (before :meth:`start`)."""
+        self.recorder = recorder
+        self._grad_oids |= recorder.gradient_outputs
+
     def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int) -> None:
         """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
         sensitivities), ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
         model does not evaluate batches) and the size of a state (n_z)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
+        if stacked_one is None and self._stack_parameters is not None and \
+                any(oid not in self._grad_oids for oid in range(len(self.outputs))):
+            self._params_one = self._stack_parameters([params])
         entries = partials.block_entries if partials is not None else 1
         # the parameter sets are stacked once per entry and step of a block (without
         # sensitivities one set serves the whole block)
@@ -443,11 +467,11 @@ class ResponseSet:
         times = np.array([t for t, _, _ in steps])
         states = [s for _, s, _ in steps]
         dstates = [ds for _, _, ds in steps]
-        partials = self._partials if dstates[0] is not None else None
         stacked_s: StepState | None = None
         value: dict[int, np.ndarray] = {}
         grad: dict[int, np.ndarray | None] = {}
         for oid, o in enumerate(self.outputs):
+            partials = self._partials if dstates[0] is not None and oid in self._grad_oids else None
             if o.linear:
                 # linear in the state, independent of the design: ∇v = fn(∇state)
                 value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
@@ -471,7 +495,10 @@ class ResponseSet:
             else:
                 value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
                 grad[oid] = None
-        return Samples(times, value, grad, dict(grad))
+        samples = Samples(times, value, grad, dict(grad))
+        if self.recorder is not None:
+            self.recorder.feed(samples)
+        return samples
 
     def _feed(self, samples: Samples) -> None:
         for r in self.responses:

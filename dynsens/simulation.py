@@ -1,18 +1,40 @@
 """Run a loaded case: the library entry point behind ``dynsens simulate``."""
 from __future__ import annotations
 
-from dataclasses import replace
+import logging
+from dataclasses import dataclass, field, fields, replace
 from typing import Callable
 
 import numpy as np
 
 from .case.load import Case
 from .march import RunResult, integrate
+from .records import RecordedQuantity, Recorder, quantities_read_by
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SimulationResult(RunResult):
+    """A :class:`~dynsens.march.RunResult` with the case's recorded quantities
+    (``output.quantities``), by name, on the run's time grid."""
+
+    quantities: dict[str, RecordedQuantity] = field(default_factory=dict)
+    events: dict[str, float] = field(default_factory=dict)   # fired events: name -> time (s)
+
+    @property
+    def ended_by(self) -> str:
+        """How the run ended, in words: "reached t_end = 12 s" or "ended by event E1 at t = 7.78 s"."""
+        if self.events:
+            name, t = next(reversed(self.events.items()))
+            return f"ended by event {name} at t = {t:.6g} s"
+        return self.message
 
 
 def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
              history: tuple[str, ...] | None = None,
-             progress: Callable[[int, int], None] | None = None) -> RunResult:
+             progress: Callable[[int, int], None] | None = None,
+             record: bool | None = None) -> SimulationResult:
     """Simulate ``case`` at design ``x`` (default: the case's initial design).
 
     Parameters
@@ -20,6 +42,11 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
     x : design (m,), real or complex (complex forces ``sensitivities=False``).
     sensitivities : override the case's ``sensitivity.enabled``.
     history : override which state histories are stored.
+    progress : called as ``progress(step, n_steps)`` while the run advances.
+    record : keep the recorded quantities (``output.quantities``; for a case that names none,
+        the quantities its responses read); default: yes, unless ``history=()`` asks for a run
+        that stores no time histories (as the finite-difference, optimization and convergence
+        runs do).
     """
     x = case.x0 if x is None else np.asarray(x)
     plan = case.plan
@@ -29,5 +56,17 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         plan = replace(plan, sensitivities=False)
     if history is not None:
         plan = replace(plan, history=history)
-    return integrate(case.model, x, case.scheme, plan, case.new_response_set(),
-                     design_names=case.design_names, design_scale=case.scale, progress=progress)
+    if record is None:
+        record = history is None or bool(history)
+    responses = case.new_response_set(record=record)
+    if record and not case.quantities:
+        specs = quantities_read_by(responses)
+        if specs:
+            responses.attach_recorder(Recorder(specs))
+    run = integrate(case.model, x, case.scheme, plan, responses,
+                    design_names=case.design_names, design_scale=case.scale, progress=progress)
+    quantities = responses.recorder.result() if responses.recorder is not None else {}
+    events = {k: float(np.real(e.t)) for k, e in responses.fired.items()}
+    log.debug("run at x = %s: %s, %.3f s", np.real(x), run.message, run.wall_time)
+    return SimulationResult(**{f.name: getattr(run, f.name) for f in fields(run)}, quantities=quantities,
+                            events=events)

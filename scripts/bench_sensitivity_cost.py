@@ -33,7 +33,9 @@ def timed(fn) -> float:
 
 
 def bench(path: Path, repeats: int, partials: str, fd: bool = True) -> dict:
-    over = ["output.history=none"] + ([] if partials == "case" else [f"sensitivity.partials={partials}"])
+    # output.quantities=[]: the solver alone, as in the figures of BENCHMARKS.md (recording: bench_records.py)
+    over = ["output.history=none", "output.quantities=[]"] + \
+        ([] if partials == "case" else [f"sensitivity.partials={partials}"])
     case = dynsens.load_case(path, over)
     m = case.x0.size
     h = 1e-7 * np.maximum(np.abs(case.x0), case.scale)

@@ -36,7 +36,11 @@ def duffing_chain(n: int = 20, t_end: float = 2.0) -> dict:
                              "function": {"type": "pulse", "t0": 0.0, "duration": 0.1}}]},
         "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 1.0e-3, "t_end": t_end},
         "sensitivity": {"enabled": True, "partials": "forward"},
-        "output": {"history": ["q"]},
+        "output": {"history": ["q"], "quantities": [
+            {"name": "tip_displacement", "quantity": {"dof": dofs[-1], "kind": "displacement"}, "unit": "m",
+             "label": f"displacement of {dofs[-1]}"},
+            {"name": "force_s1", "quantity": {"element": "s1", "kind": "force"}, "unit": "N",
+             "label": "force of spring s1 (at the wall)"}]},
         "responses": [
             {"name": "tip_end", "type": "value", "quantity": {"dof": dofs[-1], "kind": "displacement"}},
             {"name": "tip_ks", "type": "ks", "quantity": {"dof": dofs[-1], "kind": "displacement"},
@@ -82,7 +86,11 @@ def truss_impact(panels: int = 4, a: float = 500.0) -> dict:
                              "function": {"type": "pulse", "t0": 0.0, "duration": 0.005}}]},
         "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 1.0e-4, "t_end": 0.05},
         "sensitivity": {"enabled": True, "partials": "forward"},
-        "output": {"history": ["q"]},
+        "output": {"history": ["q"], "quantities": [
+            {"name": "tip_displacement", "quantity": {"dof": f"t{panels}.y", "kind": "displacement"},
+             "unit": "mm", "label": f"vertical displacement of t{panels}"},
+            {"name": "stress", "quantity": {"element": "all", "kind": "stress"}, "unit": "MPa",
+             "label": "bar stress"}]},
         "responses": [
             {"name": "mass", "type": "mass", "unit": "t"},
             {"name": "stress_ks", "type": "ks", "quantity": {"element": "all", "kind": "stress"},

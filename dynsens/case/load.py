@@ -25,12 +25,14 @@ from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
+from ..records import QuantitySpec, Recorder
 from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
+from .quantities import parse_quantities
 
 TOP_KEYS = allowed("case")
 RESPONSE_TYPES = case_keys.RESPONSE_TYPES
@@ -39,13 +41,15 @@ _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 @dataclass(frozen=True)
 class DesignVariable:
-    """A design variable: name, initial value, bounds and scale (units of the case)."""
+    """A design variable: name, initial value, bounds and scale (units of the case); ``unit``
+    names that unit in summaries and plots."""
 
     name: str
     value: float
     lower: float
     upper: float
     scale: float
+    unit: str = ""
 
 
 @dataclass
@@ -61,15 +65,26 @@ class Case:
     scheme: Newmark
     plan: RunPlan
     overrides: tuple[str, ...]
-    _make_responses: Callable[[], ResponseSet]
+    _make_responses: Callable[[bool], ResponseSet]
     response_names: tuple[str, ...]
     event_names: tuple[str, ...]
     optimization: OptimizationSpec | None = None
+    quantities: tuple[QuantitySpec, ...] = ()
 
     @property
     def design_names(self) -> tuple[str, ...]:
         """Names of the design variables, in order."""
         return tuple(v.name for v in self.design)
+
+    @property
+    def design_units(self) -> tuple[str, ...]:
+        """Units of the design variables (empty where the case names none)."""
+        return tuple(v.unit for v in self.design)
+
+    @property
+    def response_units(self) -> dict[str, str]:
+        """Unit of every response, by name."""
+        return {r.name: r.unit for r in self._make_responses(False).responses}
 
     @property
     def x0(self) -> np.ndarray:
@@ -91,9 +106,9 @@ class Case:
         """Typical magnitudes of the design variables (m,)."""
         return np.array([v.scale for v in self.design], dtype=float)
 
-    def new_response_set(self) -> ResponseSet:
-        """Fresh accumulators for one run."""
-        return self._make_responses()
+    def new_response_set(self, record: bool = True) -> ResponseSet:
+        """Fresh accumulators for one run (``record``: keep the recorded quantities)."""
+        return self._make_responses(record)
 
 
 def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
@@ -163,6 +178,9 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     events, event_names = _events(raw.get("events", []) or [], output_id, outputs, event_location, pc)
     factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, event_names,
                                  declared, model, plan, pc)
+    output_spec = raw.get("output")
+    quantities = parse_quantities(output_spec.get("quantities") if isinstance(output_spec, dict) else None,
+                                  output_id, outputs, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
@@ -170,9 +188,11 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
-                _make_responses=lambda: ResponseSet(outputs, factory(), ev),
+                _make_responses=lambda record: ResponseSet(
+                    outputs, factory(), ev, recorder=Recorder(quantities) if record and quantities else None,
+                    stack_parameters=model.stack_parameters),
                 response_names=rnames, event_names=tuple(e.name for e in events),
-                optimization=optimization)
+                optimization=optimization, quantities=quantities)
 
 
 def _plain(node: Any) -> Any:
@@ -237,7 +257,11 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
             pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")
         if scale is None:
             scale = abs(value) if value != 0 else 1.0
-        out.append(DesignVariable(name, value, lower, upper, scale))
+        unit = v.get("unit", "")
+        if not isinstance(unit, str):
+            pc.add(f"{p}.unit", f"expected text such as 'mm', found {unit!r}")
+            unit = ""
+        out.append(DesignVariable(name, value, lower, upper, scale, unit))
     return out, tuple(declared)
 
 

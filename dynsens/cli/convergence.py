@@ -5,8 +5,9 @@ import click
 
 from ..case.load import load_case
 from ..convergence import METHODS, observed_order, work_precision, write_report
+from ..progress import Progress
 from .main import cli
-from .options import case_argument, parse_float_list, set_option
+from .options import case_argument, parse_float_list, set_option, verbosity_options
 
 
 @cli.command("convergence")
@@ -18,6 +19,7 @@ from .options import case_argument, parse_float_list, set_option
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
               help="Folder for the tables and plots.")
 @set_option
+@verbosity_options
 def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str,
                     overrides: tuple[str, ...]) -> None:
     """Work-precision study of CASE_FILE: tables (markdown, CSV) and log-log plots."""
@@ -27,7 +29,11 @@ def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdi
     if bad:
         raise click.BadParameter(f"unknown methods {bad} (known: {', '.join(METHODS)})", param_hint="--methods")
     dts = dts or [case.plan.dt * f for f in (4, 2, 1, 0.5, 0.25)]
-    rows, _, _ = work_precision(case, dts, chosen)
+    with Progress(1, f"convergence of {case.name}") as bar:
+        def progress(done: float, total: float, note: str) -> None:
+            bar.total = total
+            bar.update(done, note, force=True)
+        rows, _, _ = work_precision(case, dts, chosen, progress=progress)
     files = write_report(case, rows, outdir)
     for n in rows[0].values:
         click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "

@@ -1,7 +1,6 @@
 """``dynsens`` command group; maps library errors to clean messages at the boundary."""
 from __future__ import annotations
 
-import logging
 import sys
 import warnings
 
@@ -9,6 +8,7 @@ import click
 
 from .. import __version__
 from ..errors import DynsensError
+from .options import configure_logging
 
 
 class DynsensGroup(click.Group):
@@ -24,10 +24,11 @@ class DynsensGroup(click.Group):
 
 @click.group(cls=DynsensGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dynsens")
-@click.option("-v", "--verbose", count=True, help="More log output.")
-def cli(verbose: int) -> None:
+@click.option("-v", "--verbose", count=True, help="More log output (-vv: debugging detail).")
+@click.option("-q", "--quiet", is_flag=True, help="Quiet: no progress lines, no log messages below errors.")
+def cli(verbose: int, quiet: bool) -> None:
     """dynsens: transient simulation with exact design gradients, and optimization."""
-    logging.basicConfig(level=logging.WARNING - 10 * verbose, format="%(levelname)s: %(message)s")
+    configure_logging(verbose, quiet)
 
 
 def main() -> None:

@@ -10,8 +10,10 @@ import numpy as np
 from ..case.load import load_case
 from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, optimize_case,
                         plot_optimization)
+from ..optimize.summary import decision_summary
+from ..progress import Progress
 from .main import cli
-from .options import case_argument, overwrite_option, set_option
+from .options import case_argument, overwrite_option, set_option, verbosity_options
 
 
 def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]:
@@ -93,7 +95,9 @@ def format_verdict(o: StartOutcome) -> str:
               help="Run the starts on this Dask distributed scheduler (pip install 'dynsens[dask]').")
 @click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
-              help="Write PNG plots of the history and of the best design's time histories to DIR.")
+              help="Write PNG plots to DIR: history (objective, violation, KKT), design variables and "
+                   "constraints against their bounds in units, recorded quantities at start and optimum.")
+@verbosity_options
 def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
              maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
              workers: int | None, scheduler: str | None, resume: bool, plots: str | None) -> None:
@@ -116,11 +120,25 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
         raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "
                                 "and constraints (see the README)")
     objective = case.optimization.objective
+    n_max = maxiter or case.optimization.maxiter
+    bar = Progress(None, f"optimizing {case.name}")
+    sims = {"it": 0, "n": 0, "total": 0, "t_sim": 0.0}
 
     def on_message(msg: dict[str, Any]) -> None:
         line = progress_line(msg, objective)
         if line:
+            bar.close()
             click.echo(line)
+        # within an iteration: simulations so far; across: iterations of at most maxiter
+        if msg["kind"] == "iteration":
+            sims["it"], sims["n"] = int(msg["row"]["iteration"]), 0
+        else:
+            sims["n"] += 1
+            sims["total"] += 1
+            sims["t_sim"] += float(msg["row"].get("wall_time") or 0.0)
+        mean = sims["t_sim"] / max(sims["total"], 1)
+        bar.update(0, f"start {msg['start']}: iteration {sims['it'] + 1} (at most {n_max}), "
+                      f"{sims['n']} simulation(s) in it, {sims['total']} in all, ~{mean:.1f} s each", force=True)
 
     def on_done(o: StartOutcome) -> None:
         click.echo(f"[start {o.index}] finished: {'converged' if o.success else 'not converged'} "
@@ -132,8 +150,10 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
                                workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
                                on_message=on_message, on_start_done=on_done)
     except KeyboardInterrupt:
+        bar.close()
         click.echo(f"interrupted: the history so far is in {output}; continue with --resume", err=True)
         sys.exit(130)
+    bar.close()
     click.echo("")
     click.echo(format_table(result, case.design_names, objective))
     b = result.best_outcome
@@ -141,6 +161,7 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     click.echo(f"best: start {b.index}, {objective} = {b.f:.8g}, x = {_vec(b.x)} "
                f"({', '.join(case.design_names)})")
     click.echo(format_verdict(b))
+    click.echo(decision_summary(output, result, case.design_units, case.response_units))
     if plots:
         for p in plot_optimization(output, plots):
             click.echo(f"plot: {p}")

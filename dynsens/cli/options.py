@@ -1,6 +1,8 @@
 """Options shared by several commands."""
 from __future__ import annotations
 
+import logging
+import sys
 from typing import Any, Callable
 
 import click
@@ -32,3 +34,46 @@ def compose(*decorators: Callable) -> Callable:
             fn = d(fn)
         return fn
     return deco
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes to the current ``sys.stderr`` (not the one at creation: tests and wrappers swap it)."""
+
+    @property  # type: ignore[override]
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
+    """Level of the ``dynsens`` logger: WARNING, INFO with -v, DEBUG with -vv, ERROR with -q
+    (which also hides the progress lines)."""
+    level = logging.ERROR if quiet else max(logging.DEBUG, logging.WARNING - 10 * verbose)
+    logger = logging.getLogger("dynsens")
+    logger.setLevel(level)
+    if not any(getattr(h, "_dynsens", False) for h in logger.handlers):
+        handler = _StderrHandler()    # stderr; the results go to stdout
+        handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+        handler._dynsens = True  # type: ignore[attr-defined]
+        logger.addHandler(handler)
+        logger.propagate = False
+
+
+def _set_verbosity(ctx: click.Context, param: Any, value: Any) -> Any:
+    """click callback: -v/-q given after the command name override the group's."""
+    if value:
+        state = ctx.meta.setdefault("dynsens_verbosity", {"verbose": 0, "quiet": False})
+        state[param.name] = value
+        configure_logging(state["verbose"], state["quiet"])
+    return value
+
+
+def verbosity_options(fn: Callable) -> Callable:
+    """-v/--verbose (repeatable) and -q/--quiet on a command, through the logging module."""
+    fn = click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_set_verbosity,
+                      help="Quiet: no progress lines, no log messages below errors.")(fn)
+    return click.option("-v", "--verbose", count=True, expose_value=False, callback=_set_verbosity,
+                        help="More log output (-vv: debugging detail).")(fn)

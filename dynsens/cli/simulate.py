@@ -1,21 +1,41 @@
 """``dynsens simulate``: primal + sensitivity run, results to HDF5, summary table."""
 from __future__ import annotations
 
-import sys
+import logging
+from typing import Any
 
 import click
 import numpy as np
 
 from ..case.load import load_case
 from ..io.hdf5 import write_result
+from ..progress import Progress
 from ..simulation import run_case
 from .main import cli
-from .options import case_argument, overwrite_option, set_option
+from .options import case_argument, overwrite_option, set_option, verbosity_options
+
+log = logging.getLogger("dynsens.cli")
 
 
-def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
+def format_run_notes(result: Any) -> list[str]:
+    """Step cuts and constraint drift (the per-step monitors), one line each when there are any."""
+    lines = []
+    cuts = result.counters.get("step_cuts", 0)
+    lines.append(f"step cuts: {cuts}" + (" (Newton failed on these steps; each was halved and retried)"
+                                          if cuts else ""))
+    for name, v in result.monitors.items():
+        if len(v):
+            lines.append(f"{name.replace('_', ' ')} drift: max {float(np.max(np.abs(v))):.3g}, "
+                         f"at the end {float(abs(v[-1])):.3g} (case units)")
+    return lines
+
+
+def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
     """Responses with gradients, then the run statistics, as plain text."""
-    lines = [f"status: {result.status} ({result.message})", "",
+    # a run stopped by its event says which one and when (the file's status stays "terminated")
+    events = getattr(result, "events", {})
+    head = f"status: {result.ended_by}" if events else f"status: {result.status} ({result.message})"
+    lines = [head, "",
              f"{'response':<16}{'value':>16}  {'unit':<8}gradient d/d[{', '.join(design_names)}]"]
     for name, r in result.responses.items():
         if r.missing:
@@ -30,6 +50,7 @@ def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
                   f"(+{c['sensitivity_residual_evaluations']} for sensitivities), "
                   f"solves {c['solves']} ({c['solve_columns']} right-hand sides), "
                   f"wall time {result.wall_time:.3f} s"]
+    lines += format_run_notes(result)
     return "\n".join(lines)
 
 
@@ -40,8 +61,12 @@ def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
 @overwrite_option
 @set_option
 @click.option("--no-sensitivities", is_flag=True, help="Primal run only.")
+@click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="Write a PNG of the recorded quantities (output.quantities) with units, events and "
+                   "the responses that read them to DIR.")
+@verbosity_options
 def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
-             no_sensitivities: bool) -> None:
+             no_sensitivities: bool, plots: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
     from pathlib import Path
 
@@ -49,18 +74,18 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     if Path(output).exists() and not overwrite:
         raise OutputExistsError(f"{output} exists: pass --overwrite to replace it")
     case = load_case(case_file, overrides)
-    n = case.plan.n_steps
-    show = n >= 2000 and sys.stderr.isatty()
-    with click.progressbar(length=n, label=f"simulating {case.name}", file=sys.stderr,
-                           hidden=not show) as bar:
-        last = [0]
-
-        def progress(i: int, total: int) -> None:
-            if i - last[0] >= 200:
-                bar.update(i - last[0])
-                last[0] = i
-
-        result = run_case(case, sensitivities=False if no_sensitivities else None, progress=progress)
+    log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",
+             case.name, case.plan.n_steps, case.plan.dt, len(case.design), len(case.response_names),
+             len(case.quantities))
+    with Progress(case.plan.n_steps, f"simulating {case.name}") as bar:
+        result = run_case(case, sensitivities=False if no_sensitivities else None,
+                          progress=lambda i, n: bar.update(i, f"step {i} of {n}"))
     write_result(output, result, case, overwrite=overwrite)
     click.echo(format_summary(result, case.design_names))
+    if plots:
+        from ..plots import Run, plot_runs, response_markers
+        p = plot_runs([Run(case.name, result.quantities, result.events)], Path(plots) / f"{Path(output).stem}.png",
+                      f"{case.name}: {getattr(result, 'ended_by', result.message)}",
+                      response_markers(case, result))
+        click.echo(f"plot: {p}" if p else "plots: the case records no quantities (add output.quantities)")
     click.echo(f"written: {output}")

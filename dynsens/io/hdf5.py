@@ -4,13 +4,16 @@ Layout (a contract; see the README):
 
 * root attributes ``dynsens_version``, ``created`` (ISO 8601 UTC), ``case`` (YAML text),
   ``case_source``, ``status``, ``message``;
-* ``/time`` (N,) s;
+* ``/time`` (N,) s, a dimension scale, like ``/dof``, ``/multiplier``, ``/pressure``,
+  ``/design_variable`` and ``/<quantity>_component`` (see :mod:`dynsens.io.series`);
+* ``/<quantity>`` (N,) or (N, k): the recorded quantities (``output.quantities``), attributes
+  ``units`` and ``long_name``; ``/quantity_gradients/<quantity>`` (N, [k,] m) on request;
 * ``/state/{q,qd,qdd,lam,p,pd}`` (N, n) — only the requested histories;
 * ``/sensitivity/{...}`` (N, n, m) — only with ``output.sensitivity_history``;
 * ``/monitors/<name>`` (N,) — per-step diagnostics such as constraint drift;
 * ``/design/names``, ``/design/values`` (m,), ``/design/lower``, ``/design/upper``;
 * ``/responses/<name>/value`` () and ``/responses/<name>/gradient`` (m,), attributes
-  ``unit`` and ``missing`` (empty when present);
+  ``unit`` (and ``units``, the netCDF name) and ``missing`` (empty when present);
 * ``/stats`` attributes: steps, newton_iterations, factorizations, residual_evaluations,
   ..., wall_time_s.
 
@@ -31,6 +34,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import DynsensError
+from .series import attach, decode, read_series, write_series
 
 
 class OutputExistsError(DynsensError, FileExistsError):
@@ -79,6 +83,10 @@ def write_design(f: h5py.File, names: tuple[str, ...], values: np.ndarray,
     if lower is not None and upper is not None:
         g.create_dataset("lower", data=lower)
         g.create_dataset("upper", data=upper)
+    if names and "design_variable" in f:
+        for k in ("names", "values", "lower", "upper"):
+            if k in g:
+                attach(g[k], f["design_variable"])
 
 
 def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = False) -> None:
@@ -87,20 +95,7 @@ def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = Fal
     status = result.status if not missing else f"{result.status}; missing responses: {', '.join(missing)}"
     with atomic_h5(path, overwrite) as f:
         write_header(f, case.text, case.source, status, result.message)
-        f.create_dataset("time", data=result.time)
-        if result.history:
-            g = f.create_group("state")
-            for k, v in result.history.items():
-                g.create_dataset(k, data=v, compression="gzip" if v.size > 10000 else None)
-            g.attrs["q_labels"] = np.array(result.labels.get("q", []), dtype=h5py.string_dtype())
-        if result.sensitivity_history:
-            g = f.create_group("sensitivity")
-            for k, v in result.sensitivity_history.items():
-                g.create_dataset(k, data=v, compression="gzip" if v.size > 10000 else None)
-        if result.monitors:
-            g = f.create_group("monitors")
-            for k, v in result.monitors.items():
-                g.create_dataset(k, data=v)
+        write_series(f, result, case.design_names)
         write_design(f, case.design_names, result.x, case.lower, case.upper)
         write_responses(f.create_group("responses"), result.responses)
         st = f.create_group("stats")
@@ -115,25 +110,31 @@ def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:
         rg = g.create_group(name)
         rg.create_dataset("value", data=float(np.real(r.value)))
         if r.gradient is not None:
-            rg.create_dataset("gradient", data=np.real(r.gradient))
+            gd = rg.create_dataset("gradient", data=np.real(r.gradient))
+            if "design_variable" in g.file and len(gd) == len(g.file["design_variable"]):
+                attach(gd, g.file["design_variable"])
         rg.attrs["unit"] = r.unit
+        rg.attrs["units"] = r.unit
         rg.attrs["missing"] = r.missing or ""
 
 
-def read_result(path: str | Path) -> dict[str, Any]:
-    """Read a result file into plain Python/numpy objects (for scripts and tests)."""
-    out: dict[str, Any] = {}
+def read_result_dict(path: str | Path, group: str = "/") -> dict[str, Any]:
+    """Read a result file into plain Python/numpy objects (behind :func:`dynsens.read_result`);
+    ``group`` names a run stored inside an optimization file (``optimization/optimum``)."""
     with h5py.File(path, "r") as f:
-        out["attrs"] = dict(f.attrs)
-        out["time"] = f["time"][()] if "time" in f else None
-        for grp in ("state", "sensitivity", "monitors"):
-            if grp in f:
-                out[grp] = {k: v[()] for k, v in f[grp].items()}
+        if group not in f:
+            raise DynsensError(f"{path} has no group {group!r}")
+        g = f[group]
+        out: dict[str, Any] = read_series(g)
+        out["attrs"] = {**dict(f.attrs), **dict(g.attrs)}
         out["design"] = {k: v[()] for k, v in f["design"].items()} if "design" in f else {}
         if "names" in out["design"]:
-            out["design"]["names"] = [n.decode() if isinstance(n, bytes) else n for n in out["design"]["names"]]
+            out["design"]["names"] = decode(out["design"]["names"])
         out["responses"] = {}
-        if "responses" in f:
+        if g.name != "/" and "responses" in g:      # a stored run: values only, as attributes
+            out["responses"] = {n: {"value": v, "gradient": None, "unit": "", "missing": ""}
+                                for n, v in g["responses"].attrs.items()}
+        elif "responses" in f:
             for name, rg in f["responses"].items():
                 out["responses"][name] = {
                     "value": rg["value"][()], "gradient": rg["gradient"][()] if "gradient" in rg else None,
@@ -165,3 +166,5 @@ def append_rows(path: str | Path, group: str, rows: dict[str, np.ndarray],
                 ds.resize(ds.shape[0] + 1, axis=0)
                 ds[-1] = v
         f.flush()
+
+

@@ -1,11 +1,17 @@
-"""Plots of an optimization file: history of f, violation and KKT residual; the optimum's histories."""
+"""Plots of an optimization file: history of f, violation and KKT residual; design variables and
+constraints against their bounds in units; recorded quantities at the start and the optimum."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
 
+from ..io.series import read_series
+from ..plots import Run, plot_runs
+from ..records import RecordedQuantity
 from .problem import _fmt
 
 
@@ -16,8 +22,12 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
     """PNG plots of an optimization file: the history and the best design's time histories.
 
     Writes ``<stem>_history.png`` (objective, max. constraint violation and KKT residual
-    over the iterations of every start) and ``<stem>_optimum.png`` (the ``max_lines``
-    largest displacement histories q(t) of the best design).  Returns the files written.
+    over the iterations of every start), ``<stem>_design.png`` (each design variable over the
+    iterations with its bounds, in its unit), ``<stem>_constraints.png`` (each constrained
+    response over the iterations against its bound, in its unit) and ``<stem>_optimum.png``
+    (the recorded quantities at the start and at the optimum, with events; without recorded
+    quantities the ``max_lines`` largest coordinate histories q(t) of the best design).
+    Returns the files written.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -50,7 +60,15 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
         fig.savefig(p, dpi=100)
         plt.close(fig)
         written.append(p)
-        if "optimum" in opt and "q" in opt["optimum/state"]:
+        written += _bounds_plots(f, path, outdir, plt)
+        runs = [r for r in (_stored_run(opt, "initial", "start"), _stored_run(opt, "optimum", "optimum"))
+                if r is not None and r.quantities]
+        if len(runs) == 2:
+            drawn = plot_runs(runs, outdir / f"{path.stem}_optimum.png",
+                              f"{path.name}: recorded quantities at the start (solid) and the optimum (dashed)")
+            if drawn is not None:
+                written.append(drawn)
+        elif "optimum" in opt and "state" in opt["optimum"] and "q" in opt["optimum/state"]:
             t = opt["optimum/time"][()]
             q = opt["optimum/state/q"][()]
             labels = [lb.decode() if isinstance(lb, bytes) else lb for lb in opt["optimum/state"].attrs["q_labels"]]
@@ -68,4 +86,70 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
             fig.savefig(p, dpi=100)
             plt.close(fig)
             written.append(p)
+    return written
+
+
+def _stored_run(opt: h5py.Group, group: str, name: str) -> Run | None:
+    """A run stored by the optimizer (``/optimization/initial`` or ``/optimum``) for plot_runs."""
+    if group not in opt:
+        return None
+    d = read_series(opt[group])
+    qs = {k: RecordedQuantity(k, d["units"].get(k, ""), d["labels"].get(k, k), d["time"], v,
+                              components=tuple(d["components"].get(k, ())))
+          for k, v in d["quantities"].items()}
+    events = json.loads(opt[group].attrs.get("events", "{}"))
+    return Run(name, qs, {k: float(v) for k, v in events.items()})
+
+
+def _bounds_plots(f: h5py.File, path: Path, outdir: Path, plt: Any) -> list[Path]:
+    """Design variables and constrained responses over the iterations against their bounds."""
+    opt = f["optimization"]
+    names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["design/names"][()]]
+    lower, upper = f["design/lower"][()], f["design/upper"][()]
+    dunits = json.loads(opt.attrs.get("design_units", "[]")) or [""] * len(names)
+    runits = json.loads(opt.attrs.get("response_units", "{}"))
+    rnames = json.loads(opt.attrs["response_names"])
+    cons = json.loads(opt.attrs["constraints"])
+    starts = [(k, opt[k]["history"]) for k in sorted(k for k in opt if k.startswith("start_"))
+              if "history" in opt[k]]
+    written = []
+
+    def panel_grid(n: int) -> tuple[Any, Any]:
+        fig, axes = plt.subplots(n, 1, figsize=(7, 1.9 * n + 0.8), sharex=True, squeeze=False)
+        return fig, axes[:, 0]
+
+    def save(fig: Any, axes: Any, suffix: str, title: str) -> None:
+        axes[-1].set_xlabel("iteration")
+        for ax in axes:
+            ax.grid(True, alpha=0.3)
+        axes[0].legend(fontsize=7)
+        fig.suptitle(f"{path.name}: {title}", fontsize=10)
+        fig.tight_layout()
+        p = outdir / f"{path.stem}_{suffix}.png"
+        fig.savefig(p, dpi=100)
+        plt.close(fig)
+        written.append(p)
+
+    if names and starts:
+        fig, axes = panel_grid(len(names))
+        for j, (ax, n) in enumerate(zip(axes, names)):
+            for k, h in starts:
+                ax.plot(h["iteration"][()], h["x"][:, j], "o-", ms=3, label=k.replace("_", " "))
+            for b, lab in ((lower[j], "lower bound"), (upper[j], "upper bound")):
+                if np.isfinite(b):
+                    ax.axhline(b, color="k", ls="--", lw=0.8, label=lab if j == 0 else None)
+            ax.set_ylabel(f"{n} [{dunits[j]}]" if j < len(dunits) and dunits[j] else n)
+        save(fig, axes, "design", "design variables and their bounds")
+    if cons and starts:
+        fig, axes = panel_grid(len(cons))
+        for ax, c in zip(axes, cons):
+            i = rnames.index(c["response"])
+            for k, h in starts:
+                ax.plot(h["iteration"][()], h["responses"][:, i], "o-", ms=3, label=k.replace("_", " "))
+            op = {"upper": "<=", "lower": ">=", "eq": "=="}[c["kind"]]
+            ax.axhline(c["bound"], color="r", ls="--", lw=0.9, label="bound")
+            unit = runits.get(c["response"], "")
+            ax.set_ylabel(f"{c['response']} [{unit}]" if unit else c["response"])
+            ax.set_title(f"{c['response']} {op} {c['bound']:g} {unit}".strip(), fontsize=8)
+        save(fig, axes, "constraints", "constrained responses against their bounds")
     return written

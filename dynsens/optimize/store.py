@@ -10,6 +10,7 @@ import numpy as np
 
 from ..case.load import Case
 from ..io.hdf5 import append_rows, atomic_h5, write_design, write_header
+from ..io.series import make_scale, write_series
 from ..simulation import run_case
 from .jobs import StartOutcome
 from .problem import FEAS_TOL, SIM_ERRORS, ConstraintTerm, ScaledProblem
@@ -72,9 +73,14 @@ def _outcome_from_file(f: h5py.File, k: int) -> StartOutcome:
 def _init_file(path: Path, case: Case, x_ref: np.ndarray, overwrite: bool) -> None:
     with atomic_h5(path, overwrite) as f:
         write_header(f, case.text, case.source, "running", "")
+        if case.design_names:
+            make_scale(f, "design_variable", list(case.design_names))
         write_design(f, case.design_names, x_ref, case.lower, case.upper)
         f["design"].create_dataset("x0", data=x_ref)
-        f.create_group("optimization")
+        opt = f.create_group("optimization")
+        # units for summaries and plots (the case's own; empty where it names none)
+        opt.attrs["design_units"] = json.dumps(list(case.design_units))
+        opt.attrs["response_units"] = json.dumps(case.response_units)
 
 
 def _problem_attrs(problem: ScaledProblem) -> dict[str, Any]:
@@ -93,26 +99,39 @@ def _problem_from_file(f: h5py.File, case: Case) -> ScaledProblem:
                          float(a["f_ref"]), terms, tuple(json.loads(a["response_names"])))
 
 
-def _store_optimum(path: Path, case: Case, x: np.ndarray) -> None:
+def _store_run(path: Path, case: Case, x: np.ndarray, group: str) -> bool:
+    """Simulate ``case`` at ``x`` (no sensitivities) and store its time series (time, state
+    histories, monitors, recorded quantities, on named dimensions) and response values in
+    ``group``; False when the design cannot be simulated."""
     hist = tuple(case.plan.history) or ("q",)
     try:
-        r = run_case(case, x, sensitivities=False, history=hist)
+        r = run_case(case, x, sensitivities=False, history=hist, record=True)
     except SIM_ERRORS:
-        return
+        return False
     with h5py.File(path, "a") as f:
-        if "optimization/optimum" in f:
-            del f["optimization/optimum"]
-        g = f.create_group("optimization/optimum")
+        if group in f:
+            del f[group]
+        g = f.create_group(group)
         g.create_dataset("x", data=np.asarray(x, dtype=float))
-        g.create_dataset("time", data=r.time)
-        st = g.create_group("state")
-        for k, v in r.history.items():
-            st.create_dataset(k, data=v, compression="gzip" if v.size > 10000 else None)
-        st.attrs["q_labels"] = np.array(r.labels.get("q", []), dtype=h5py.string_dtype())
+        write_series(g, r, case.design_names)
+        g.attrs["status"], g.attrs["message"] = r.status, getattr(r, "ended_by", r.message)
+        g.attrs["events"] = json.dumps(r.events)
         rg = g.create_group("responses")
         for n, rv in r.responses.items():
             rg.attrs[n] = float(np.real(rv.value)) if not rv.missing else np.nan
         f.flush()
+    return True
+
+
+def _store_optimum(path: Path, case: Case, x: np.ndarray) -> None:
+    """The best design's run in ``/optimization/optimum``; with recorded quantities, the start
+    design's run in ``/optimization/initial`` as well (for the start-vs-optimum plots)."""
+    _store_run(path, case, x, "optimization/optimum")
+    if case.quantities:
+        with h5py.File(path, "r") as f:
+            x0 = f["design/x0"][()] if "design/x0" in f else None
+        if x0 is not None:
+            _store_run(path, case, x0, "optimization/initial")
 
 
 def read_history(path: str | Path, start: int = 0) -> dict[str, np.ndarray]:

@@ -1,0 +1,90 @@
+"""``output.quantities``: the quantities a case records over time (validated here).
+
+Each entry names a quantity in the case language (the same ``quantity:`` mappings responses
+and events use) and how to show it::
+
+    output:
+      quantities:
+        - {name: cylinder_force, quantity: {element: cylinder, kind: force}, unit: N,
+           label: cylinder force}
+        - {name: reaction_Z, quantity: {joint: Z, kind: reaction_force}, unit: N,
+           component: [fx, fy]}                 # a subset of the components (default: all)
+        - {name: stroke, quantity: {element: cylinder, kind: stroke}, unit: mm, sensitivity: true}
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Callable
+
+from ..errors import ProblemCollector
+from ..case_keys import allowed
+from ..models._keys import check_keys
+from ..models.base import Output
+from ..records import RESERVED, QuantitySpec
+
+QUANTITY_KEYS = allowed("output.quantity")
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _components(out: Output, comp: Any, path: str, pc: ProblemCollector) -> tuple[int, ...] | None:
+    """Indices of the requested components (all when ``comp`` is None)."""
+    if comp is None:
+        return tuple(range(len(out.labels)))
+    wanted = comp if isinstance(comp, list) else [comp]
+    idx = []
+    for c in wanted:
+        if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(out.labels):
+            idx.append(c)
+            continue
+        # a label in full ("Z.fx") or its last part ("fx")
+        short = [lb.rsplit(".", 1)[-1] for lb in out.labels]
+        if c in out.labels:
+            idx.append(out.labels.index(c))
+        elif isinstance(c, str) and short.count(c) == 1:
+            idx.append(short.index(c))
+        else:
+            pc.add(path, f"component {c!r} not found (components: {list(out.labels)})")
+            return None
+    return tuple(idx)
+
+
+def parse_quantities(spec: Any, output_id: Callable[[Any, str], int | None], outputs: list[Output],
+                     pc: ProblemCollector) -> tuple[QuantitySpec, ...]:
+    """The validated ``output.quantities`` list (problems go to ``pc`` with their YAML path)."""
+    if spec is None:
+        return ()
+    if not isinstance(spec, list):
+        pc.add("output.quantities", f"expected a list of quantities, found {type(spec).__name__}")
+        return ()
+    out: list[QuantitySpec] = []
+    names: list[str] = []
+    for i, q in enumerate(spec):
+        p = f"output.quantities[{i}]"
+        if not check_keys(q, p, QUANTITY_KEYS, pc, required=("name", "quantity")):
+            continue
+        name = q.get("name")
+        if not isinstance(name, str) or not _IDENT.match(name):
+            pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {name!r}")
+            continue
+        if name in names:
+            pc.add(f"{p}.name", f"duplicate quantity {name!r}")
+        elif name in RESERVED or name.endswith("_component"):
+            pc.add(f"{p}.name", f"{name!r} is reserved for the result file (reserved: "
+                                f"{', '.join(RESERVED)} and names ending in _component)")
+        names.append(name)
+        sens = q.get("sensitivity", False)
+        if not isinstance(sens, bool):
+            pc.add(f"{p}.sensitivity", f"expected true or false, found {sens!r}")
+        for key in ("unit", "label"):
+            if key in q and not isinstance(q[key], str):
+                pc.add(f"{p}.{key}", f"expected text, found {q[key]!r}")
+        oid = output_id(q.get("quantity"), f"{p}.quantity")
+        if oid is None:
+            continue
+        comps = _components(outputs[oid], q.get("component"), f"{p}.component", pc)
+        if comps is None:
+            continue
+        labels = tuple(outputs[oid].labels[c] for c in comps)
+        out.append(QuantitySpec(name, oid, comps, labels, str(q.get("unit", outputs[oid].unit)),
+                                str(q.get("label", name.replace("_", " "))), sens is True))
+    return tuple(out)
