@@ -140,6 +140,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
+    table.nominal = {d.name: d.value for d in design}   # the initial design (redundant joints are found there)
     model = build_model(raw.get("model"), "model", table, pc)
     scheme, plan, event_location = _integrator(raw.get("integrator", {}), raw.get("sensitivity", {}),
                                                raw.get("output", {}), pc)

@@ -171,6 +171,7 @@ class ParameterTable:
     def __init__(self, design_names: Sequence[str]):
         self.design_names = tuple(design_names)
         self._known = frozenset(design_names)
+        self.nominal: dict[str, float] = {}     # the case's initial design, by name (set by the loader)
         self._constants: list[complex | float] = []
         self._exprs: list[tuple[int, Expression]] = []
         # the last fully evaluated design and its entries, and per design variable the

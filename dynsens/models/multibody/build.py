@@ -20,6 +20,7 @@ from .forces import ForceElement, Gravity, PointForce, SpringDamper, Torque
 from .hydraulics import HydraulicCylinder
 from .joints import JOINT_TYPES, DotEq, Joint, Motion, const_coef, make_driver, make_joint
 from .model import Assembly, MultibodyModel
+from .redundancy import InconsistentRedundancy, analyse
 from .rotations import rotate, atan2_cs
 from .spec import Reader
 
@@ -77,9 +78,30 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.bodies", "no moving body")
     if len(problems.problems) > n0:
         return None
-    model = MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
+    def make() -> MultibodyModel:
+        m = MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
-    model.drift_limit = None if drift_limit is None else float(drift_limit)
+        m.drift_limit = None if drift_limit is None else float(drift_limit)
+        return m
+    model = make()
+    nominal = getattr(table, "nominal", None) or {}
+    x0 = np.array([float(nominal.get(n, 0.0)) for n in table.design_names])
+    try:
+        red = analyse(model, x0)
+    except InconsistentRedundancy as exc:
+        problems.add(f"{path}.joints", str(exc))
+        return None
+    if red is None:
+        return model
+    # the joints keep only their independent equations; the model is rebuilt on them
+    dropped = [(model.eq_owner[i], model.eqs[i]) for i in red.dropped]
+    gone = {id(eq) for _, eq in dropped}
+    for jt in joints:
+        keep = [k for k, eq in enumerate(jt.eqs) if id(eq) not in gone]
+        jt.eqs = [jt.eqs[k] for k in keep]
+        jt.labels = tuple(jt.labels[k] for k in keep)
+    model = make()
+    model.redundant = [(*owner.split(".", 1), eq) for owner, eq in dropped]  # type: ignore[misc]
     return model
 
 

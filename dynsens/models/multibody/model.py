@@ -276,8 +276,14 @@ class MultibodyModel(Model):
         return self._evaluation(t, s, params).linearization()
 
     # ------------------------------------------------------------------ diagnostics
+    redundant: list[tuple[str, str, Equation]] = []   # (joint, label, equation) left out of Φ
+
     def check_state(self, t: float, s: StepState, params: MBParams) -> None:
-        """Raise ModelError when a cylinder chamber volume is not positive."""
+        """Raise ModelError when a cylinder chamber volume is not positive, or when a joint
+        equation left out as redundant became independent (:mod:`.redundancy`)."""
+        if self.redundant:
+            from .redundancy import check_dependency
+            check_dependency(self, t, s.q, params)
         if not self.cylinders:
             return
         kin = self.kinematics(s, params)
