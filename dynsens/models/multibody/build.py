@@ -18,7 +18,8 @@ from ..timefunctions import build_time_function
 from .bodies import GROUND, BodyDef, Const, Diff, Direction, Point
 from .forces import ForceElement, Gravity, PointForce, SpringDamper, Torque
 from .hydraulics import HydraulicCylinder
-from .joints import JOINT_TYPES, DotEq, Joint, Motion, const_coef, make_driver, make_joint
+from .drivers import read_driver
+from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
 from .redundancy import InconsistentRedundancy, analyse
 from .rotations import rotate, atan2_cs
@@ -27,8 +28,6 @@ from .spec import Reader
 TOP_KEYS = ("type", "units", "gravity", "bodies", "joints", "forces", "initial", "stabilization",
             "constraint_scale", "drift_limit")
 JOINT_KEYS = ("name", "type", "body_1", "body_2", "point", "marker_1", "marker_2", "axis")
-DRIVER_KEYS = ("name", "type", "joint", "body", "coordinate", "offset", "rate", "amplitude",
-               "frequency", "phase")
 FORCE_KEYS = {
     "point_force": ("type", "name", "body", "point", "force", "frame", "function"),
     "torque": ("type", "name", "body", "torque", "frame", "function"),
@@ -84,8 +83,9 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         m.drift_limit = None if drift_limit is None else float(drift_limit)
         return m
     model = make()
-    nominal = getattr(table, "nominal", None) or {}
-    x0 = np.array([float(nominal.get(n, 0.0)) for n in table.design_names])
+    if table.nominal is None:       # built outside a case: no initial design to analyse
+        return model
+    x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])
     try:
         red = analyse(model, x0)
     except InconsistentRedundancy as exc:
@@ -125,7 +125,7 @@ def _joints(rd: Reader, spec: Any, path: str) -> list[Joint]:
                                           f"(known: {', '.join(JOINT_TYPES)})")
             continue
         if kind == "driving":
-            jt = _driver(rd, j, jp, name, by_name)
+            jt = read_driver(rd, j, jp, name, by_name)
         else:
             jt = _joint(rd, j, jp, name, kind)
         if jt is not None:
@@ -178,53 +178,6 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     jt = make_joint(name, kind, b1.index, b2.index, keys)
     jt.extra["drive"] = {"revolute": "angle", "prismatic": "slide"}.get(kind, "")
     return jt
-
-
-def _motion(rd: Reader, j: dict, jp: str, offset_default: Any = 0.0) -> Motion:
-    return Motion(rd.num(j.get("offset", offset_default), f"{jp}.offset"),
-                  rd.num(j.get("rate", 0.0), f"{jp}.rate"),
-                  rd.num(j.get("amplitude", 0.0), f"{jp}.amplitude"),
-                  rd.num(j.get("frequency", 0.0), f"{jp}.frequency"),
-                  rd.num(j.get("phase", 0.0), f"{jp}.phase"))
-
-
-def _driver(rd: Reader, j: dict, jp: str, name: str, by_name: dict[str, Joint]) -> Joint | None:
-    check_keys(j, jp, DRIVER_KEYS, rd.problems)
-    if "joint" in j:
-        target = by_name.get(j["joint"])
-        if target is None:
-            rd.problems.add(f"{jp}.joint", f"unknown joint {j['joint']!r} (a driver must follow the "
-                                           f"joint it drives){did_you_mean(j['joint'], by_name)}")
-            return None
-        coord = j.get("coordinate", target.extra.get("drive") or None)
-        allowed = {"revolute": ("angle",), "prismatic": ("slide",), "cylindrical": ("angle", "slide")}
-        if coord not in allowed.get(target.kind, ()):
-            rd.problems.add(f"{jp}.coordinate", f"a {target.kind} joint can be driven in "
-                            f"{' or '.join(allowed.get(target.kind, ())) or 'nothing'}; found {coord!r}")
-            return None
-        target.extra["drive"] = coord
-        jt = make_driver(name, target, _motion(rd, j, jp))
-        target.extra["drive"] = {"revolute": "angle", "prismatic": "slide"}.get(target.kind, "")
-        return jt
-    body = rd.body(j.get("body"), f"{jp}.body")
-    coord = j.get("coordinate")
-    if body is None or body.index == GROUND:
-        return None
-    if coord not in ("x", "y", "z"):
-        rd.problems.add(f"{jp}.coordinate", f"a body driver prescribes x, y or z of the COM; found {coord!r}")
-        return None
-    k = "xyz".index(coord)
-    motion = _motion(rd, j, jp)
-    b = body.index
-
-    r0 = body.position[k]
-
-    def shift(t: float, prm: Any) -> tuple[Any, Any, Any]:
-        # relative to the given initial COM coordinate (read from pv: see joints.Coef)
-        x, xd, xdd = motion(t, prm)
-        return prm.pv[..., r0] + x, xd, xdd
-    eq = DotEq([(const_coef(1.0), Const(f"e_{coord}"), Point(b, "zero"))], shift=shift)
-    return Joint(name, "driving", GROUND, b, [eq], labels=("drive",))
 
 
 def _point(rd: Reader, body: BodyDef, spec: Any, path: str, key: str) -> Point | None:
