@@ -253,8 +253,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     ok &= check_keys(output, "output", ("history", "sensitivity_history"), pc)
     if not ok:
         return None, None, "interpolate"
-    beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
-    gamma = _number(spec.get("gamma", 0.5), "integrator.gamma", pc)
+    # None: not given (the scheme's own value; a scheme refuses parameters it does not use)
+    beta = _number(spec["beta"], "integrator.beta", pc) if "beta" in spec else None
+    gamma = _number(spec["gamma"], "integrator.gamma", pc) if "gamma" in spec else None
     # a missing dt / t_end is already reported by check_keys
     dt = _number(spec["dt"], "integrator.dt", pc, positive=True) if "dt" in spec else None
     t0 = _number(spec.get("t0", 0.0), "integrator.t0", pc)
@@ -264,7 +265,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     if scheme_name not in SCHEMES:
         pc.add("integrator.scheme", f"unknown scheme {scheme_name!r}{did_you_mean(scheme_name, SCHEMES)} "
                                     f"(known: {', '.join(SCHEMES)})")
-    elif beta is not None and gamma is not None:
+    elif (beta is not None or "beta" not in spec) and (gamma is not None or "gamma" not in spec):
         try:
             alpha = _number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
             rho = _number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
