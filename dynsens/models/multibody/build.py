@@ -22,6 +22,7 @@ from .drivers import read_driver
 from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
 from .redundancy import InconsistentRedundancy, analyse
+from .rotational import RotationalSpringDamper
 from .rotations import rotate, atan2_cs
 from .spec import Reader
 
@@ -33,6 +34,8 @@ FORCE_KEYS = {
     "torque": ("type", "name", "body", "torque", "frame", "function"),
     "spring_damper": ("type", "name", "body_1", "body_2", "point_1", "point_2", "stiffness",
                       "damping", "cubic_stiffness", "free_length"),
+    "rotational_spring_damper": ("type", "name", "body_1", "body_2", "axis", "stiffness", "damping",
+                                 "free_angle"),
     "hydraulic_cylinder": ("type", "name", "body_1", "body_2", "point_1", "point_2", "bore", "rod",
                            "area_1", "area_2", "length_0", "stroke_max", "bulk_modulus",
                            "dead_volume_1", "dead_volume_2", "tank_conductance", "tank_pressure",
@@ -226,6 +229,11 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
         b1, b2 = rd.body(f.get("body_1"), f"{fp}.body_1"), rd.body(f.get("body_2"), f"{fp}.body_2")
         if b1 is None or b2 is None:
             continue
+        if kind == "rotational_spring_damper":
+            rot = _rotational(rd, f, fp, name, b1, b2)
+            if rot is not None:
+                forces.append(rot)
+            continue
         P1 = _point(rd, b1, f.get("point_1"), f"{fp}.point_1", f"f:{name}.p1")
         P2 = _point(rd, b2, f.get("point_2"), f"{fp}.point_2", f"f:{name}.p2")
         if P1 is None or P2 is None:
@@ -249,6 +257,21 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
         if cyl is not None:
             cylinders.append(cyl)
             n_p += 2
+
+
+def _rotational(rd: Reader, f: dict, fp: str, name: str, b1: BodyDef, b2: BodyDef
+                ) -> RotationalSpringDamper | None:
+    if b1 is b2:
+        rd.problems.add(f"{fp}.body_2", "a rotational spring-damper needs two different bodies")
+        return None
+    if "axis" not in f:
+        rd.problems.add(f"{fp}.axis", "missing (the axis of the relative rotation, global at the initial pose)")
+        return None
+    keys = rd.frame_recipes(f"f:{name}", rd.vec3(f.get("axis"), f"{fp}.axis"), b1, b2)
+    return RotationalSpringDamper(
+        name, Direction(b1.index, keys["u1"]), Direction(b1.index, keys["v1"]), Direction(b2.index, keys["u2"]),
+        rd.num(f.get("stiffness", 0.0), f"{fp}.stiffness"), rd.num(f.get("damping", 0.0), f"{fp}.damping"),
+        rd.num(f.get("free_angle", 0.0), f"{fp}.free_angle"))
 
 
 def _cylinder(rd: Reader, f: dict, fp: str, name: str, d: Diff, p_index: int) -> HydraulicCylinder | None:

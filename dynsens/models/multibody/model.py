@@ -287,6 +287,11 @@ class MultibodyModel(Model):
         if self.redundant:
             from .redundancy import check_dependency
             check_dependency(self, t, s.q, params)
+        for el in self.other_forces:
+            check = getattr(el, "check", None)      # rotational spring-dampers: the angle's range
+            if check is not None:
+                check(t, Ctx(np.asarray(s.q)[:, None], np.asarray(s.qd)[:, None], np.zeros((s.q.shape[0], 1)),
+                             params, t))
         if not self.cylinders:
             return
         kin = self.kinematics(s, params)
