@@ -23,7 +23,7 @@ from ..march import HISTORY_FIELDS, RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
-from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
+from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
@@ -369,6 +369,36 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
     return events, names
 
 
+def _expression_integral(r: dict, p: str, name: str, unit: str, output_id: Callable, outputs: list[Output],
+                         pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``{type: integral, expression: "x**2 + 0.1*F**2", symbols: {x: {quantity, component}, ...}}``."""
+    check_keys(r, p, ("name", "type", "unit", "expression", "symbols"), pc, required=("symbols",))
+    syms = r.get("symbols")
+    if not isinstance(syms, dict) or not syms:
+        pc.add(f"{p}.symbols", "expected a mapping symbol -> {quantity: ..., component: ...}")
+        return None
+    table: list[tuple[str, int, int]] = []
+    for sname, sspec in syms.items():
+        sp = f"{p}.symbols.{sname}"
+        if not isinstance(sname, str) or not _IDENT.match(sname) or \
+                not check_keys(sspec, sp, ("quantity", "component"), pc, required=("quantity",)):
+            if not isinstance(sname, str) or not _IDENT.match(sname):
+                pc.add(sp, f"expected an identifier as the symbol, found {sname!r}")
+            continue
+        oid = output_id(sspec.get("quantity"), f"{sp}.quantity")
+        comp = None if oid is None else _component(outputs[oid], sspec.get("component"), f"{sp}.component", pc)
+        if comp is not None:
+            table.append((sname, oid, comp))   # type: ignore[arg-type]
+    try:
+        expr = compile_expression(str(r.get("expression")), set(syms))
+    except ExpressionError as exc:
+        pc.add(f"{p}.expression", f"{exc} (an integrand names its symbols)")
+        return None
+    if len(table) != len(syms):
+        return None
+    return lambda n=name, e=expr, t=tuple(table), u=unit: ExpressionIntegral(n, e, list(t), u)
+
+
 def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_names: list[str],
                design_names: tuple[str, ...], model: Model | None, plan: RunPlan | None,
                pc: ProblemCollector) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
@@ -427,6 +457,10 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             comps = tuple(slice(None) for _ in oids)
             u = unit or outputs[oids[0]].unit
             makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
+        elif kind == "integral" and "expression" in r:
+            made = _expression_integral(r, p, name, unit, output_id, outputs, pc)
+            if made is not None:
+                makers.append(made)
         elif kind == "integral":
             check_keys(r, p, common + ("quantity", "component"), pc, required=("quantity",))
             oid = output_id(r.get("quantity"), f"{p}.quantity")
