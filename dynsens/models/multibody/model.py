@@ -282,11 +282,11 @@ class MultibodyModel(Model):
         """Raise ModelError after a step when ‖Φ‖ exceeds the drift limit (:mod:`.drift`), when a
         joint equation left out as redundant became independent (:mod:`.redundancy`), or when a
         cylinder chamber volume is not positive."""
-        from .drift import check_drift
-        check_drift(self, t, s, params)
-        if self.redundant:
+        if self.redundant:          # first: a change of rank also shows as drift, less specifically
             from .redundancy import check_dependency
             check_dependency(self, t, s.q, params)
+        from .drift import check_drift
+        check_drift(self, t, s, params)
         for el in self.other_forces:
             check = getattr(el, "check", None)      # rotational spring-dampers: the angle's range
             if check is not None:
