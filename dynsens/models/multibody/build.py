@@ -22,6 +22,7 @@ from .drivers import read_driver
 from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
 from .redundancy import InconsistentRedundancy, analyse
+from .pointmass import attachment_problem, orientation_lock, read_distance_joint
 from .rotational import RotationalSpringDamper
 from .rotations import rotate, atan2_cs
 from .spec import Reader
@@ -51,7 +52,8 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     check_keys(spec, path, TOP_KEYS, problems, required=("bodies",))
     rd = Reader(table, problems)
     rd.read_bodies(spec.get("bodies"), f"{path}.bodies")
-    joints = _joints(rd, spec.get("joints", []), f"{path}.joints")
+    joints = [orientation_lock(rd, b) for b in rd.bodies if b.point_mass]
+    joints += _joints(rd, spec.get("joints", []), f"{path}.joints")
     forces: list[ForceElement] = []
     if spec.get("gravity") is not None:
         forces.append(Gravity(rd.vec3(spec["gravity"], f"{path}.gravity")))  # type: ignore[arg-type]
@@ -84,6 +86,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         m = MultibodyModel(table, rd.bodies, rd.ground, joints, forces + springs, cylinders,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
         m.drift_limit = None if drift_limit is None else float(drift_limit)
+        m.point_mass_attachments = list(rd.point_mass_attachments)
         return m
     model = make()
     if table.nominal is None:       # built outside a case: no initial design to analyse
@@ -129,6 +132,8 @@ def _joints(rd: Reader, spec: Any, path: str) -> list[Joint]:
             continue
         if kind == "driving":
             jt = read_driver(rd, j, jp, name, by_name)
+        elif kind == "distance":
+            jt = read_distance_joint(rd, j, jp, name)
         else:
             jt = _joint(rd, j, jp, name, kind)
         if jt is not None:
@@ -145,6 +150,11 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     if b1 is b2:
         rd.problems.add(f"{jp}.body_2", "a joint needs two different bodies")
         return None
+    for role, b in (("body_1", b1), ("body_2", b2)):
+        why = attachment_problem(kind, role, b)
+        if why is not None:
+            rd.problems.add(f"{jp}.{role}", why)
+            return None
     keys: dict[str, str] = {"ex": "e_x", "ey": "e_y", "ez": "e_z"}
     if "marker_1" in j or "marker_2" in j:
         k1 = rd.marker(b1, j.get("marker_1"), f"{jp}.marker_1")
@@ -178,6 +188,8 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     else:
         axis = rd.vec3([0.0, 0.0, 1.0], f"{jp}.axis")
     keys.update(rd.frame_recipes(name, axis, b1, b2))
+    rd.attached(b1, keys["s1"], f"the point of joint '{name}'")
+    rd.attached(b2, keys["s2"], f"the point of joint '{name}'")
     jt = make_joint(name, kind, b1.index, b2.index, keys)
     jt.extra["drive"] = {"revolute": "angle", "prismatic": "slide"}.get(kind, "")
     return jt
@@ -219,6 +231,11 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
             idx = rd.vec3(f.get(vkey), f"{fp}.{vkey}", [0.0, 0.0, 0.0])
             if body is None or fn is None:
                 continue
+            if body.point_mass and (kind == "torque" or frame == "body"):
+                rd.problems.add(f"{fp}.{'type' if kind == 'torque' else 'frame'}",
+                                f"'{body.name}' is a point mass, which has no orientation and carries no "
+                                "moment: apply a force in global axes at its position")
+                continue
             if kind == "point_force":
                 pt = _point(rd, body, f.get("point"), f"{fp}.point", f"f:{name}.point")
                 if pt is not None:
@@ -230,6 +247,10 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
         if b1 is None or b2 is None:
             continue
         if kind == "rotational_spring_damper":
+            if b1.point_mass or b2.point_mass:
+                rd.problems.add(f"{fp}.body_{1 if b1.point_mass else 2}", "a point mass has no orientation: "
+                                                                          "a rotational spring cannot act on it")
+                continue
             rot = _rotational(rd, f, fp, name, b1, b2)
             if rot is not None:
                 forces.append(rot)

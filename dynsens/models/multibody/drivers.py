@@ -142,6 +142,8 @@ def read_driver(rd: Reader, j: dict, jp: str, name: str, by_name: dict[str, Join
         if m1[0] is m2[0]:
             rd.problems.add(f"{jp}.distance", "the two markers must be on different bodies")
             return None
+        for (b, key), k in ((m1, 0), (m2, 1)):
+            rd.attached(b, key, f"marker {pair[k]} of driver '{name}'")
         d = Diff(Point(m2[0].index, m2[1]), Point(m1[0].index, m1[1]))
         eq = DotEq([(_half_reciprocal(x), d, d)], shift=_half(x))
         return Joint(name, "driving", m1[0].index, m2[0].index, [eq], labels=("drive",))

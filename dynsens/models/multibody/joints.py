@@ -25,6 +25,7 @@ cylindrical       u_i·d, v_i·d, u_i·w_j, v_i·w_j                    4    0-1
 prismatic         cylindrical + u_i·v_j                             5    0-1
 fixed             spherical + u_i·w_j, v_i·w_j, u_i·v_j             6    0-2
 planar_pin        u_i·d, v_i·d (in-plane coincidence only)          2    0-1
+distance          (d·d)/(2L) − L/2 (a rod; :mod:`.pointmass`)       1    –
 driving (angle)   sin θ(t) (u_i·u_j) − cos θ(t) (v_i·u_j)           1    –
 driving (slide)   w_i·d − s(t)                                      1    –
 driving (body)    e_k·r_j − x(t)                                    1    –
@@ -183,9 +184,10 @@ class NormEq(Equation):
         ctx.pending.append((self, lam))
 
 
-JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "driving")
+JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "distance",
+               "driving")
 N_EQUATIONS = {"spherical": 3, "revolute": 5, "cylindrical": 4, "prismatic": 5, "fixed": 6,
-               "planar_pin": 2, "driving": 1}
+               "planar_pin": 2, "distance": 1, "driving": 1}
 FORCE_ROWS = {"spherical": (0, 1, 2), "revolute": (0, 1, 2), "cylindrical": (0, 1),
               "prismatic": (0, 1), "fixed": (0, 1, 2), "planar_pin": (0, 1), "driving": ()}
 EQ_LABELS = {

@@ -338,9 +338,14 @@ class MultibodyModel(Model):
         return list(self.eq_owner)
 
     # ------------------------------------------------------------------ initial state
+    point_mass_attachments: list[tuple[str, str, str]] = []   # (body, vec key, what): see .pointmass
+
     def initial_state(self, params: MBParams) -> tuple[Array, Array, Array]:
         """Consistent (q0, q̇0, p0) by assembly; see :mod:`.assembly`."""
         from .assembly import initial_conditions
+        if self.point_mass_attachments:
+            from .pointmass import check_attachments
+            check_attachments(self, params)
         res = initial_conditions(self, params)
         self._ic_cache = (params, res)
         return res.q0, res.qd0, res.p0
