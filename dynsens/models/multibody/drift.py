@@ -33,9 +33,20 @@ def drift_limit(model: "MultibodyModel", params: Any) -> float:
     return float(limit)
 
 
+def constraint_residuals(model: "MultibodyModel", t: float, s: StepState, params: Any) -> Any:
+    """(Φ, Φ̇, Φ̈) (n_eq, 3) at (t, s), kept for the same state object: the guard after a step and
+    the monitors recorded for it share one evaluation."""
+    last = model.__dict__.get("_phi_last")
+    if last is not None and last[0] == t and last[1] is s.q and last[2] is s.qd and last[3] is params:
+        return last[4]
+    Phi = model.constraint_levels(t, model.kinematics(s, params))[0][0]
+    model.__dict__["_phi_last"] = (t, s.q, s.qd, params, Phi)
+    return Phi
+
+
 def check_drift(model: "MultibodyModel", t: float, s: StepState, params: Any) -> None:
     """ModelError when ‖Φ‖ at (t, s) exceeds the limit (module docstring)."""
-    Phi = model.constraint_levels(t, model.kinematics(s, params))[0][0]
+    Phi = constraint_residuals(model, t, s, params)
     phi = np.real(Phi[:, 0])
     drift = float(np.linalg.norm(phi))
     limit = drift_limit(model, params)

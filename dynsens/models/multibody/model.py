@@ -284,7 +284,7 @@ class MultibodyModel(Model):
         cylinder chamber volume is not positive."""
         if self.redundant:          # first: a change of rank also shows as drift, less specifically
             from .redundancy import check_dependency
-            check_dependency(self, t, s.q, params)
+            check_dependency(self, t, s, params)
         from .drift import check_drift
         check_drift(self, t, s, params)
         for el in self.other_forces:
@@ -325,7 +325,8 @@ class MultibodyModel(Model):
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
         """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`)."""
-        Phi = self.constraint_levels(t, self.kinematics(s, params))[0][0]
+        from .drift import constraint_residuals
+        Phi = constraint_residuals(self, t, s, params)
         return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
                 "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
 

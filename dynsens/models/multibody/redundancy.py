@@ -169,15 +169,17 @@ def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
     return Redundancy(dropped, rank, n_eq)
 
 
-def check_dependency(model: "MultibodyModel", t: float, q: Array, params: Any) -> None:
-    """ModelError when a dropped equation's row has left the span of the kept rows at (t, q):
+def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any) -> None:
+    """ModelError when a dropped equation's row has left the span of the kept rows at (t, state):
     the rank of the joints' equations changed during the run."""
     red = model.redundant
     if not red:
         return
-    q = np.real(q)
-    Jk = np.real(jacobian_rows(model.eqs, q, params, t))
-    Jd = np.real(jacobian_rows([eq for _, _, eq in red], q, params, t))
+    n_q, n_lam = model.traits.n_q, model.traits.n_lam
+    # the kept rows from the kernel's linearization at this state (∂R2/∂q̈ = c_s J_Φ; usually the
+    # solver's own, cached), the few dropped rows term by term
+    Jk = np.real(np.asarray(model.linearize(t, state, params).R_z)[n_q:n_q + n_lam, :n_q]) / model.scale
+    Jd = np.real(jacobian_rows([eq for _, _, eq in red], np.real(state.q), params, t))
     coef = np.linalg.solve(Jk @ Jk.T, Jk @ Jd.T)
     off = np.linalg.norm(Jd - coef.T @ Jk, axis=1) / np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
     bad = np.flatnonzero(off > RUN_TOL)
