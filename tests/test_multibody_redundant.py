@@ -122,3 +122,17 @@ def test_change_of_rank_is_an_error_naming_time_and_joints():
         m.check_state(0.125, StepState(q, qd0, z, np.zeros(m.traits.n_lam), z[:0], z[:0]), prm)
     msg = str(exc.value)
     assert "t = 0.125 s" in msg and "J6.v.w" in msg and "changed rank" in msg
+
+
+def test_two_drivers_of_one_freedom_are_refused_when_they_part():
+    """Both drivers hold at t0, so one of them is dependent there and left out; as soon as the
+    prescribed motions disagree, the run stops naming it (never following one driver silently)."""
+    from test_multibody_singular import CASE
+    text = CASE.replace("AMP", "0.3").replace(
+        "integrator: {", "    - {name: spin, type: driving, joint: O, rate: 0.2}\nintegrator: {")
+    case = dynsens.case.load.load_case_text(text, "two_drivers.yaml")
+    assert [(j, lab) for j, lab, _ in case.model.redundant] == [("spin", "drive")]
+    with pytest.raises(ModelError) as exc:
+        dynsens.run_case(case, sensitivities=False)
+    msg = str(exc.value)
+    assert "spin.drive" in msg and "do not hold here" in msg and "t = 0.01 s" in msg, msg

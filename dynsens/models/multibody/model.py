@@ -348,6 +348,9 @@ class MultibodyModel(Model):
             from .pointmass import check_attachments
             check_attachments(self, params)
         res = initial_conditions(self, params)
+        if self.redundant:          # the dropped equations hold at this design's assembly too
+            from .redundancy import check_values
+            check_values(self, self.assembly.t0, res.q0, params, 0.0)
         self._ic_cache = (params, res)
         return res.q0, res.qd0, res.p0
 

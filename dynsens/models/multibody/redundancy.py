@@ -169,6 +169,24 @@ def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
     return Redundancy(dropped, rank, n_eq)
 
 
+def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_norm: float) -> None:
+    """ModelError when an equation left out does not hold at (t, q) although the kept ones do
+    (‖Φ_kept‖ = kept_norm): the dependency found at the initial design does not hold here (another
+    design, or equations that conflict as time goes on, such as two drivers of one freedom)."""
+    from .drift import drift_limit
+    red = model.redundant
+    phi = np.real(model.constraint_values(_ctx(np.real(q), params, t), [eq for _, _, eq in red])[0][:, 0])
+    bound = max(1e-4 * drift_limit(model, params), 100.0 * kept_norm)
+    bad = np.flatnonzero(np.abs(phi) > bound)
+    if bad.size:
+        names = ", ".join(f"{red[i][0]}.{red[i][1]} = {phi[i]:.3g}" for i in bad)
+        raise ModelError(
+            f"redundant joints at t = {t:.6g} s: the equation(s) {names}, left out as implied by the "
+            f"others at the initial design, do not hold here while the kept equations hold to "
+            f"{kept_norm:.3g}: the redundancy does not persist (a design other than the initial one, "
+            "or equations that conflict as time goes on, e.g. two drivers of one freedom)")
+
+
 def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any) -> None:
     """ModelError when a dropped equation's row has left the span of the kept rows at (t, state):
     the rank of the joints' equations changed during the run."""
@@ -182,6 +200,9 @@ def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any)
     Jd = np.real(jacobian_rows([eq for _, _, eq in red], np.real(state.q), params, t))
     coef = np.linalg.solve(Jk @ Jk.T, Jk @ Jd.T)
     off = np.linalg.norm(Jd - coef.T @ Jk, axis=1) / np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
+    from .drift import constraint_residuals
+    kept = float(np.linalg.norm(np.real(constraint_residuals(model, t, state, params)[:, 0])))
+    check_values(model, t, state.q, params, kept)
     bad = np.flatnonzero(off > RUN_TOL)
     if bad.size:
         names = ", ".join(f"{red[i][0]}.{red[i][1]}" for i in bad)
