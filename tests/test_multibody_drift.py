@@ -3,7 +3,6 @@ conditioning of J_Φ) and suggests no setting that would only hide the failure; 
 pose it names the joints losing rank."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import dynsens

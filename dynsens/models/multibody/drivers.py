@@ -25,7 +25,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 
 from ...expressions import Expression, ExpressionError, compile_expression
 from ...jets import JET_FUNCTIONS, Jet

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from ...errors import ModelError, ProblemCollector
+from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper

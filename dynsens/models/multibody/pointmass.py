@@ -29,7 +29,7 @@ import numpy as np
 from ...errors import ModelError
 from .._keys import check_keys
 from .bodies import GROUND, BodyDef, Diff, Direction, Point
-from .joints import DotEq, Joint
+from .joints import DotEq, Joint, const_coef
 from .spec import Reader
 
 DISTANCE_KEYS = ("name", "type", "body_1", "body_2", "marker_1", "marker_2", "length")
@@ -42,15 +42,10 @@ def orientation_lock(rd: Reader, body: BodyDef) -> Joint:
     keys = rd.frame_recipes(name, rd.vec3([0.0, 0.0, 1.0], f"{name}.axis"), rd.ground, body)
     u1, v1 = Direction(GROUND, keys["u1"]), Direction(GROUND, keys["v1"])
     v2, w2 = Direction(body.index, keys["v2"]), Direction(body.index, keys["w2"])
-    one = _one()
+    one = const_coef(1.0)
     return Joint(name, "orientation_lock", GROUND, body.index,
                  [DotEq([(one, u1, w2)]), DotEq([(one, v1, w2)]), DotEq([(one, u1, v2)])],
                  labels=("u.w", "v.w", "u.v"))
-
-
-def _one() -> Any:
-    from .joints import const_coef
-    return const_coef(1.0)
 
 
 def read_distance_joint(rd: Reader, j: dict, jp: str, name: str) -> Joint | None:

@@ -19,7 +19,6 @@ rotation passes ±0.9π rather than let the measure wrap.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
