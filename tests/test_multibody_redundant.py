@@ -136,3 +136,16 @@ def test_two_drivers_of_one_freedom_are_refused_when_they_part():
         dynsens.run_case(case, sensitivities=False)
     msg = str(exc.value)
     assert "spin.drive" in msg and "do not hold here" in msg and "t = 0.01 s" in msg, msg
+
+
+def test_a_singular_initial_pose_is_not_taken_for_redundancy():
+    """The link starting upright, where its height driver and the hinge are dependent only at that
+    pose: refused at load as a singular configuration, not run as a redundant mechanism."""
+    from test_multibody_singular import CASE
+    text = CASE.replace("position: [0.5, 0, 0]", "position: [0, 0.5, 0]\n      orientation: "
+                        "{axis: [0, 0, 1], angle: 1.5707963267948966}").replace("AMP", "0.1")
+    with pytest.raises(CaseError) as exc:
+        dynsens.case.load.load_case_text(text, "apex_start.yaml")
+    msg = str(exc.value)
+    assert "apex_start.yaml" in msg and "initial pose is a singular configuration" in msg
+    assert "joints O, lift" in msg

@@ -166,7 +166,45 @@ def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
             f"redundant joints: the rank of the constraint Jacobian ({rank} of {n_eq}) is not "
             "clear-cut at the initial pose (a singular configuration?); give an initial pose "
             f"away from it. Joints involved: {', '.join(smallest_dependent_joints(model, J))}")
+    if not _persists(model, params, q, sorted(kept), dropped):
+        joints = smallest_dependent_joints(model, J)
+        raise InconsistentRedundancy(
+            f"the initial pose is a singular configuration: the equations of joints {', '.join(joints)} "
+            f"are linearly dependent there (constraint Jacobian rank {rank} < {n_eq}) but not at "
+            "poses next to it, so they are not redundant joints; give an initial pose away from "
+            "the singular one (e.g. another held angle)")
     return Redundancy(dropped, rank, n_eq)
+
+
+def _persists(model: "MultibodyModel", params: Any, q: Array, kept: list[int], dropped: list[int]) -> bool:
+    """Whether the dropped rows stay in the kept rows' span at poses next to q on the kept
+    equations' manifold (a redundancy), not only at q itself (a singular configuration).
+
+    Two steps of 1e-4 × the mechanism's size along the kept manifold's tangents, each closed
+    again by minimum-norm Gauss–Newton; a fully constrained (static) manifold has nothing to test."""
+    t0 = model.assembly.t0
+    eqs_k = [model.eqs[i] for i in kept]
+    eqs_d = [model.eqs[i] for i in dropped]
+    Jk = np.real(jacobian_rows(eqs_k, q, params, t0))
+    _, sv, Vt = np.linalg.svd(Jk)
+    null = Vt[int(np.sum(sv > RANK_TOL * sv[0])):]
+    if null.shape[0] == 0:
+        return True
+    size = 1.0 + np.linalg.norm(q)
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        c = rng.standard_normal(null.shape[0])
+        q1 = q + 1e-4 * size * (c / np.linalg.norm(c)) @ null
+        for _ in range(20):
+            phi = np.real(model.constraint_values(_ctx(q1, params, t0), eqs_k)[0][:, 0])
+            step = np.linalg.lstsq(np.real(jacobian_rows(eqs_k, q1, params, t0)), -phi, rcond=1e-12)[0]
+            q1 = q1 + step
+            if np.linalg.norm(step) <= 1e-14 * size:
+                break
+        J1 = np.real(jacobian_rows(eqs_k + eqs_d, q1, params, t0))
+        if len(independent_rows(J1, list(range(J1.shape[0])))) > len(kept):
+            return False
+    return True
 
 
 def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_norm: float) -> None:
