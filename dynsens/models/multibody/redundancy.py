@@ -21,6 +21,9 @@ What is done (README "Redundant joints"):
    resultant constraint force on every body, J_Φᵀλ, is the same for every split).
 4. Inconsistent redundancy (dependent rows and Φ ≠ 0 at the least-squares pose) is refused,
    naming the smallest set of joints whose equations are dependent.
+5. A dependency that holds at the initial pose only — the dropped rows leave the kept rows'
+   span at poses next to it on the kept equations' manifold — is a singular configuration,
+   not a redundancy, and is refused as such.
 
 During the run :func:`check_dependency` verifies at every step that each dropped
 equation's row is still in the span of the kept rows; a change of rank is an error naming
