@@ -89,8 +89,8 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         m.point_mass_attachments = list(rd.point_mass_attachments)
         return m
     model = make()
-    if table.nominal is None:       # built outside a case: no initial design to analyse
-        return model
+    if table.nominal is None or problems.problems:   # outside a case, or the design has problems:
+        return model                                  # no initial design to analyse
     x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])
     try:
         red = analyse(model, x0)
