@@ -61,7 +61,7 @@ def _req(name: str, kind: str, doc: str, **kw: Any) -> Key:
 TIME_FUNCTION_TYPES = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
 RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
 STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar")
-FORCE_TYPES = ("point_force", "torque", "spring_damper", "hydraulic_cylinder")
+FORCE_TYPES = ("point_force", "torque", "spring_damper", "rotational_spring_damper", "hydraulic_cylinder")
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin")
 
 _RESPONSE_COMMON = (
@@ -184,10 +184,13 @@ SECTIONS: dict[str, Section] = {
         _req("rho", "number", "aggregation parameter (1/unit of the quantity); larger is closer to the maximum"),
         _k("components", "any", "reserved: all components are aggregated"),
     ), type_value="ks"),
-    "response.integral": Section("responses[i], type: integral", "Trapezoid integral over the steps.", (
+    "response.integral": Section("responses[i], type: integral", "Trapezoid integral over the steps, of one "
+                                 "quantity's component or of an expression of quantities.", (
         *_RESPONSE_COMMON,
-        _req("quantity", "any", "the quantity (see Quantities)"),
+        _k("quantity", "any", "the quantity (see Quantities); required unless `expression` is given"),
         _k("component", "any", "component of a vector quantity: index or label", default=0),
+        _k("expression", "string", "integrand as an expression of `symbols` (instead of quantity/component)"),
+        _k("symbols", "map", "symbol -> {quantity, component}: the quantities the expression names", item="any"),
     ), type_value="integral"),
     "response.event_time": Section("responses[i], type: event_time", "Time at which an event fires (missing if "
                                    "it never does).", (
@@ -289,7 +292,8 @@ SECTIONS: dict[str, Section] = {
         _k("units", "string", "free text naming the unit system (informative)"),
         _k("gravity", "vector", "gravitational acceleration [x, y, z]", length=3),
         _req("bodies", "map", "body name -> body ('ground' has only markers)", item="multibody.body"),
-        _k("joints", "list", "joints and drivers", item=("multibody.joint", "multibody.driver")),
+        _k("joints", "list", "joints, distance rods and drivers",
+           item=("multibody.joint", "multibody.distance_joint", "multibody.driver")),
         _k("forces", "list", "force elements", item=tuple(f"multibody.{t}" for t in FORCE_TYPES)),
         _k("initial", "section", "consistent initial assembly", item="multibody.initial"),
         _k("stabilization", "section", "Baumgarte terms (part of the residual)", item="multibody.stabilization"),
@@ -306,6 +310,8 @@ SECTIONS: dict[str, Section] = {
         _k("angular_velocity", "vector", "angular velocity (global)", length=3),
         _k("markers", "map", "marker name -> [x, y, z] (body axes from the COM) or {position, frame}",
            item="multibody.marker"),
+        _k("point_mass", "bool", "a point mass: no inertia, orientation held fixed; joints only at its "
+           "mass point (keys: mass, position, velocity, markers)", default=False),
     )),
     "multibody.orientation.axis_angle": Section("orientation (axis and angle)", "Rotation about an axis.", (
         _k("axis", "vector", "rotation axis", length=3, default=[0, 0, 1]),
@@ -333,10 +339,20 @@ SECTIONS: dict[str, Section] = {
         _k("joint", "name", "the driven revolute (angle) or prismatic (slide) joint"),
         _k("body", "name", "or the body whose COM coordinate is driven"),
         _k("coordinate", "enum", "angle | slide (joint) or x | y | z (body)", values=("angle", "slide", "x", "y", "z")),
+        _k("distance", "any", "or the distance between two markers: [body_1.marker_1, body_2.marker_2]"),
+        _k("expression", "string", "the prescribed value as an expression of t and the design variables "
+           "(instead of offset, rate, amplitude, frequency, phase)"),
         _k("offset", "expr", "value at t = 0 (default: the initial one)"),
         _k("rate", "expr", "rate", default=0.0), _k("amplitude", "expr", "amplitude", default=0.0),
         _k("frequency", "expr", "frequency (Hz)", default=0.0), _k("phase", "expr", "phase (rad)", default=0.0),
     )),
+    "multibody.distance_joint": Section("joints[i], type: distance", "A massless rod: the distance between two "
+                                        "markers is held at `length`.", (
+        _k("name", "name", "joint name"), _req("type", "enum", "joint type", values=("distance",)),
+        _req("body_1", "name", "first body (or ground)"), _req("body_2", "name", "second body"),
+        _req("marker_1", "name", "marker on body 1"), _req("marker_2", "name", "marker on body 2"),
+        _req("length", "expr", "rod length"),
+    ), type_value="distance"),
     "multibody.point_force": Section("forces[i], type: point_force", "A force at a marker.", (
         _req("type", "enum", "force type", values=("point_force",)), _k("name", "name", "force name"),
         _req("body", "name", "body"), _k("point", "name", "marker (default: the COM)"),
@@ -358,6 +374,14 @@ SECTIONS: dict[str, Section] = {
         _k("stiffness", "expr", "k", default=0.0), _k("cubic_stiffness", "expr", "k3", default=0.0),
         _k("damping", "expr", "d", default=0.0), _k("free_length", "expr", "L0 (default: the initial length)"),
     ), type_value="spring_damper"),
+    "multibody.rotational_spring_damper": Section("forces[i], type: rotational_spring_damper",
+                                                  "Torque −k(φ − φ0) − d φ̇ about an axis between two bodies.", (
+        _req("type", "enum", "force type", values=("rotational_spring_damper",)), _k("name", "name", "force name"),
+        _req("body_1", "name", "body 1 (or ground)"), _req("body_2", "name", "body 2"),
+        _req("axis", "vector", "axis (global at t0)", length=3),
+        _k("stiffness", "expr", "k (torque per rad)", default=0.0), _k("damping", "expr", "d", default=0.0),
+        _k("free_angle", "expr", "φ0 (rad)", default=0.0),
+    ), type_value="rotational_spring_damper"),
     "multibody.hydraulic_cylinder": Section("forces[i], type: hydraulic_cylinder", "Two-chamber cylinder between two "
                                             "markers; its chamber pressures are first-order states.", (
         _req("type", "enum", "force type", values=("hydraulic_cylinder",)), _k("name", "name", "force name"),

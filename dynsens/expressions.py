@@ -86,9 +86,14 @@ class Expression:
 
 
 def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
-                  text: str) -> Callable[[Mapping[str, Number]], Number]:
+                  text: str, functions: Mapping[str, Callable[..., Number]] | None = None
+                  ) -> Callable[[Mapping[str, Number]], Number]:
+    table = FUNCTIONS if functions is None else functions
+
+    def sub(n: ast.AST) -> Callable[[Mapping[str, Number]], Number]:
+        return _compile_node(n, names, known, text, functions)
     if isinstance(node, ast.Expression):
-        return _compile_node(node.body, names, known, text)
+        return sub(node.body)
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
             and not isinstance(node.value, bool):
         value = float(node.value)
@@ -108,35 +113,38 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
         return lambda env: env[name]
     if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
         op = _BINOPS[type(node.op)]
-        left = _compile_node(node.left, names, known, text)
-        right = _compile_node(node.right, names, known, text)
+        left = sub(node.left)
+        right = sub(node.right)
         return lambda env: op(left(env), right(env))
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        operand = _compile_node(node.operand, names, known, text)
+        operand = sub(node.operand)
         if isinstance(node.op, ast.USub):
             return lambda env: -operand(env)
         return operand
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and not node.keywords:
         fname = node.func.id
-        if fname not in FUNCTIONS:
+        if fname not in table:
             raise ExpressionError(
                 f"expression '{text}' calls '{fname}', which is not allowed "
-                f"(allowed: {', '.join(sorted(FUNCTIONS))})")
-        fn = FUNCTIONS[fname]
-        args = [_compile_node(a, names, known, text) for a in node.args]
+                f"(allowed: {', '.join(sorted(table))})")
+        fn = table[fname]
+        args = [sub(a) for a in node.args]
         return lambda env: fn(*(a(env) for a in args))
     raise ExpressionError(
         f"expression '{text}': '{ast.dump(node)[:40]}...' is not allowed "
         "(only numbers, names, + - * / **, parentheses and math functions)")
 
 
-def compile_expression(text: str, known: frozenset[str] | set[str] | None = None) -> Expression:
+def compile_expression(text: str, known: frozenset[str] | set[str] | None = None,
+                       functions: Mapping[str, Callable[..., Number]] | None = None) -> Expression:
     """Parse ``text`` into an :class:`Expression`.
 
     Parameters
     ----------
     text : the expression, e.g. ``"0.5*m + 1e-3"``.
     known : allowed symbol names; ``None`` accepts any name.
+    functions : the function table (default :data:`FUNCTIONS`; :data:`dynsens.jets.JET_FUNCTIONS`
+        evaluates time derivatives along).
 
     Raises
     ------
@@ -149,5 +157,5 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
     except SyntaxError as exc:
         raise ExpressionError(f"expression '{text}' is not valid: {exc.msg}") from None
     names: set[str] = set()
-    fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text)
+    fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text, functions)
     return Expression(text, frozenset(names), fn)

@@ -215,11 +215,15 @@ class TimeIntegral(Response):
         self._value: Any = 0.0
         self._grad: np.ndarray | None = None
 
-    def feed(self, samples: Samples) -> None:
+    def integrand(self, samples: Samples) -> tuple[Any, np.ndarray | None]:
+        """The integrand (K,) at the instants and its gradient (K, m) (None without sensitivities)."""
         oid, c = self.output_ids[0], self.component
-        t, v = samples.t, samples.value[oid][:, c]
         g = samples.grad[oid]
-        g = None if g is None else g[:, c]
+        return samples.value[oid][:, c], None if g is None else g[:, c]
+
+    def feed(self, samples: Samples) -> None:
+        t = samples.t
+        v, g = self.integrand(samples)
         last = (t[-1], v[-1], None if g is None else g[-1])
         if self._prev is not None:
             # the interval from the previous block's last instant to this block's first
@@ -241,6 +245,34 @@ class TimeIntegral(Response):
     def finish(self, ctx: FinishContext) -> ResponseValue:
         grad = self._grad if self._grad is not None else (np.zeros(ctx.m) if ctx.m else None)
         return ResponseValue(self._value, grad, self.unit)
+
+
+class ExpressionIntegral(TimeIntegral):
+    """Trapezoidal time integral of an expression f(v_1, …, v_n) of output components (∫q² dt);
+    gradient ∇f = Σ_j ∂f/∂v_j ∇v_j with ∂f/∂v_j by complex step of the expression (real data)."""
+
+    def __init__(self, name: str, expr: Expression, symbols: list[tuple[str, int, int]], unit: str):
+        self.name, self.unit = name, unit
+        self.expr = expr
+        self.symbols = symbols                        # (symbol, output id, component)
+        self.output_ids = tuple(dict.fromkeys(o for _, o, _ in symbols))
+        self._prev = None
+        self._value = 0.0
+        self._grad = None
+
+    def integrand(self, samples: Samples) -> tuple[Any, np.ndarray | None]:
+        vals = {n: samples.value[o][:, c] for n, o, c in self.symbols}
+        f = self.expr.evaluate(vals) + 0.0 * next(iter(vals.values()))
+        grads: list[Any] = [samples.grad[o] for _, o, _ in self.symbols]
+        if any(g is None for g in grads):
+            return f, None
+        h = 1e-30
+        g: Any = 0.0
+        for (n, _o, c), gj in zip(self.symbols, grads):
+            shifted = dict(vals)
+            shifted[n] = vals[n] + 1j * h
+            g = g + (np.imag(self.expr.evaluate(shifted)) / h)[:, None] * gj[:, c]
+        return f, g
 
 
 class EventTime(Response):

@@ -34,7 +34,7 @@ def duffing_chain(n: int = 20, t_end: float = 2.0) -> dict:
         "model": {"type": "structural", "dofs": dofs, "elements": elements,
                   "loads": [{"dof": dofs[-1], "value": 100.0,
                              "function": {"type": "pulse", "t0": 0.0, "duration": 0.1}}]},
-        "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 1.0e-3, "t_end": t_end},
+        "integrator": {"scheme": "newmark", "dt": 1.0e-3, "t_end": t_end},
         "sensitivity": {"enabled": True, "partials": "forward"},
         "output": {"history": ["q"], "quantities": [
             {"name": "tip_displacement", "quantity": {"dof": dofs[-1], "kind": "displacement"}, "unit": "m",
@@ -84,7 +84,7 @@ def truss_impact(panels: int = 4, a: float = 500.0) -> dict:
                   "damping": {"rayleigh": {"alpha": 5.0, "beta": 1.0e-5}},
                   "loads": [{"node": f"t{panels}", "direction": "y", "value": -6.0e4,
                              "function": {"type": "pulse", "t0": 0.0, "duration": 0.005}}]},
-        "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 1.0e-4, "t_end": 0.05},
+        "integrator": {"scheme": "newmark", "dt": 1.0e-4, "t_end": 0.05},
         "sensitivity": {"enabled": True, "partials": "forward"},
         "output": {"history": ["q"], "quantities": [
             {"name": "tip_displacement", "quantity": {"dof": f"t{panels}.y", "kind": "displacement"},

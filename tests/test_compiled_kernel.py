@@ -19,7 +19,8 @@ pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not in
 
 FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 MECHANISMS = [("slider_crank", 0.3), ("four_bar", 0.3), ("hydraulic_lever", 0.3),
-              ("pendulum_3d", 0.3), ("tyrolean_weir", 0.3)]
+              ("pendulum_3d", 0.3), ("tyrolean_weir", 0.3), ("bricard", 0.3), ("rheonomic", 0.3),
+              ("torsional_pair", 0.3), ("point_pendulum", 0.3)]
 TOL = 1e-12
 
 

@@ -26,7 +26,7 @@ from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
 from ..records import QuantitySpec, Recorder
-from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
+from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
@@ -156,6 +156,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
+    table.nominal = {d.name: d.value for d in design}   # the initial design (redundant joints are found there)
     model = build_model(raw.get("model"), "model", table, pc)
     scheme, plan, event_location = _integrator(raw.get("integrator", {}), raw.get("sensitivity", {}),
                                                raw.get("output", {}), pc)
@@ -276,8 +277,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     ok &= check_keys(output, "output", allowed("output"), pc)
     if not ok:
         return None, None, "interpolate"
-    beta = _number(spec.get("beta", 0.25), "integrator.beta", pc)
-    gamma = _number(spec.get("gamma", 0.5), "integrator.gamma", pc)
+    # None: not given (the scheme's own value; a scheme refuses parameters it does not use)
+    beta = _number(spec["beta"], "integrator.beta", pc) if "beta" in spec else None
+    gamma = _number(spec["gamma"], "integrator.gamma", pc) if "gamma" in spec else None
     # a missing dt / t_end is already reported by check_keys
     dt = _number(spec["dt"], "integrator.dt", pc, positive=True) if "dt" in spec else None
     t0 = _number(spec.get("t0", 0.0), "integrator.t0", pc)
@@ -287,7 +289,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     if scheme_name not in SCHEMES:
         pc.add("integrator.scheme", f"unknown scheme {scheme_name!r}{did_you_mean(scheme_name, SCHEMES)} "
                                     f"(known: {', '.join(SCHEMES)})")
-    elif beta is not None and gamma is not None:
+    elif (beta is not None or "beta" not in spec) and (gamma is not None or "gamma" not in spec):
         try:
             alpha = _number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
             rho = _number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
@@ -392,6 +394,45 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
     return events, names
 
 
+# an integral reads one quantity's component, or an expression of several quantities
+_INTEGRAL_OF_QUANTITY = tuple(k for k in allowed("response.integral") if k not in ("expression", "symbols"))
+_INTEGRAL_OF_EXPRESSION = tuple(k for k in allowed("response.integral") if k not in ("quantity", "component"))
+
+
+def _expression_integral(r: dict, p: str, name: str, unit: str, output_id: Callable, outputs: list[Output],
+                         pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``{type: integral, expression: "x**2 + 0.1*F**2", symbols: {x: {quantity, component}, ...}}``."""
+    check_keys(r, p, _INTEGRAL_OF_EXPRESSION, pc, required=("symbols",))
+    syms = r.get("symbols")
+    if not isinstance(syms, dict) or not syms:
+        pc.add(f"{p}.symbols", "expected a mapping symbol -> {quantity: ..., component: ...}")
+        return None
+    table: list[tuple[str, int, int]] = []
+    for sname, sspec in syms.items():
+        sp = f"{p}.symbols.{sname}"
+        if not isinstance(sname, str) or not _IDENT.match(sname) or \
+                not check_keys(sspec, sp, ("quantity", "component"), pc, required=("quantity",)):
+            if not isinstance(sname, str) or not _IDENT.match(sname):
+                pc.add(sp, f"expected an identifier as the symbol, found {sname!r}")
+            continue
+        oid = output_id(sspec.get("quantity"), f"{sp}.quantity")
+        comp = None if oid is None else _component(outputs[oid], sspec.get("component"), f"{sp}.component", pc)
+        if comp is not None:
+            table.append((sname, oid, comp))   # type: ignore[arg-type]
+    try:
+        expr = compile_expression(str(r.get("expression")), set(syms))
+    except ExpressionError as exc:
+        pc.add(f"{p}.expression", f"{exc} (an integrand names its symbols)")
+        return None
+    if len(table) != len(syms):
+        return None
+    symbols = list(table)
+
+    def make() -> Response:
+        return ExpressionIntegral(name, expr, symbols, unit)
+    return make
+
+
 def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_names: list[str],
                design_names: tuple[str, ...], model: Model | None, plan: RunPlan | None,
                pc: ProblemCollector) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
@@ -449,8 +490,12 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             comps = tuple(slice(None) for _ in oids)
             u = unit or outputs[oids[0]].unit
             makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
+        elif kind == "integral" and "expression" in r:
+            made = _expression_integral(r, p, name, unit, output_id, outputs, pc)
+            if made is not None:
+                makers.append(made)
         elif kind == "integral":
-            check_keys(r, p, allowed("response.integral"), pc, required=("quantity",))
+            check_keys(r, p, _INTEGRAL_OF_QUANTITY, pc, required=("quantity",))
             oid = output_id(r.get("quantity"), f"{p}.quantity")
             if oid is None:
                 continue

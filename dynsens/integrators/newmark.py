@@ -118,18 +118,40 @@ class Newmark:
 SCHEMES = ("newmark", "hht", "generalized_alpha")
 
 
-def make_scheme(name: str, beta: float = 0.25, gamma: float = 0.5, *, alpha: float | None = None,
-                rho_inf: float | None = None) -> Newmark:
+def make_scheme(name: str, beta: float | None = None, gamma: float | None = None, *,
+                alpha: float | None = None, rho_inf: float | None = None) -> Newmark:
     """Build the time-integration scheme named in a case.
 
-    ``newmark`` takes β, γ: γ < ½ is rejected (negative numerical damping, unstable), β < γ/2
-    warns (only conditionally stable), γ > ½ warns (numerical damping, first order).
-    ``hht`` takes α ∈ [0, ⅓]; ``generalized_alpha`` takes ρ∞ ∈ [0, 1].
+    ``newmark`` takes β, γ (default ¼, ½): γ < ½ is rejected (negative numerical damping,
+    unstable), β < γ/2 warns (only conditionally stable), γ > ½ warns (numerical damping, first
+    order).  ``hht`` takes α with |α| ≤ ⅓ in either sign convention: dynsens' α ∈ [0, ⅓]
+    (weights the end-of-step forces by 1 − α) or Hilber–Hughes–Taylor's original
+    α_HHT = −α ∈ [−⅓, 0]; the two ranges meet only at 0, so the sign tells which one is meant.
+    ``generalized_alpha`` takes ρ∞ ∈ [0, 1].  A parameter the named scheme does not use
+    (β or γ with hht or generalized_alpha, α with newmark or generalized_alpha, ρ∞ with
+    newmark or hht) is an error, never silently ignored.
     """
+    if name not in SCHEMES:
+        raise ValueError(f"unknown scheme {name!r} (known: {', '.join(SCHEMES)})")
+    uses = {"newmark": ("beta", "gamma"), "hht": ("alpha",), "generalized_alpha": ("rho_inf",)}[name]
+    given = {"beta": beta, "gamma": gamma, "alpha": alpha, "rho_inf": rho_inf}
+    ignored = [k for k, v in given.items() if v is not None and k not in uses]
+    if ignored:
+        derived = {"hht": "β = (1 + α)²/4 and γ = ½ + α follow from α",
+                   "generalized_alpha": "β, γ, α_m and α_f follow from ρ∞",
+                   "newmark": "β and γ set it"}[name]
+        raise ValueError(f"integrator.{', integrator.'.join(ignored)} given, but the {name} scheme does "
+                         f"not use {'it' if len(ignored) == 1 else 'them'} ({derived}; its "
+                         f"parameter{'s are' if len(uses) > 1 else ' is'} {', '.join(uses)}): remove "
+                         f"{'it' if len(ignored) == 1 else 'them'} or choose the scheme that uses "
+                         f"{'it' if len(ignored) == 1 else 'them'}")
     if name == "hht":
         a = 0.05 if alpha is None else alpha
-        if not 0.0 <= a <= 1.0 / 3.0:
-            raise ValueError(f"integrator.alpha = {a}: must be in [0, 1/3] for HHT-alpha")
+        if not -1.0 / 3.0 <= a <= 1.0 / 3.0:
+            raise ValueError(f"integrator.alpha = {a}: HHT-alpha needs |alpha| <= 1/3; dynsens reads "
+                             "alpha in [0, 1/3] (end-of-step forces weighted by 1 - alpha) and also "
+                             "accepts the original convention alpha_HHT = -alpha in [-1/3, 0]")
+        a = abs(a)      # the original (negative) convention: α_HHT = −α
         return Newmark(beta=0.25 * (1 + a) ** 2, gamma=0.5 + a, alpha_m=0.0, alpha_f=a, name="hht")
     if name == "generalized_alpha":
         r = 0.8 if rho_inf is None else rho_inf
@@ -139,8 +161,8 @@ def make_scheme(name: str, beta: float = 0.25, gamma: float = 0.5, *, alpha: flo
         af = r / (r + 1)
         g = 0.5 + af - am
         return Newmark(beta=0.25 * (g + 0.5) ** 2, gamma=g, alpha_m=am, alpha_f=af, name="generalized_alpha")
-    if name != "newmark":
-        raise ValueError(f"unknown scheme {name!r} (known: {', '.join(SCHEMES)})")
+    beta = 0.25 if beta is None else beta
+    gamma = 0.5 if gamma is None else gamma
     if gamma < 0.5:
         raise ValueError(f"integrator.gamma = {gamma}: must be >= 0.5 (gamma < 1/2 gives "
                          "negative numerical damping and an unstable scheme)")

@@ -171,6 +171,8 @@ class ParameterTable:
     def __init__(self, design_names: Sequence[str]):
         self.design_names = tuple(design_names)
         self._known = frozenset(design_names)
+        # the case's initial design by name, set by the case loader (None: not built from a case)
+        self.nominal: dict[str, float] | None = None
         self._constants: list[complex | float] = []
         self._exprs: list[tuple[int, Expression]] = []
         # the last fully evaluated design and its entries, and per design variable the

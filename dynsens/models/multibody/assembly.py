@@ -154,8 +154,10 @@ def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str
         f"{where}: the constraint Jacobian has rank {rank} < {J.shape[0]} "
         f"({n_red} redundant equation{'s' if n_red > 1 else ''}); linearly dependent "
         f"equations: {', '.join(involved)} (joints/conditions: {', '.join(joints)}). "
-        "A closed loop whose joint axes are all parallel is over-constrained in 3D: replace one "
-        "revolute by a planar_pin (or a spherical/cylindrical joint), or drop a hold/distance.")
+        "Redundant joint equations are left out when the case is loaded, if they are redundant "
+        "and hold at the case's initial design (README, 'Redundant joints'); these are not (another "
+        "design, holds/distances that repeat a joint, or a model built outside a case): drop a "
+        "hold/distance, or give a joint fewer equations (e.g. a revolute as a planar_pin).")
 
 
 def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:

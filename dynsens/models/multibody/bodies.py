@@ -48,6 +48,7 @@ class BodyDef:
     velocity, angular_velocity : 3 indices each (global frame; length/s, rad/s).
     markers : name → (3 indices, frame) with frame ``body`` (coordinates relative to the
         COM in body axes) or ``global`` (global coordinates in the initial pose).
+    point_mass : no inertia; its orientation is held by an orientation lock (:mod:`.pointmass`).
     """
 
     name: str
@@ -59,6 +60,7 @@ class BodyDef:
     velocity: tuple[int, ...] = ()
     angular_velocity: tuple[int, ...] = ()
     markers: dict[str, tuple[tuple[int, ...], str]] = field(default_factory=dict)
+    point_mass: bool = False
 
 
 @dataclass

@@ -19,15 +19,18 @@ from ..timefunctions import build_time_function
 from .bodies import GROUND, BodyDef, Const, Diff, Direction, Point
 from .forces import ForceElement, Gravity, PointForce, SpringDamper, Torque
 from .hydraulics import HydraulicCylinder
-from .joints import JOINT_TYPES, DotEq, Joint, Motion, const_coef, make_driver, make_joint
+from .drivers import read_driver
+from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
+from .redundancy import InconsistentRedundancy, analyse
+from .pointmass import attachment_problem, orientation_lock, read_distance_joint
+from .rotational import RotationalSpringDamper
 from .rotations import rotate, atan2_cs
 from .spec import Reader
 
 # the accepted keys live in the case language's key table (dynsens/case_keys.py)
 TOP_KEYS = allowed("model.multibody")
 JOINT_KEYS = allowed("multibody.joint")
-DRIVER_KEYS = allowed("multibody.driver")
 FORCE_KEYS = {kind: allowed(f"multibody.{kind}") for kind in FORCE_TYPES}
 
 
@@ -39,7 +42,8 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     check_keys(spec, path, TOP_KEYS, problems, required=("bodies",))
     rd = Reader(table, problems)
     rd.read_bodies(spec.get("bodies"), f"{path}.bodies")
-    joints = _joints(rd, spec.get("joints", []), f"{path}.joints")
+    joints = [orientation_lock(rd, b) for b in rd.bodies if b.point_mass]
+    joints += _joints(rd, spec.get("joints", []), f"{path}.joints")
     forces: list[ForceElement] = []
     if spec.get("gravity") is not None:
         forces.append(Gravity(rd.vec3(spec["gravity"], f"{path}.gravity")))  # type: ignore[arg-type]
@@ -68,9 +72,32 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.bodies", "no moving body")
     if len(problems.problems) > n0:
         return None
-    model = MultibodyModel(table, rd.bodies, rd.ground, joints, [*forces, *springs], cylinders,
+    def make() -> MultibodyModel:
+        m = MultibodyModel(table, rd.bodies, rd.ground, joints, [*forces, *springs], cylinders,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
-    model.drift_limit = None if drift_limit is None else float(drift_limit)
+        m.drift_limit = None if drift_limit is None else float(drift_limit)
+        m.point_mass_attachments = list(rd.point_mass_attachments)
+        return m
+    model = make()
+    if table.nominal is None or problems.problems:   # outside a case, or the design has problems:
+        return model                                  # no initial design to analyse
+    x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])
+    try:
+        red = analyse(model, x0)
+    except InconsistentRedundancy as exc:
+        problems.add(f"{path}.joints", str(exc))
+        return None
+    if red is None:
+        return model
+    # the joints keep only their independent equations; the model is rebuilt on them
+    dropped = [(model.eq_owner[i], model.eqs[i]) for i in red.dropped]
+    gone = {id(eq) for _, eq in dropped}
+    for jt in joints:
+        keep = [k for k, eq in enumerate(jt.eqs) if id(eq) not in gone]
+        jt.eqs = [jt.eqs[k] for k in keep]
+        jt.labels = tuple(jt.labels[k] for k in keep)
+    model = make()
+    model.redundant = [(*owner.split(".", 1), eq) for owner, eq in dropped]  # type: ignore[misc]
     return model
 
 
@@ -94,7 +121,9 @@ def _joints(rd: Reader, spec: Any, path: str) -> list[Joint]:
                                           f"(known: {', '.join(JOINT_TYPES)})")
             continue
         if kind == "driving":
-            jt = _driver(rd, j, jp, name, by_name)
+            jt = read_driver(rd, j, jp, name, by_name)
+        elif kind == "distance":
+            jt = read_distance_joint(rd, j, jp, name)
         else:
             jt = _joint(rd, j, jp, name, kind)
         if jt is not None:
@@ -111,6 +140,11 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     if b1 is b2:
         rd.problems.add(f"{jp}.body_2", "a joint needs two different bodies")
         return None
+    for role, b in (("body_1", b1), ("body_2", b2)):
+        why = attachment_problem(kind, role, b)
+        if why is not None:
+            rd.problems.add(f"{jp}.{role}", why)
+            return None
     keys: dict[str, str] = {"ex": "e_x", "ey": "e_y", "ez": "e_z"}
     if "marker_1" in j or "marker_2" in j:
         k1 = rd.marker(b1, j.get("marker_1"), f"{jp}.marker_1")
@@ -144,56 +178,11 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     else:
         axis = rd.vec3([0.0, 0.0, 1.0], f"{jp}.axis")
     keys.update(rd.frame_recipes(name, axis, b1, b2))
+    rd.attached(b1, keys["s1"], f"the point of joint '{name}'")
+    rd.attached(b2, keys["s2"], f"the point of joint '{name}'")
     jt = make_joint(name, kind, b1.index, b2.index, keys)
     jt.extra["drive"] = {"revolute": "angle", "prismatic": "slide"}.get(kind, "")
     return jt
-
-
-def _motion(rd: Reader, j: dict, jp: str, offset_default: Any = 0.0) -> Motion:
-    return Motion(rd.num(j.get("offset", offset_default), f"{jp}.offset"),
-                  rd.num(j.get("rate", 0.0), f"{jp}.rate"),
-                  rd.num(j.get("amplitude", 0.0), f"{jp}.amplitude"),
-                  rd.num(j.get("frequency", 0.0), f"{jp}.frequency"),
-                  rd.num(j.get("phase", 0.0), f"{jp}.phase"))
-
-
-def _driver(rd: Reader, j: dict, jp: str, name: str, by_name: dict[str, Joint]) -> Joint | None:
-    check_keys(j, jp, DRIVER_KEYS, rd.problems)
-    if "joint" in j:
-        target = by_name.get(j["joint"])
-        if target is None:
-            rd.problems.add(f"{jp}.joint", f"unknown joint {j['joint']!r} (a driver must follow the "
-                                           f"joint it drives){did_you_mean(j['joint'], by_name)}")
-            return None
-        coord = j.get("coordinate", target.extra.get("drive") or None)
-        allowed = {"revolute": ("angle",), "prismatic": ("slide",), "cylindrical": ("angle", "slide")}
-        if coord not in allowed.get(target.kind, ()):
-            rd.problems.add(f"{jp}.coordinate", f"a {target.kind} joint can be driven in "
-                            f"{' or '.join(allowed.get(target.kind, ())) or 'nothing'}; found {coord!r}")
-            return None
-        target.extra["drive"] = coord
-        jt = make_driver(name, target, _motion(rd, j, jp))
-        target.extra["drive"] = {"revolute": "angle", "prismatic": "slide"}.get(target.kind, "")
-        return jt
-    body = rd.body(j.get("body"), f"{jp}.body")
-    coord = j.get("coordinate")
-    if body is None or body.index == GROUND:
-        return None
-    if coord not in ("x", "y", "z"):
-        rd.problems.add(f"{jp}.coordinate", f"a body driver prescribes x, y or z of the COM; found {coord!r}")
-        return None
-    k = "xyz".index(coord)
-    motion = _motion(rd, j, jp)
-    b = body.index
-
-    r0 = body.position[k]
-
-    def shift(t: float, prm: Any) -> tuple[Any, Any, Any]:
-        # relative to the given initial COM coordinate (read from pv: see joints.Coef)
-        x, xd, xdd = motion(t, prm)
-        return prm.pv[..., r0] + x, xd, xdd
-    eq = DotEq([(const_coef(1.0), Const(f"e_{coord}"), Point(b, "zero"))], shift=shift)
-    return Joint(name, "driving", GROUND, b, [eq], labels=("drive",))
 
 
 def _point(rd: Reader, body: BodyDef, spec: Any, path: str, key: str) -> Point | None:
@@ -232,6 +221,11 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
             idx = rd.vec3(f.get(vkey), f"{fp}.{vkey}", [0.0, 0.0, 0.0])
             if body is None or fn is None:
                 continue
+            if body.point_mass and (kind == "torque" or frame == "body"):
+                rd.problems.add(f"{fp}.{'type' if kind == 'torque' else 'frame'}",
+                                f"'{body.name}' is a point mass, which has no orientation and carries no "
+                                "moment: apply a force in global axes at its position")
+                continue
             if kind == "point_force":
                 pt = _point(rd, body, f.get("point"), f"{fp}.point", f"f:{name}.point")
                 if pt is not None:
@@ -241,6 +235,15 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
             continue
         b1, b2 = rd.body(f.get("body_1"), f"{fp}.body_1"), rd.body(f.get("body_2"), f"{fp}.body_2")
         if b1 is None or b2 is None:
+            continue
+        if kind == "rotational_spring_damper":
+            if b1.point_mass or b2.point_mass:
+                rd.problems.add(f"{fp}.body_{1 if b1.point_mass else 2}", "a point mass has no orientation: "
+                                                                          "a rotational spring cannot act on it")
+                continue
+            rot = _rotational(rd, f, fp, name, b1, b2)
+            if rot is not None:
+                forces.append(rot)
             continue
         P1 = _point(rd, b1, f.get("point_1"), f"{fp}.point_1", f"f:{name}.p1")
         P2 = _point(rd, b2, f.get("point_2"), f"{fp}.point_2", f"f:{name}.p2")
@@ -265,6 +268,21 @@ def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, spr
         if cyl is not None:
             cylinders.append(cyl)
             n_p += 2
+
+
+def _rotational(rd: Reader, f: dict, fp: str, name: str, b1: BodyDef, b2: BodyDef
+                ) -> RotationalSpringDamper | None:
+    if b1 is b2:
+        rd.problems.add(f"{fp}.body_2", "a rotational spring-damper needs two different bodies")
+        return None
+    if "axis" not in f:
+        rd.problems.add(f"{fp}.axis", "missing (the axis of the relative rotation, global at the initial pose)")
+        return None
+    keys = rd.frame_recipes(f"f:{name}", rd.vec3(f.get("axis"), f"{fp}.axis"), b1, b2)
+    return RotationalSpringDamper(
+        name, Direction(b1.index, keys["u1"]), Direction(b1.index, keys["v1"]), Direction(b2.index, keys["u2"]),
+        rd.num(f.get("stiffness", 0.0), f"{fp}.stiffness"), rd.num(f.get("damping", 0.0), f"{fp}.damping"),
+        rd.num(f.get("free_angle", 0.0), f"{fp}.free_angle"))
 
 
 def _cylinder(rd: Reader, f: dict, fp: str, name: str, d: Diff, p_index: int) -> HydraulicCylinder | None:

@@ -374,6 +374,8 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
             j = ax_pidx[i]
             if ax_kind[i] == SPRING:
                 P, P_L, P_Ld = _spring(L, Ld, c[0], c[1], c[2], c[3])
+            elif ax_kind[i] != CYLINDER:            # never another element's law (Layout refuses them)
+                raise ValueError("axial element of an unknown law kind")
             else:
                 P, P_Ld, P_p1, P_p2, h1, h2, h1_L, h2_L, h1_Ld, h2_Ld, h2_p2 = _cylinder(
                     L, Ld, pb_[j], pb_[j + 1], eb[i], c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],

@@ -25,9 +25,11 @@ cylindrical       u_i·d, v_i·d, u_i·w_j, v_i·w_j                    4    0-1
 prismatic         cylindrical + u_i·v_j                             5    0-1
 fixed             spherical + u_i·w_j, v_i·w_j, u_i·v_j             6    0-2
 planar_pin        u_i·d, v_i·d (in-plane coincidence only)          2    0-1
+distance          (d·d)/(2L) − L/2 (a rod; :mod:`.pointmass`)       1    –
 driving (angle)   sin θ(t) (u_i·u_j) − cos θ(t) (v_i·u_j)           1    –
 driving (slide)   w_i·d − s(t)                                      1    –
 driving (body)    e_k·r_j − x(t)                                    1    –
+driving (dist.)   (d·d)/(2L(t)) − L(t)/2                            1    –
 ================  ================================================  ===  =============
 
 Position equations are in length units, so their multipliers are forces; the
@@ -62,8 +64,30 @@ def ONE(t: float, prm: Any) -> tuple[float, float, float]:
     return 1.0, 0.0, 0.0
 
 
+class Prescribed:
+    """A prescribed coordinate x(t): ``self(t, prm)`` returns (x, ẋ, ẍ) (units of the coordinate,
+    per s, per s²); :meth:`sin` and :meth:`cos` give the coefficients of an angle driver."""
+
+    def __call__(self, t: float, prm: Any) -> tuple[Any, Any, Any]:
+        raise NotImplementedError
+
+    def sin(self) -> Coef:
+        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
+            th, thd, thdd = self(t, prm)
+            s, c = np.sin(th), np.cos(th)
+            return s, c * thd, -s * thd * thd + c * thdd
+        return fn
+
+    def cos(self, sign: float = 1.0) -> Coef:
+        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
+            th, thd, thdd = self(t, prm)
+            s, c = np.sin(th), np.cos(th)
+            return sign * c, -sign * s * thd, sign * (-c * thd * thd - s * thdd)
+        return fn
+
+
 @dataclass(frozen=True)
-class Motion:
+class Motion(Prescribed):
     """Prescribed motion x(t) = offset + rate t + amplitude sin(2π f t + phase).
 
     Indices into the parameter vector; units of the driven coordinate (length or rad),
@@ -84,20 +108,6 @@ class Motion:
         w = 2.0 * np.pi * f
         s, c = np.sin(w * t + ph), np.cos(w * t + ph)
         return x0 + v * t + a * s, v + a * w * c, -a * w * w * s
-
-    def sin(self) -> Coef:
-        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
-            th, thd, thdd = self(t, prm)
-            s, c = np.sin(th), np.cos(th)
-            return s, c * thd, -s * thd * thd + c * thdd
-        return fn
-
-    def cos(self, sign: float = 1.0) -> Coef:
-        def fn(t: float, prm: Any) -> tuple[Any, Any, Any]:
-            th, thd, thdd = self(t, prm)
-            s, c = np.sin(th), np.cos(th)
-            return sign * c, -sign * s * thd, sign * (-c * thd * thd - s * thdd)
-        return fn
 
 
 class Equation:
@@ -176,9 +186,10 @@ class NormEq(Equation):
         ctx.pending.append((self, lam))
 
 
-JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "driving")
+JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin", "distance",
+               "driving")
 N_EQUATIONS = {"spherical": 3, "revolute": 5, "cylindrical": 4, "prismatic": 5, "fixed": 6,
-               "planar_pin": 2, "driving": 1}
+               "planar_pin": 2, "distance": 1, "driving": 1}
 FORCE_ROWS = {"spherical": (0, 1, 2), "revolute": (0, 1, 2), "cylindrical": (0, 1),
               "prismatic": (0, 1), "fixed": (0, 1, 2), "planar_pin": (0, 1), "driving": ()}
 EQ_LABELS = {
@@ -241,7 +252,7 @@ def make_joint(name: str, kind: str, b1: int, b2: int, keys: dict[str, str]) -> 
                  extra={"d": d, "u2": u2, "w1": w1})
 
 
-def make_driver(name: str, target: Joint | None, motion: Motion, *, body: int = GROUND,
+def make_driver(name: str, target: Joint | None, motion: Prescribed, *, body: int = GROUND,
                 axis_key: str = "", origin_key: str = "") -> Joint:
     """A driving constraint on a joint's coordinate (angle of a revolute/cylindrical,
     slide of a prismatic/cylindrical) or on a body's COM coordinate along a global axis."""

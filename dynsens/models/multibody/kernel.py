@@ -89,6 +89,11 @@ class Layout:
         self.axial = axial
         # every axial law known to the compiled kernel (otherwise the numpy kernel evaluates forces)
         self.compiled_laws = all(getattr(el, "law_kind", None) is not None for el in axial)
+        unknown = [el for el in axial if getattr(el, "law_kind", None) not in (None, cc.SPRING, cc.CYLINDER)]
+        if unknown:     # a law the compiled kernel would not know: refuse, never evaluate another law
+            raise TypeError(f"axial element '{unknown[0].name}' declares law_kind "
+                            f"{unknown[0].law_kind!r}; the compiled kernel knows {cc.SPRING} (spring) "
+                            f"and {cc.CYLINDER} (cylinder), None selects the numpy kernel")
         for el in axial:
             sides += [self._side(el.d), self._side(el.d)]
         point_sides = [self._side(P)[0] for P in points]

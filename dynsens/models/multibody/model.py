@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from ...errors import ModelError, ProblemCollector
+from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
@@ -276,8 +276,22 @@ class MultibodyModel(Model):
         return self._evaluation(t, s, params).linearization()
 
     # ------------------------------------------------------------------ diagnostics
+    redundant: list[tuple[str, str, Equation]] = []   # (joint, label, equation) left out of Φ
+
     def check_state(self, t: float, s: StepState, params: MBParams) -> None:
-        """Raise ModelError when a cylinder chamber volume is not positive."""
+        """Raise ModelError after a step when ‖Φ‖ exceeds the drift limit (:mod:`.drift`), when a
+        joint equation left out as redundant became independent (:mod:`.redundancy`), or when a
+        cylinder chamber volume is not positive."""
+        if self.redundant:          # first: a change of rank also shows as drift, less specifically
+            from .redundancy import check_dependency
+            check_dependency(self, t, s, params)
+        from .drift import check_drift
+        check_drift(self, t, s, params)
+        for el in self.other_forces:
+            check = getattr(el, "check", None)      # rotational spring-dampers: the angle's range
+            if check is not None:
+                check(t, Ctx(np.asarray(s.q)[:, None], np.asarray(s.qd)[:, None], np.zeros((s.q.shape[0], 1)),
+                             params, t))
         if not self.cylinders:
             return
         kin = self.kinematics(s, params)
@@ -310,27 +324,10 @@ class MultibodyModel(Model):
     drift_limit: float | None = None
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
-        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step.
-
-        Raises ModelError when ‖Φ‖ exceeds ``model.drift_limit`` (default 1e-2 × the size of
-        the mechanism, the largest marker/joint vector): a run that drifts that far (e.g. one
-        that stepped through a dead-centre configuration) must not report success."""
-        Phi = self.constraint_levels(t, self.kinematics(s, params))[0][0]
-        drift = float(np.linalg.norm(np.real(Phi[:, 0])))
-        limit: Any = self.drift_limit
-        if limit is None:
-            limit = params.ts.get("__drift_limit__")
-            if limit is None:
-                size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
-                limit = 1e-2 * (size if size > 0 else 1.0)
-                params.ts["__drift_limit__"] = limit
-        if drift > limit:
-            raise ModelError(
-                f"constraint drift ‖Φ‖ = {drift:.3g} exceeds {limit:.3g} at t = {t:.6g} s: the mechanism has "
-                "probably passed through a singular (dead-centre) configuration, or the time step is too "
-                "large for the index-1 form; reduce integrator.dt, add model.stabilization, or set "
-                "model.drift_limit")
-        return {"constraint_position": drift,
+        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`)."""
+        from .drift import constraint_residuals
+        Phi = constraint_residuals(self, t, s, params)
+        return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
                 "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
 
     def dof_labels(self) -> list[str]:
@@ -342,10 +339,18 @@ class MultibodyModel(Model):
         return list(self.eq_owner)
 
     # ------------------------------------------------------------------ initial state
+    point_mass_attachments: list[tuple[str, str, str]] = []   # (body, vec key, what): see .pointmass
+
     def initial_state(self, params: MBParams) -> tuple[Array, Array, Array]:
         """Consistent (q0, q̇0, p0) by assembly; see :mod:`.assembly`."""
         from .assembly import initial_conditions
+        if self.point_mass_attachments:
+            from .pointmass import check_attachments
+            check_attachments(self, params)
         res = initial_conditions(self, params)
+        if self.redundant:          # the dropped equations hold at this design's assembly too
+            from .redundancy import check_values
+            check_values(self, self.assembly.t0, res.q0, params, 0.0)
         self._ic_cache = (params, res)
         return res.q0, res.qd0, res.p0
 

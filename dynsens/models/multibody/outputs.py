@@ -12,7 +12,9 @@ Spec forms (``quantity:`` in a case):
   angular_velocity_z}`` (angle_z = direction of the body x-axis in the x–y plane, rad);
 * ``{marker: body.marker, kind: position | velocity}``;
 * ``{element: CYL, kind: stroke | stroke_rate | pressure_1 | pressure_2 | force | volume_1 |
-  volume_2}`` for hydraulic cylinders, ``{element: SPRING, kind: length | length_rate | force}``.
+  volume_2}`` for hydraulic cylinders, ``{element: SPRING, kind: length | length_rate | force}``,
+  ``{element: ROT, kind: angle | angle_rate | torque}`` for rotational spring-dampers (torque on
+  body_2 about the axis, N·m).
 
 All functions are complex-safe.  Quantities that are linear in the state and independent of
 the design are declared ``linear``; joint reaction forces, body angles and angular
@@ -265,7 +267,18 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             problems.add(f"{path}.kind", f"unknown spring quantity {kind!r}{did_you_mean(kind, SPRING_KINDS)}")
             return None
         return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
-    allnames = list(cyls) + list(springs)
+    rots = {f.name: f for f in model.other_forces if hasattr(f, "free_angle")}
+    if name in rots:
+        rot: Any = rots[name]                 # a RotationalSpringDamper (its state(): angle, rate, torque)
+        kinds = ("angle", "angle_rate", "torque")
+        if kind not in kinds:
+            problems.add(f"{path}.kind", f"unknown rotational spring quantity {kind!r}{did_you_mean(kind, kinds)} "
+                                         f"(known: {', '.join(kinds)})")
+            return None
+        level = kinds.index(kind)
+        return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{name}.{kind}",),
+                      {"angle": "rad", "angle_rate": "rad/s", "torque": ""}[kind])
+    allnames = list(cyls) + list(springs) + list(rots)
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")
     return None

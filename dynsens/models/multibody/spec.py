@@ -19,6 +19,7 @@ from .bodies import GROUND, BodyDef, MBParams
 from .rotations import perpendicular_pair, rotate
 
 BODY_KEYS = allowed("multibody.body")
+POINT_MASS_KEYS = ("mass", "point_mass", "position", "velocity", "markers")
 Recipe = Callable[..., Any]  # recipe(params); "..." admits lambdas with bound defaults
 
 
@@ -32,6 +33,8 @@ class Reader:
         self.ground = BodyDef("ground", GROUND)
         self.by_name: dict[str, BodyDef] = {"ground": self.ground}
         self.vec: list[tuple[str, Recipe]] = []
+        # (point-mass body, vec key, what) of every point attached to a point mass
+        self.point_mass_attachments: list[tuple[str, str, str]] = []
         self.scal: list[tuple[str, Recipe]] = []
         for k, e in (("e_x", (1.0, 0, 0)), ("e_y", (0, 1.0, 0)), ("e_z", (0, 0, 1.0)), ("zero", (0, 0, 0))):
             self.vec.append((k, lambda prm, _e=e: np.array(_e, dtype=float)))
@@ -56,11 +59,24 @@ class Reader:
                 if check_keys(b, bp, ("markers",), self.problems):
                     self._markers(self.ground, b.get("markers"), f"{bp}.markers")
                 continue
-            if not check_keys(b, bp, BODY_KEYS, self.problems, required=("mass", "inertia")):
+            point = isinstance(b, dict) and b.get("point_mass", False)
+            if isinstance(b, dict) and not isinstance(point, bool):
+                self.problems.add(f"{bp}.point_mass", f"expected true or false, found {point!r}")
+                continue
+            if point:
+                # no inertia, no orientation: the body is its mass point (README "Point masses")
+                extra = [k for k in ("inertia", "orientation", "angular_velocity") if k in b]
+                for k in extra:
+                    self.problems.add(f"{bp}.{k}", "a point mass has no rotational inertia or "
+                                                   "orientation: remove it, or drop point_mass")
+                if extra or not check_keys(b, bp, POINT_MASS_KEYS, self.problems, required=("mass",)):
+                    continue
+            elif not check_keys(b, bp, BODY_KEYS, self.problems, required=("mass", "inertia")):
                 continue
             body = BodyDef(str(name), len(self.bodies))
+            body.point_mass = bool(point)
             body.mass = self.num(b.get("mass"), f"{bp}.mass", positive=True)
-            inertia = b.get("inertia")
+            inertia = [0.0, 0.0, 0.0] if point else b.get("inertia")
             if isinstance(inertia, (list, tuple)) and len(inertia) == 3:
                 body.inertia = tuple(self.table.add_many(inertia, f"{bp}.inertia", self.problems)) + \
                     tuple(self.num(0.0, f"{bp}.inertia") for _ in range(3))
@@ -184,10 +200,19 @@ class Reader:
     def point_on(self, body: BodyDef, spec: Any, path: str, key: str) -> str | None:
         """A point of ``body``: a marker name, or [x, y, z] in body axes rel. the COM."""
         if isinstance(spec, str):
-            return self.marker(body, spec, path)
-        idx = self.vec3(spec, path, [0.0, 0.0, 0.0])
-        self.vec.append((key, lambda prm, _i=idx: np.array([prm.pv[i] for i in _i])))
-        return key
+            k = self.marker(body, spec, path)
+        else:
+            idx = self.vec3(spec, path, [0.0, 0.0, 0.0])
+            self.vec.append((key, lambda prm, _i=idx: np.array([prm.pv[i] for i in _i])))
+            k = key
+        if k is not None:
+            self.attached(body, k, f"the point at {path}")
+        return k
+
+    def attached(self, body: BodyDef, key: str, what: str) -> None:
+        """Record a point of ``body`` that a joint or force uses (checked for point masses)."""
+        if body.point_mass:
+            self.point_mass_attachments.append((body.name, key, what))
 
     def frame_recipes(self, name: str, axis_idx: tuple[int, ...], b1: BodyDef, b2: BodyDef
                       ) -> dict[str, str]:
