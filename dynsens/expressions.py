@@ -53,6 +53,12 @@ FUNCTIONS: dict[str, Callable[..., Number]] = {
     "deg": lambda a: a * (180.0 / math.pi), "rad": lambda a: a * (math.pi / 180.0),
 }
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
+#: names a case may not give to its own variables, responses or events (an expression
+#: would read the constant or function instead)
+RESERVED_NAMES: frozenset[str] = frozenset(CONSTANTS) | frozenset(FUNCTIONS)
+#: deepest nesting of parentheses, calls and powers (chains of + - and * / are flat)
+MAX_DEPTH = 100
+MAX_LENGTH = 2000
 
 _BINOPS: dict[type, Callable[[Number, Number], Number]] = {
     ast.Add: lambda a, b: a + b,
@@ -64,7 +70,17 @@ _BINOPS: dict[type, Callable[[Number, Number], Number]] = {
 
 
 class ExpressionError(DynsensError, ValueError):
-    """An expression could not be parsed or names something unknown."""
+    """An expression could not be parsed, names something unknown, or has no finite value."""
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, ZeroDivisionError) or "divide" in str(exc):
+        return "division by zero"
+    if isinstance(exc, OverflowError) or "overflow" in str(exc).lower():
+        return "the result overflows (too large for a floating-point number)"
+    if "invalid" in str(exc) or isinstance(exc, ValueError):
+        return f"a value outside a function's domain ({exc})"
+    return str(exc)
 
 
 @dataclass(frozen=True)
@@ -76,8 +92,32 @@ class Expression:
     _fn: Callable[[Mapping[str, Number]], Number]
 
     def evaluate(self, env: Mapping[str, Number]) -> Number:
-        """Value of the expression with the symbol values in ``env`` (units as the symbols)."""
-        return self._fn(env)
+        """Value of the expression with the symbol values in ``env`` (units as the symbols).
+
+        Raises ExpressionError (naming the expression and the values) for a division by
+        zero, an overflow, a value outside a function's domain (e.g. ``log(-1)``), a complex
+        result from real values, or any other non-finite result.
+        """
+        try:
+            with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
+                value = self._fn(env)
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            raise ExpressionError(f"expression '{self.text}' cannot be evaluated{self._at(env)}: "
+                                  f"{_describe(exc)}") from None
+        if np.iscomplexobj(value) and not any(np.iscomplexobj(env[n]) for n in self.symbols):
+            raise ExpressionError(f"expression '{self.text}' gives a complex value{self._at(env)} "
+                                  f"(found {complex(np.ravel(value)[0])}): a real number was expected")
+        if not np.all(np.isfinite(value)):
+            raise ExpressionError(f"expression '{self.text}' gives {np.real(value)!r}{self._at(env)}: "
+                                  "a finite number was expected")
+        return value
+
+    def _at(self, env: Mapping[str, Number]) -> str:
+        if not self.symbols:
+            return ""
+        vals = ", ".join(f"{n} = {np.real(env[n]):.6g}" if np.ndim(env[n]) == 0 else f"{n} = {env[n]!r}"
+                         for n in sorted(self.symbols))
+        return f" at {vals}"
 
     @property
     def is_constant(self) -> bool:
@@ -85,10 +125,45 @@ class Expression:
         return not self.symbols
 
 
+_CHAINS = ((ast.Add, ast.Sub), (ast.Mult, ast.Div))
+
+
+def _chain(node: ast.BinOp) -> tuple[list[ast.AST], list[type]]:
+    """Operands and operators of a left-nested chain ``a + b - c + ...`` (or ``* /``)."""
+    family = next(f for f in _CHAINS if isinstance(node.op, f))
+    ops: list[type] = []
+    operands: list[ast.AST] = []
+    cur: ast.AST = node
+    while isinstance(cur, ast.BinOp) and isinstance(cur.op, family):
+        ops.append(type(cur.op))
+        operands.append(cur.right)
+        cur = cur.left
+    operands.append(cur)
+    return operands[::-1], ops[::-1]
+
+
 def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
-                  text: str) -> Callable[[Mapping[str, Number]], Number]:
+                  text: str, depth: int = 0) -> Callable[[Mapping[str, Number]], Number]:
+    if depth > MAX_DEPTH:
+        raise ExpressionError(f"expression '{_short(text)}' nests parentheses, calls or powers more than "
+                              f"{MAX_DEPTH} levels deep: split it into simpler terms")
     if isinstance(node, ast.Expression):
-        return _compile_node(node.body, names, known, text)
+        return _compile_node(node.body, names, known, text, depth)
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        # a long sum (or product) is evaluated in a loop, not by one nested call per term
+        operands, ops = _chain(node)
+        first, *rest = [_compile_node(o, names, known, text, depth + 1) for o in operands]
+        if not rest:
+            return first
+        fns = [_BINOPS[o] for o in ops]
+        pairs = list(zip(fns, rest))
+
+        def chain(env: Mapping[str, Number]) -> Number:
+            acc = first(env)
+            for op, term in pairs:
+                acc = op(acc, term(env))
+            return acc
+        return chain
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
             and not isinstance(node.value, bool):
         value = float(node.value)
@@ -108,11 +183,11 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
         return lambda env: env[name]
     if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
         op = _BINOPS[type(node.op)]
-        left = _compile_node(node.left, names, known, text)
-        right = _compile_node(node.right, names, known, text)
+        left = _compile_node(node.left, names, known, text, depth + 1)
+        right = _compile_node(node.right, names, known, text, depth + 1)
         return lambda env: op(left(env), right(env))
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        operand = _compile_node(node.operand, names, known, text)
+        operand = _compile_node(node.operand, names, known, text, depth + 1)
         if isinstance(node.op, ast.USub):
             return lambda env: -operand(env)
         return operand
@@ -123,7 +198,7 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
                 f"expression '{text}' calls '{fname}', which is not allowed "
                 f"(allowed: {', '.join(sorted(FUNCTIONS))})")
         fn = FUNCTIONS[fname]
-        args = [_compile_node(a, names, known, text) for a in node.args]
+        args = [_compile_node(a, names, known, text, depth + 1) for a in node.args]
         return lambda env: fn(*(a(env) for a in args))
     raise ExpressionError(
         f"expression '{text}': '{ast.dump(node)[:40]}...' is not allowed "
@@ -142,12 +217,19 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
     ------
     ExpressionError : syntax errors, disallowed constructs, unknown symbols.
     """
-    if len(text) > 2000:
-        raise ExpressionError("expression longer than 2000 characters")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expected an expression of at most {MAX_LENGTH} characters, found {len(text)}")
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        names: set[str] = set()
+        fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text)
     except SyntaxError as exc:
-        raise ExpressionError(f"expression '{text}' is not valid: {exc.msg}") from None
-    names: set[str] = set()
-    fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text)
+        raise ExpressionError(f"expression '{_short(text)}' is not valid: {exc.msg}") from None
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"expression '{_short(text)}' nests too deeply: split it into simpler terms") \
+            from None
     return Expression(text, frozenset(names), fn)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= 80 else text[:60] + " ... " + text[-15:]

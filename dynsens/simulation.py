@@ -8,6 +8,7 @@ import numpy as np
 
 from .case.load import Case
 from .march import RunResult, integrate
+from .runchecks import check_design, check_result, check_run_size
 
 
 def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
@@ -20,6 +21,9 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
     x : design (m,), real or complex (complex forces ``sensitivities=False``).
     sensitivities : override the case's ``sensitivity.enabled``.
     history : override which state histories are stored.
+
+    Raises DesignError (an entry invalid at ``x``), RunSizeError (the run would not fit),
+    NonFiniteError (a non-finite state, response value or gradient) with their context.
     """
     x = case.x0 if x is None else np.asarray(x)
     plan = case.plan
@@ -29,5 +33,9 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         plan = replace(plan, sensitivities=False)
     if history is not None:
         plan = replace(plan, history=history)
-    return integrate(case.model, x, case.scheme, plan, case.new_response_set(),
-                     design_names=case.design_names, design_scale=case.scale, progress=progress)
+    check_design(case, x)
+    check_run_size(case, plan)
+    result = integrate(case.model, x, case.scheme, plan, case.new_response_set(),
+                       design_names=case.design_names, design_scale=case.scale, progress=progress)
+    check_result(case, result)
+    return result
