@@ -24,7 +24,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .expressions import Expression
+from .errors import NonFiniteError
+from .expressions import Expression, ExpressionError
 from .models.base import Output, StepState
 
 
@@ -287,7 +288,10 @@ class Combination(Response):
                 env[sym] = rv.value
             else:
                 env[sym] = ctx.design[sym]
-        value = self.expr.evaluate(env)
+        try:
+            value = self.expr.evaluate(env)
+        except ExpressionError as exc:   # e.g. log of a negative response: a failed run, named
+            raise NonFiniteError(f"response '{self.name}': {exc}") from None
         if ctx.m == 0 or any(ctx.values[s].gradient is None for s in self.expr.symbols if s in ctx.values):
             return ResponseValue(value, None, self.unit)
         grad = np.zeros(ctx.m, dtype=np.result_type(value, float))

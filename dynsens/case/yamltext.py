@@ -33,7 +33,7 @@ def read_case_text(path: Path, source: str) -> str:
     try:
         size = path.stat().st_size
         if path.is_dir():
-            raise CaseError("expected a case file, found a folder", source)
+            raise CaseError(f"cannot read {source}: expected a case file, found a folder", source)
         if size > MAX_FILE_BYTES:
             raise CaseError(f"expected a case file of at most {MAX_FILE_BYTES // 2**20} MiB, found "
                             f"{size / 2**20:.1f} MiB", source)
