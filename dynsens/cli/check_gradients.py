@@ -10,7 +10,8 @@ import click
 from ..case.load import load_case
 from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
 from .main import cli
-from .options import case_argument, parse_float_list, set_option
+from ..io.paths import atomic_write_text, check_output_path
+from .options import case_argument, overwrite_option, parse_float_list, set_option
 
 
 @cli.command("check-gradients")
@@ -24,21 +25,25 @@ from .options import case_argument, parse_float_list, set_option
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
 @click.option("--workers", type=int, default=None, help="Worker processes for the FD runs (default: 2).")
+@overwrite_option
 @set_option
 def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: float | None,
-                        report: str | None, workers: int | None, overrides: tuple[str, ...]) -> None:
+                        report: str | None, workers: int | None, overwrite: bool,
+                        overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
+    paths: list[Path] = []
+    if report:
+        stem = Path(report)
+        stem = stem.with_suffix("") if stem.suffix in (".md", ".json") else stem
+        paths = [check_output_path(stem.with_name(stem.name + ext), overwrite) for ext in (".md", ".json")]
     case = load_case(case_file, overrides)
     rep = check_gradients(case, steps, scheme, workers=workers)
     md = to_markdown(rep)
     click.echo(md)
-    if report:
-        stem = Path(report)
-        stem = stem.with_suffix("") if stem.suffix in (".md", ".json") else stem
-        stem.parent.mkdir(parents=True, exist_ok=True)
-        stem.with_suffix(".md").write_text(md, encoding="utf-8")
-        stem.with_suffix(".json").write_text(json.dumps(to_json(rep), indent=2), encoding="utf-8")
-        click.echo(f"written: {stem.with_suffix('.md')}, {stem.with_suffix('.json')}")
+    if paths:
+        atomic_write_text(paths[0], md, overwrite)
+        atomic_write_text(paths[1], json.dumps(to_json(rep), indent=2), overwrite)
+        click.echo(f"written: {paths[0]}, {paths[1]}")
     if rtol is not None and not rep.passes(rtol):
         worst = {n: rep.best_rel_diff(n) for n in rep.responses}
         click.echo(f"gradient check FAILED at rtol = {rtol:g}: best relative differences {worst}", err=True)

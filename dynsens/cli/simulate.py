@@ -8,6 +8,7 @@ import numpy as np
 
 from ..case.load import load_case
 from ..io.hdf5 import write_result
+from ..io.paths import check_output_path
 from ..simulation import run_case
 from .main import cli
 from .options import case_argument, overwrite_option, set_option
@@ -33,6 +34,15 @@ def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
     return "\n".join(lines)
 
 
+def zero_gradient_columns(result, design_names) -> list[str]:  # type: ignore[no-untyped-def]
+    """Design variables whose gradient entry is exactly zero for every response with a gradient."""
+    grads = [np.real(r.gradient) for r in result.responses.values() if r.gradient is not None and not r.missing]
+    if not grads:
+        return []
+    g = np.vstack(grads)
+    return [n for j, n in enumerate(design_names) if j < g.shape[1] and not np.any(g[:, j])]
+
+
 @cli.command()
 @case_argument
 @click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
@@ -43,11 +53,7 @@ def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
 def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
              no_sensitivities: bool) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
-    from pathlib import Path
-
-    from ..io.hdf5 import OutputExistsError
-    if Path(output).exists() and not overwrite:
-        raise OutputExistsError(f"{output} exists: pass --overwrite to replace it")
+    check_output_path(output, overwrite)     # before the run, not after it
     case = load_case(case_file, overrides)
     n = case.plan.n_steps
     show = n >= 2000 and sys.stderr.isatty()
@@ -63,4 +69,8 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
         result = run_case(case, sensitivities=False if no_sensitivities else None, progress=progress)
     write_result(output, result, case, overwrite=overwrite)
     click.echo(format_summary(result, case.design_names))
+    zero = zero_gradient_columns(result, case.design_names)
+    if zero:
+        click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "
+                   "(nothing in the model or responses depends on it at this design)")
     click.echo(f"written: {output}")
