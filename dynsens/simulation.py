@@ -7,6 +7,7 @@ from typing import Callable
 import numpy as np
 
 from .case.load import Case
+from .errors import CaseError
 from .march import RunResult, integrate
 from .runchecks import check_design, check_result, check_run_size
 
@@ -35,7 +36,12 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         plan = replace(plan, history=history)
     check_design(case, x)
     check_run_size(case, plan)
-    result = integrate(case.model, x, case.scheme, plan, case.new_response_set(),
-                       design_names=case.design_names, design_scale=case.scale, progress=progress)
+    try:
+        result = integrate(case.model, x, case.scheme, plan, case.new_response_set(),
+                           design_names=case.design_names, design_scale=case.scale, progress=progress)
+    except CaseError as exc:       # found by the model at run time (e.g. redundant joints): name the file
+        if exc.source is not None:
+            raise
+        raise CaseError(exc.problems, case.source) from None
     check_result(case, result)
     return result

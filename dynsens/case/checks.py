@@ -21,6 +21,36 @@ if TYPE_CHECKING:
     from .load import DesignVariable
 
 
+#: keys whose value names something (a type, a body, an event, ...): a scalar
+NAME_KEYS = frozenset({"type", "name", "kind", "body", "body_1", "body_2", "joint", "marker_1", "marker_2",
+                       "function", "scheme", "partials", "matrix", "event", "response", "frame", "direction",
+                       "action", "location", "at", "derivative", "coordinate", "component", "objective",
+                       "method", "dof", "element", "node"})
+#: keys whose value is a name or a list of names
+NAME_LIST_KEYS = frozenset({"dof", "dofs", "element", "nodes", "fixed", "history"})
+_SCALARS = (str, int, float, bool, type(None))
+
+
+def check_reference_types(node: Any, path: str, pc: ProblemCollector) -> None:
+    """Every entry that names something is a name (or a list of names where lists are allowed),
+    so that the builders never meet a list or mapping where they look a name up."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            p = f"{path}.{key}" if path else str(key)
+            if key in NAME_LIST_KEYS and isinstance(value, list):
+                bad = [v for v in value if not isinstance(v, _SCALARS)]
+                if bad:
+                    pc.add(p, f"expected a list of names, found an entry {bad[0]!r}")
+                continue
+            if key in NAME_KEYS and not isinstance(value, _SCALARS):
+                pc.add(p, f"expected a name, found {type(value).__name__} {value!r}")
+                continue
+            check_reference_types(value, p, pc)
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            check_reference_types(value, f"{path}[{i}]", pc)
+
+
 def reserved_message(name: str) -> str:
     """Problem text for a case name that is also a constant or function of the expressions."""
     what = f"the constant {name} = {CONSTANTS[name]:.6g}" if name in CONSTANTS else f"the function {name}()"

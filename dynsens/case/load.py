@@ -30,7 +30,7 @@ from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
-from .checks import check_start, reserved_message, unused_design_variables
+from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .yamltext import parse_yaml, read_case_text
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
@@ -131,6 +131,11 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
+    # a list or mapping where a name belongs would reach the builders' look-ups: stop here
+    n_before = len(pc.problems)
+    check_reference_types(raw, "", pc)
+    if len(pc.problems) > n_before:
+        pc.raise_if_any()
     design, declared = _design(raw.get("design", {"variables": []}), pc)
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
@@ -215,7 +220,12 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
         return [], ()
     out = []
     declared: list[str] = []
-    for i, v in enumerate(spec.get("variables", []) or []):
+    variables = spec.get("variables", []) or []
+    if not isinstance(variables, list):
+        pc.add("design.variables", f"expected a list of variables, found {type(variables).__name__} "
+                                   f"{variables!r}")
+        return [], ()
+    for i, v in enumerate(variables):
         p = f"design.variables[{i}]"
         if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
             continue
@@ -378,7 +388,7 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
             continue
         comp = _component(outputs[oid], ev.get("component"), f"{p}.component", pc)
         if comp is not None:
-            events.append(EventSpec(str(ev["name"]), oid, comp, level, direction, loc))
+            events.append(EventSpec(str(ename), oid, comp, level, direction, loc))
     return events, names
 
 

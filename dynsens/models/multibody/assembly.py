@@ -128,7 +128,7 @@ def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = Non
     Singular values ≤ rel_tol·σ_max count as zero (default: round-off, 1e3·ε·max(shape));
     the equations named are those with a visible share (> 1e-6) in the left null vectors.
     """
-    if J.shape[0] == 0:
+    if J.shape[0] == 0 or not np.all(np.isfinite(J)):   # no rank to judge
         return None
     U, sv, _ = np.linalg.svd(np.real(J), full_matrices=True)
     rel = max(J.shape) * np.finfo(float).eps * 1e3 if rel_tol is None else rel_tol
@@ -144,6 +144,9 @@ def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = Non
 
 def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str) -> None:
     """CaseError naming the equations (joints) involved when J (n_eq, n_q) is rank-deficient."""
+    if not np.all(np.isfinite(J)):
+        raise CaseError(f"{where}: expected a finite constraint Jacobian at the initial pose, found NaN or "
+                        "infinite entries: a body position, joint point or axis is too large or not finite")
     dep = dependent_equations(J, labels)
     if dep is None:
         return
