@@ -23,9 +23,9 @@ if TYPE_CHECKING:
 
 #: keys whose value names something (a type, a body, an event, ...): a scalar
 NAME_KEYS = frozenset({"type", "name", "kind", "body", "body_1", "body_2", "joint", "marker_1", "marker_2",
-                       "function", "scheme", "partials", "matrix", "event", "response", "frame", "direction",
+                       "scheme", "partials", "matrix", "event", "response", "frame", "direction",
                        "action", "location", "at", "derivative", "coordinate", "component", "objective",
-                       "method", "dof", "element", "node"})
+                       "method", "dof", "element", "node", "marker"})
 #: keys whose value is a name or a list of names
 NAME_LIST_KEYS = frozenset({"dof", "dofs", "element", "nodes", "fixed", "history"})
 _SCALARS = (str, int, float, bool, type(None))

@@ -622,7 +622,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
                                 spring_nonlinear=spring_nonlinear)
-    except (ValueError, IndexError, TypeError):
+    except (ValueError, IndexError, TypeError, KeyError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled
         raise

@@ -192,7 +192,10 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
             dx = np.linalg.solve(K, -F)
         except np.linalg.LinAlgError:
             _rank_check(model, jacobian_rows(eqs, q, params, a.t0), labels, "assembly")
-            raise
+            raise ModelError(f"assembly failed: the assembly matrix is singular at Newton iteration {it} "
+                             "(the joints' equations are dependent at this pose, or a body's mass or "
+                             "inertia leaves it undetermined): check the initial poses, joints and holds") \
+                from None
         # backtracking on ‖F‖ (decided on real parts) keeps far-off guesses from diverging
         step = 1.0
         while step > 1e-3 and fnorm(q + step * dx[:n_q], mu + step * dx[n_q:]) > f0 and f0 > 1e-14 * scale:
