@@ -128,3 +128,48 @@ def check_result(case: Case, result: RunResult) -> None:
             raise NonFiniteError(f"{case.source}: the gradient of response '{name}' with respect to '{var}' is "
                                  f"{np.real(r.gradient[j])!r}; {where}. The derivative is not finite at this "
                                  "design (e.g. sqrt or a power of a variable at 0); the run is failed, not completed")
+
+
+def stability_limit(model: Any, scheme: Any, t0: float, x: np.ndarray) -> tuple[float, float, float] | None:
+    """(dt_max s, Ω_crit, ω_max rad/s) of a conditionally stable Newmark scheme (2β < γ) for the
+    model linearized at its initial state and design ``x``; None when the scheme is unconditionally
+    stable or the model has constraints or first-order states (no plain M, K pair).
+
+    Undamped Newmark is stable for ω·dt ≤ Ω_crit = 1/sqrt(γ/2 − β) (central differences: 2).
+    """
+    from .models.base import StepState
+    beta, gamma = scheme.beta, scheme.gamma
+    tr = model.traits
+    if not beta < gamma / 2 or tr.n_lam or tr.n_p or tr.n_q > 2000:
+        return None
+    params = model.parameters(np.asarray(x, dtype=float))
+    q0, qd0, p0 = model.initial_state(params)
+    s = StepState(q0, qd0, np.zeros_like(q0), np.zeros(0), p0, np.zeros(0))
+    lin = model.linearize(t0, s, params)
+    if lin.R_q is None:
+        return None
+    M, K = (a.toarray() if hasattr(a, "toarray") else np.asarray(a, dtype=float) for a in (lin.R_z, lin.R_q))
+    try:
+        w2 = np.linalg.eigvals(np.linalg.solve(M, K))
+    except np.linalg.LinAlgError:
+        return None
+    w2 = np.real(w2[np.isfinite(w2)])
+    if not w2.size or w2.max() <= 0:
+        return None
+    omega = float(np.sqrt(w2.max()))
+    crit = 1.0 / np.sqrt(gamma / 2 - beta)
+    return crit / omega, crit, omega
+
+
+def stability_problem(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray) -> str | None:
+    """Why ``plan.dt`` is past the scheme's stability limit at design ``x`` (the run would grow
+    without bound), or None."""
+    lim = stability_limit(model, scheme, plan.t0, x)
+    if lim is None or plan.dt <= lim[0] * (1 + 1e-9):
+        return None
+    dt_max, crit, omega = lim
+    return (f"expected at most the stability limit of newmark with beta = {scheme.beta:g}, gamma = {scheme.gamma:g}: "
+            f"dt <= Omega_crit/omega_max = {crit:.4g}/{omega:.6g} rad/s = {dt_max:.4g} s (omega_max: the highest "
+            f"natural frequency of the model linearized at t0 at this design), found {plan.dt:g} s; past it the "
+            "solution grows without "
+            "bound. Reduce dt, or use beta = 1/4 (unconditionally stable)")

@@ -7,9 +7,9 @@ from typing import Callable
 import numpy as np
 
 from .case.load import Case
-from .errors import CaseError
+from .errors import CaseError, NonFiniteError
 from .march import RunResult, integrate
-from .runchecks import check_design, check_result, check_run_size
+from .runchecks import check_design, check_result, check_run_size, stability_problem
 
 
 def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
@@ -43,5 +43,10 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         if exc.source is not None:
             raise
         raise CaseError(exc.problems, case.source) from None
+    except NonFiniteError as exc:  # name the stability limit when the scheme's is the cause
+        why = stability_problem(case.model, case.scheme, plan, np.real(x))
+        if why is None:
+            raise
+        raise NonFiniteError(f"{exc}. Cause: integrator.dt: {why}") from None
     check_result(case, result)
     return result

@@ -396,3 +396,24 @@ def _quiet():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         yield
+
+
+def test_explicit_scheme_past_its_stability_limit_is_refused(runner, tmp_path):
+    # sdof: omega = sqrt(k/m) = 5 rad/s; central differences (beta = 0) are stable for dt <= 2/5 s
+    raw = make(lambda r: r["integrator"].update(beta=0.0, dt=0.5, t_end=5.0))
+    simulate_refused(runner, tmp_path, raw, "integrator.dt", "stability limit of newmark with beta = 0",
+                     "= 0.4 s", "found 0.5 s", "beta = 1/4")
+
+
+def test_runaway_growth_at_a_later_design_names_the_stability_limit():
+    # within the limit at x0 (0.4 s), past it at k = 200 (omega = 10 rad/s, limit 0.2 s)
+    raw = make(lambda r: r["integrator"].update(beta=0.0, dt=0.35, t_end=300.0))
+    raw["responses"] = raw["responses"][:1]
+    del raw["events"]                    # the crossing event would end the run first
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        case = load_case_text(yaml.safe_dump(raw), "explicit.yaml")
+        with pytest.raises(NonFiniteError) as info:
+            run_case(case, np.array([2.0, 0.0, 200.0]))
+    msg = str(info.value)
+    assert "stability limit" in msg and "= 0.2 s" in msg and "found 0.35 s" in msg, msg

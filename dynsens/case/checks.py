@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ProblemCollector
 from ..expressions import CONSTANTS, ExpressionError, compile_expression
-from ..runchecks import size_problem
+from ..runchecks import size_problem, stability_problem
 
 if TYPE_CHECKING:
     from ..march import RunPlan
@@ -58,15 +58,21 @@ def reserved_message(name: str) -> str:
             f"expressions would read {what} instead; rename it (e.g. '{name}_')")
 
 
-def check_start(design: Sequence[DesignVariable], table: ParameterTable, model: Model, plan: RunPlan,
-                pc: ProblemCollector) -> None:
-    """Every entry finite and in range at the start design; the run's size within reason."""
+def check_start(design: Sequence[DesignVariable], table: ParameterTable, model: Model, scheme: Any,
+                plan: RunPlan, pc: ProblemCollector) -> None:
+    """Every entry finite and in range at the start design; the run's size within reason; dt
+    within the stability limit of a conditionally stable scheme."""
     x0 = np.array([v.value for v in design], dtype=float)
+    n0 = len(pc.problems)
     for path, message in table.check(x0):
         pc.add(path, f"{message} (at the start design)")
     why = size_problem(model.traits, plan, len(design))
     if why:
         pc.add("integrator.dt", why)
+    if scheme is not None and len(pc.problems) == n0:
+        why = stability_problem(model, scheme, plan, x0)
+        if why:
+            pc.add("integrator.dt", why)
 
 
 def unused_design_variables(table: ParameterTable, responses: Any) -> tuple[str, ...]:

@@ -164,7 +164,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                                  declared, model, plan, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     if not pc.problems and model is not None and plan is not None:
-        check_start(design, table, model, plan, pc)
+        check_start(design, table, model, scheme, plan, pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
