@@ -7,7 +7,7 @@ input either loads or is refused with a DynsensError (never another exception, n
 hang), and a case that loads runs a few steps to either a DynsensError or a result whose
 every response value and gradient is finite.
 
-Bounded for CI: a fixed number of examples per test (FUZZ_EXAMPLES, default 150) and a
+Bounded for CI: a fixed number of examples per test (FUZZ_EXAMPLES, default 200) and a
 deadline per example; the README's reliability section records the count and the time.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 CASE_NAMES = ("sdof_step", "duffing_chain", "pendulum_3d", "four_bar", "slider_crank", "truss_impact")
 TEXTS = {n: (REPO / "cases" / f"{n}.yaml").read_text(encoding="utf-8") for n in CASE_NAMES}
 RAWS = {n: yaml.safe_load(t) for n, t in TEXTS.items()}
-EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "150"))
+EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "200"))
 # no per-example deadline from hypothesis (the first run of a model type compiles kernels);
 # a hang is caught by the alarm of _time_limit instead
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
