@@ -417,3 +417,24 @@ def test_runaway_growth_at_a_later_design_names_the_stability_limit():
             run_case(case, np.array([2.0, 0.0, 200.0]))
     msg = str(info.value)
     assert "stability limit" in msg and "= 0.2 s" in msg and "found 0.35 s" in msg, msg
+
+
+# ---------------------------------------------------------------- check-gradients: the partials' step
+def test_partials_audit_shows_the_plateau_and_flags_a_variable_without_one(runner, tmp_path):
+    from dynsens.partials_audit import audit_partials
+    # mass = m + 1e12: a relative perturbation of m changes the entry by less than its round-off
+    # at every step (no plateau; k's change of the residual drowns in the round-off of M q'' too);
+    # c is well scaled and linear: a plateau over most of the sweep
+    raw = make(lambda r: r["model"]["elements"][0].__setitem__("mass", "m + 1e12"))
+    raw["integrator"]["t_end"] = 0.05
+    del raw["events"]
+    case = load_case_text(yaml.safe_dump(raw), "audit.yaml")
+    a = audit_partials(case)
+    assert "m" in a.flagged() and "c" not in a.flagged(), a.errors
+    assert a.plateau(1)[0] == 1e-2 and a.plateau(1)[1] <= 1e-10, a.errors
+    res = runner.invoke(cli, ["check-gradients", str(write_case(tmp_path, raw)), "--audit-partials",
+                              "--workers", "1", "--steps", "1e-6", "-o", str(tmp_path / "rep")])
+    assert res.exit_code == 0, res.output
+    assert "Partials audit" in res.output and "- m: NO PLATEAU" in res.output
+    import json
+    assert "m" in json.loads((tmp_path / "rep.json").read_text())["partials_audit"]["flagged"]

@@ -11,6 +11,8 @@ from ..case.load import load_case
 from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
 from .main import cli
 from ..io.paths import atomic_write_text, check_output_path
+from ..partials_audit import audit_json, audit_markdown
+from ..partials_audit import audit_partials as audit_partials_of
 from .options import case_argument, overwrite_option, parse_float_list, set_option
 
 
@@ -25,10 +27,13 @@ from .options import case_argument, overwrite_option, parse_float_list, set_opti
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
 @click.option("--workers", type=int, default=None, help="Worker processes for the FD runs (default: 2).")
+@click.option("--audit-partials", is_flag=True,
+              help="Also sweep the forward partials' own step (1e-2 ... 1e-12) against complex-step partials "
+                   "and flag design variables without a plateau.")
 @overwrite_option
 @set_option
 def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: float | None,
-                        report: str | None, workers: int | None, overwrite: bool,
+                        report: str | None, workers: int | None, audit_partials: bool, overwrite: bool,
                         overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
     paths: list[Path] = []
@@ -39,10 +44,15 @@ def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: f
     case = load_case(case_file, overrides)
     rep = check_gradients(case, steps, scheme, workers=workers)
     md = to_markdown(rep)
+    data = to_json(rep)
+    if audit_partials:
+        audit = audit_partials_of(case)
+        md += "\n\n" + audit_markdown(audit)
+        data["partials_audit"] = audit_json(audit)
     click.echo(md)
     if paths:
         atomic_write_text(paths[0], md, overwrite)
-        atomic_write_text(paths[1], json.dumps(to_json(rep), indent=2), overwrite)
+        atomic_write_text(paths[1], json.dumps(data, indent=2), overwrite)
         click.echo(f"written: {paths[0]}, {paths[1]}")
     if rtol is not None and not rep.passes(rtol):
         worst = {n: rep.best_rel_diff(n) for n in rep.responses}
