@@ -438,3 +438,19 @@ def test_partials_audit_shows_the_plateau_and_flags_a_variable_without_one(runne
     assert "Partials audit" in res.output and "- m: NO PLATEAU" in res.output
     import json
     assert "m" in json.loads((tmp_path / "rep.json").read_text())["partials_audit"]["flagged"]
+
+
+def test_a_locking_mechanism_is_not_told_to_reduce_the_time_step():
+    # the driver asks the link's COM for y = 0.6 m, out of its reach (0.5 m): the mechanism locks
+    import sys
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_multibody_singular import CASE as LINK
+    from dynsens.errors import ConvergenceError
+    case = load_case_text(LINK.replace("AMP", "0.6"), "lock.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ConvergenceError) as info:
+            run_case(case)
+    msg = str(info.value)
+    assert "the mechanism locks here" in msg and "joints O, lift" in msg, msg
+    assert "reduce the time step" not in msg, msg

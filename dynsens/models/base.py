@@ -383,8 +383,9 @@ class Model(ABC):
     def check_state(self, t: float, s: StepState, params: Any) -> None:
         """Raise ModelError when the state leaves the model's range of validity."""
 
-    def diagnose_singular(self, t: float, s: StepState, params: Any) -> str:
-        """Explain a singular iteration matrix at (t, s), e.g. which joints lost rank ('' if unknown)."""
+    def diagnose_singular(self, t: float, s: StepState, params: Any, rel_tol: float = 1e-9) -> str:
+        """Explain a singular iteration matrix at (t, s), e.g. which joints lost rank to ``rel_tol``
+        relative to the largest singular value ('' if unknown)."""
         return ""
 
     def monitors(self, t: float, s: StepState, params: Any) -> dict[str, float]:
