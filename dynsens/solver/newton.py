@@ -213,7 +213,16 @@ class StepSolver:
             return (f"{head}: the solution diverges at {labels[k]} (|q| = {q[k]:.3g}); reduce the time "
                     "step, check the stiffness signs and the load magnitudes")
         k = int(np.flatnonzero(~np.isfinite(R))[0])
-        where = labels[k] if k < len(labels) else f"equation {k}"
+        n_q, n_lam = self.model.traits.n_q, self.model.traits.n_lam
+        owners = list(getattr(self.model, "eq_owner", []))    # constraint rows' joints, where known
+        if k < len(labels):
+            where = labels[k]
+        elif n_q <= k < n_q + n_lam and k - n_q < len(owners):
+            where = f"constraint {owners[k - n_q]}"
+        elif k >= n_q + n_lam:
+            where = f"first-order state p[{k - n_q - n_lam}]"
+        else:
+            where = f"equation {k}"
         return (f"{head}: first in the equation of {where}; check the parameters of the elements "
                 "acting there, the initial conditions and the time step")
 
