@@ -10,6 +10,7 @@ from .case.load import Case
 from .errors import CaseError, NonFiniteError
 from .march import RunResult, integrate
 from .runchecks import check_design, check_result, check_run_size, stability_problem
+from .sensitivity_drift import sensitivity_constraint_residual
 
 
 def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | None = None,
@@ -49,4 +50,8 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
             raise
         raise NonFiniteError(f"{exc}. Cause: integrator.dt: {why}") from None
     check_result(case, result)
+    if plan.sensitivity_history and result.sensitivity_history:
+        drift = sensitivity_constraint_residual(case.model, result)
+        if drift:
+            result.monitors.update(drift)
     return result

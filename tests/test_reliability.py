@@ -454,3 +454,38 @@ def test_a_locking_mechanism_is_not_told_to_reduce_the_time_step():
     msg = str(info.value)
     assert "the mechanism locks here" in msg and "joints O, lift" in msg, msg
     assert "reduce the time step" not in msg, msg
+
+
+# ---------------------------------------------------------------- mechanisms: the sensitivities' constraints
+@pytest.mark.parametrize("name", ["pendulum_3d", "slider_crank"])
+def test_sensitivity_constraint_residual_is_the_derivative_of_the_drift(name):
+    """J_Φ ∇q_j + ∂Φ/∂x_j per step equals d/dx_j of Φ(q_k(x), x) along the computed trajectory,
+    taken here by complex step of the whole run (the run's discrete drift, differentiated)."""
+    from dynsens.models.base import StepState
+    sets = ["output.sensitivity_history=true", "output.history=[q,qd,qdd]", "integrator.t_end=0.2",
+            "sensitivity.partials=complex"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        case = load_case(CASES / f"{name}.yaml", sets)
+        res = run_case(case)
+    mon = res.monitors
+    assert mon["sensitivity_constraint_position"].shape == res.time.shape
+    model, m = case.model, len(case.design)
+    h = 1e-30
+    pos = np.zeros(res.time.size)
+    vel = np.zeros(res.time.size)
+    for j in range(m):
+        xj = case.x0 + 1j * h * np.eye(m)[j]
+        rj = run_case(case, xj, history=("q", "qd", "qdd"))
+        pj = model.parameters(xj)
+        for k, t in enumerate(rj.time[:res.time.size]):
+            z = np.zeros(0)
+            s = StepState(rj.history["q"][k], rj.history["qd"][k], rj.history["qdd"][k], z, z, z)
+            d = np.imag(model.constraint_levels(t, model.kinematics(s, pj))[0][0]) / h
+            pos[k] = max(pos[k], np.linalg.norm(d[:, 0]))
+            vel[k] = max(vel[k], np.linalg.norm(d[:, 1]))
+    scale = max(pos.max(), 1e-300)
+    np.testing.assert_allclose(mon["sensitivity_constraint_position"], pos, rtol=1e-6, atol=1e-9 * scale)
+    np.testing.assert_allclose(mon["sensitivity_constraint_velocity"], vel, rtol=1e-6, atol=1e-9 * max(vel.max(), 1e-300))
+    # reported by simulate, and small: of the order of the state's own drift
+    assert mon["sensitivity_constraint_position"].max() < 1e-3 * max(mon["sensitivity_constraint_scale"].max(), 1)

@@ -69,6 +69,13 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
         result = run_case(case, sensitivities=False if no_sensitivities else None, progress=progress)
     write_result(output, result, case, overwrite=overwrite)
     click.echo(format_summary(result, case.design_names))
+    if "sensitivity_constraint_position" in result.monitors:
+        mon = result.monitors
+        click.echo(f"constraint residual of the sensitivities (J_Phi grad q + dPhi/dx): position max "
+                   f"{mon['sensitivity_constraint_position'].max():.3g}, velocity max "
+                   f"{mon['sensitivity_constraint_velocity'].max():.3g} (scale max |J_Phi grad q| "
+                   f"{mon['sensitivity_constraint_scale'].max():.3g}); state drift max "
+                   f"{mon['constraint_position'].max():.3g}")
     zero = zero_gradient_columns(result, case.design_names)
     if zero:
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "
