@@ -12,11 +12,11 @@ deadline per example; the README's reliability section records the count and the
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import os
-import warnings
-import contextlib
 import signal
+import warnings
 from pathlib import Path
 from typing import Any
 

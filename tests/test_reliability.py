@@ -445,6 +445,7 @@ def test_a_locking_mechanism_is_not_told_to_reduce_the_time_step():
     import sys
     sys.path.insert(0, str(Path(__file__).parent))
     from test_multibody_singular import CASE as LINK
+
     from dynsens.errors import ConvergenceError
     case = load_case_text(LINK.replace("AMP", "0.6"), "lock.yaml")
     with warnings.catch_warnings():
@@ -486,6 +487,7 @@ def test_sensitivity_constraint_residual_is_the_derivative_of_the_drift(name):
             vel[k] = max(vel[k], np.linalg.norm(d[:, 1]))
     scale = max(pos.max(), 1e-300)
     np.testing.assert_allclose(mon["sensitivity_constraint_position"], pos, rtol=1e-6, atol=1e-9 * scale)
-    np.testing.assert_allclose(mon["sensitivity_constraint_velocity"], vel, rtol=1e-6, atol=1e-9 * max(vel.max(), 1e-300))
+    np.testing.assert_allclose(mon["sensitivity_constraint_velocity"], vel, rtol=1e-6,
+                               atol=1e-9 * max(vel.max(), 1e-300))
     # reported by simulate, and small: of the order of the state's own drift
     assert mon["sensitivity_constraint_position"].max() < 1e-3 * max(mon["sensitivity_constraint_scale"].max(), 1)

@@ -28,9 +28,9 @@ from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Respons
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
+from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
-from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .yamltext import parse_yaml, read_case_text
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",

@@ -9,10 +9,10 @@ import click
 
 from ..case.load import load_case
 from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
-from .main import cli
 from ..io.paths import atomic_write_text, check_output_path
 from ..partials_audit import audit_json, audit_markdown
 from ..partials_audit import audit_partials as audit_partials_of
+from .main import cli
 from .options import case_argument, overwrite_option, parse_float_list, set_option
 
 

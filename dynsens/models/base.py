@@ -255,14 +255,13 @@ class ParameterTable:
             except ExpressionError as exc:
                 out.append((self._paths[i], str(exc)))
                 bad.add(i)
-        texts = {i: e.text for i, e in self._exprs}
+        exprs = dict(self._exprs)
         for i, rule, path in self._rules:
             v = values[i]
             if i not in bad and (v <= 0 if rule == "positive" else v < 0):
-                where = "".join(f", {n} = {env[n]:.6g}" for n in sorted(
-                    next(e.symbols for k, e in self._exprs if k == i)))
+                where = "".join(f", {n} = {env[n]:.6g}" for n in sorted(exprs[i].symbols))
                 out.append((path, f"expected {'> 0' if rule == 'positive' else '>= 0'}, found {v:.6g} "
-                                  f"(expression '{texts[i]}'{where})"))
+                                  f"(expression '{exprs[i].text}'{where})"))
         for idx, path, what in self._nonzero:
             if not bad.intersection(idx) and not np.any(values[list(idx)]):
                 out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
