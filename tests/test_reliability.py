@@ -491,3 +491,12 @@ def test_sensitivity_constraint_residual_is_the_derivative_of_the_drift(name):
                                atol=1e-9 * max(vel.max(), 1e-300))
     # reported by simulate, and small: of the order of the state's own drift
     assert mon["sensitivity_constraint_position"].max() < 1e-3 * max(mon["sensitivity_constraint_scale"].max(), 1)
+
+
+def test_optimize_plots_not_overwritten(runner, tmp_path):
+    plots = tmp_path / "plots"
+    plots.mkdir()
+    (plots / "opt_history.png").write_bytes(b"old")
+    refused(runner, ["optimize", str(CASES / "truss_lightweight.yaml"), "-o", str(tmp_path / "opt.h5"),
+                     "--plots", str(plots)], "opt_history.png exists", "--overwrite")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["opt_history.png", "plots"]
