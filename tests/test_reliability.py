@@ -500,3 +500,22 @@ def test_optimize_plots_not_overwritten(runner, tmp_path):
     refused(runner, ["optimize", str(CASES / "truss_lightweight.yaml"), "-o", str(tmp_path / "opt.h5"),
                      "--plots", str(plots)], "opt_history.png exists", "--overwrite")
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["opt_history.png", "plots"]
+
+
+def test_redundant_joints_found_at_run_time_name_the_case_file(runner, tmp_path):
+    raw = yaml.safe_load((CASES / "four_bar.yaml").read_text())
+    raw["model"]["joints"][3]["type"] = "revolute"           # all axes parallel: over-constrained in 3D
+    simulate_refused(runner, tmp_path, raw, "invalid case", "case.yaml", "redundant", "O4.")
+
+
+def test_read_only_output_folder_is_refused_before_the_run(runner, tmp_path, monkeypatch):
+    # (the tests may run as root, for whom every folder is writable: the permission is simulated)
+    import dynsens.io.paths as paths
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access = paths.os.access
+    monkeypatch.setattr(paths.os, "access", lambda p, mode: False if Path(p) == ro else real_access(p, mode))
+    case = write_case(tmp_path, make())
+    refused(runner, ["simulate", str(case), "-o", str(ro / "r.h5")], "expected a folder you may write",
+            "ro read-only for you")
+    assert list(ro.iterdir()) == []
