@@ -112,6 +112,28 @@ class Expression:
                                   "a finite number was expected")
         return value
 
+    def derivative_problem(self, env: Mapping[str, float]) -> str | None:
+        """Why the expression has no finite derivative at the real values ``env``, or None.
+
+        The complex-step derivative of a smooth expression does not depend on the step; at a
+        singular point (``sqrt(c)`` at c = 0) it grows like a power of 1/step.  Two steps,
+        1e-30 and 1e-20, tell the two apart."""
+        for name in sorted(self.symbols):
+            d = []
+            for h in (1e-30, 1e-20):
+                pert = dict(env)
+                pert[name] = env[name] + 1j * h
+                try:
+                    with np.errstate(all="ignore"):
+                        d.append(float(np.imag(self._fn(pert))) / h)
+                except (ArithmeticError, ValueError, TypeError):
+                    d.append(float("inf"))
+            if not all(np.isfinite(d)) or abs(d[0] - d[1]) > 1e-6 * max(abs(d[0]), abs(d[1]), 1.0):
+                return (f"expected an expression with a finite derivative, found that of '{self.text}' with "
+                        f"respect to {name} is not finite{self._at(env)} (complex-step slopes {d[0]:.3g} and "
+                        f"{d[1]:.3g} for steps 1e-30 and 1e-20): the gradient would be meaningless there")
+        return None
+
     def _at(self, env: Mapping[str, Number]) -> str:
         if not self.symbols:
             return ""

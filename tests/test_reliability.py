@@ -519,3 +519,17 @@ def test_read_only_output_folder_is_refused_before_the_run(runner, tmp_path, mon
     refused(runner, ["simulate", str(case), "-o", str(ro / "r.h5")], "expected a folder you may write",
             "ro read-only for you")
     assert list(ro.iterdir()) == []
+
+
+def test_infinite_derivative_at_the_design_is_refused(runner, tmp_path):
+    # c = 0 at x0 (inside its bounds [0, 5]): sqrt(c) has a finite value but an infinite slope
+    raw = make(lambda r: (r["design"]["variables"][1].__setitem__("value", 0.0),
+                          r["model"]["elements"][2].__setitem__("c", "sqrt(c)")))
+    simulate_refused(runner, tmp_path, raw, "model.elements[2].c", "expected an expression with a finite derivative",
+                     "'sqrt(c)' with respect to c is not finite at c = 0", "start design")
+    # at a design where it is smooth the same case runs, and the optimizer's step back to c = 0 fails
+    raw["design"]["variables"][1]["value"] = 0.64
+    case = load_case_text(yaml.safe_dump(raw), "sqrt.yaml")
+    assert np.all(np.isfinite(run_case(case).responses["q_end"].gradient))
+    with pytest.raises(DesignError, match="finite derivative"):
+        run_case(case, np.array([2.0, 0.0, 50.0]))

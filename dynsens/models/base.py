@@ -255,6 +255,12 @@ class ParameterTable:
             except ExpressionError as exc:
                 out.append((self._paths[i], str(exc)))
                 bad.add(i)
+        for i, expr in self._exprs:
+            if expr.symbols and i not in bad:
+                why = expr.derivative_problem(env)
+                if why:
+                    out.append((self._paths[i], why))
+                    bad.add(i)
         exprs = dict(self._exprs)
         for i, rule, path in self._rules:
             v = values[i]
