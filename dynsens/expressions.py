@@ -53,6 +53,8 @@ FUNCTIONS: dict[str, Callable[..., Number]] = {
     "deg": lambda a: a * (180.0 / math.pi), "rad": lambda a: a * (math.pi / 180.0),
 }
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
+# number of arguments of each function (0: one or more); the rest take one
+_ARITY = {"atan2": 2, "min": 0, "max": 0}
 #: names a case may not give to its own variables, responses or events (an expression
 #: would read the constant or function instead)
 RESERVED_NAMES: frozenset[str] = frozenset(CONSTANTS) | frozenset(FUNCTIONS)
@@ -102,13 +104,13 @@ class Expression:
             with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
                 value = self._fn(env)
         except (ArithmeticError, ValueError, TypeError) as exc:
-            raise ExpressionError(f"expression '{self.text}' cannot be evaluated{self._at(env)}: "
+            raise ExpressionError(f"expression '{_short(self.text)}' cannot be evaluated{self._at(env)}: "
                                   f"{_describe(exc)}") from None
         if np.iscomplexobj(value) and not any(np.iscomplexobj(env[n]) for n in self.symbols):
-            raise ExpressionError(f"expression '{self.text}' gives a complex value{self._at(env)} "
+            raise ExpressionError(f"expression '{_short(self.text)}' gives a complex value{self._at(env)} "
                                   f"(found {complex(np.ravel(value)[0])}): a real number was expected")
         if not np.all(np.isfinite(value)):
-            raise ExpressionError(f"expression '{self.text}' gives {np.real(value)!r}{self._at(env)}: "
+            raise ExpressionError(f"expression '{_short(self.text)}' gives {np.real(value)!r}{self._at(env)}: "
                                   "a finite number was expected")
         return value
 
@@ -129,7 +131,7 @@ class Expression:
                 except (ArithmeticError, ValueError, TypeError):
                     d.append(float("inf"))
             if not all(np.isfinite(d)) or abs(d[0] - d[1]) > 1e-6 * max(abs(d[0]), abs(d[1]), 1.0):
-                return (f"expected an expression with a finite derivative, found that of '{self.text}' with "
+                return (f"expected an expression with a finite derivative, found that of '{_short(self.text)}' with "
                         f"respect to {name} is not finite{self._at(env)} (complex-step slopes {d[0]:.3g} and "
                         f"{d[1]:.3g} for steps 1e-30 and 1e-20): the gradient would be meaningless there")
         return None
@@ -188,7 +190,11 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
         return chain
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
             and not isinstance(node.value, bool):
-        value = float(node.value)
+        try:
+            value = float(node.value)
+        except OverflowError:
+            raise ExpressionError(f"expression '{_short(text)}' has a number too large for a floating-point "
+                                  "value") from None
         return lambda env: value
     if isinstance(node, ast.Name):
         name = node.id
@@ -219,6 +225,12 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
             raise ExpressionError(
                 f"expression '{text}' calls '{fname}', which is not allowed "
                 f"(allowed: {', '.join(sorted(FUNCTIONS))})")
+        want = _ARITY.get(fname, 1)
+        if (len(node.args) != want) if want else not node.args:
+            raise ExpressionError(
+                f"expression '{_short(text)}': {fname}() takes "
+                f"{f'{want} argument' + ('s' if want > 1 else '') if want else 'one or more arguments'}, "
+                f"found {len(node.args)}")
         fn = FUNCTIONS[fname]
         args = [_compile_node(a, names, known, text, depth + 1) for a in node.args]
         return lambda env: fn(*(a(env) for a in args))

@@ -47,7 +47,8 @@ FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
 HOSTILE = ["1/0", "9**9**9", "(-8)**(1/3)", "log(-1)", "sqrt(-1)", "__import__('os')", "1e308*10",
            "nan", "inf", "-inf", "m.real", "lambda: 0", "[1, 2]", "1 if 1 else 0", "(" * 300 + "1" + ")" * 300,
            "sin(" * 120 + "1" + ")" * 120, "+".join(["1"] * 999), "x" * 3000, "pi", "e", "exp(1000)",
-           "abs(-0.0)", "0*0", "1e-320", "'text'", "a=1", "", " ", "∞", "\x00", "2**-2000"]
+           "abs(-0.0)", "0*0", "1e-320", "'text'", "a=1", "", " ", "∞", "\x00", "2**-2000", "1" * 400,
+           "sin(1, 2)", "atan2(1)", "min()", "sqrt(0)", "0**-1", "(-1)**0.5", "1e308+1e308"]
 NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**30, 10**30),
                     st.sampled_from([0, -0.0, 1e-308, 5e-324, 1e308, -1e308, 2**63, -1]))
 LEAVES = st.one_of(NUMBERS, st.sampled_from(HOSTILE), st.text(max_size=20), st.booleans(), st.none(),

@@ -533,3 +533,11 @@ def test_infinite_derivative_at_the_design_is_refused(runner, tmp_path):
     assert np.all(np.isfinite(run_case(case).responses["q_end"].gradient))
     with pytest.raises(DesignError, match="finite derivative"):
         run_case(case, np.array([2.0, 0.0, 50.0]))
+
+
+@pytest.mark.parametrize("value, fragment", [("1" * 400, "number too large"),
+                                             ("sin(m, 2)", "sin() takes 1 argument, found 2"),
+                                             ("atan2(m)", "atan2() takes 2 arguments, found 1")])
+def test_more_expression_errors_at_load(runner, tmp_path, value, fragment):
+    raw = make(lambda r: r["model"]["elements"][0].__setitem__("mass", value))
+    simulate_refused(runner, tmp_path, raw, "model.elements[0].mass", fragment)
