@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from .case.load import Case, load_case_dict
+from .io.paths import atomic_path, atomic_write_text, safe_stem
 from .simulation import run_case
 
 log = logging.getLogger(__name__)
@@ -150,14 +151,24 @@ def observed_order(rows: list[Row], response: str, method: str = "ddm-complex", 
     return float(np.polyfit(d, e, 1)[0])
 
 
-def write_report(case: Case, rows: list[Row], outdir: str | Path) -> list[Path]:
-    """Markdown and CSV tables and two log-log plots per response; returns the files written."""
+def report_files(case: Case, outdir: str | Path) -> list[Path]:
+    """The files :func:`write_report` writes for ``case`` (named from the case name, kept inside
+    ``outdir`` whatever the name holds): CSV, markdown, one PNG per response."""
+    out, stem = Path(outdir), safe_stem(case.name)
+    return ([out / f"{stem}_work_precision.csv", out / f"{stem}_work_precision.md"]
+            + [out / f"{stem}_{safe_stem(n)}_work_precision.png" for n in case.response_names])
+
+
+def write_report(case: Case, rows: list[Row], outdir: str | Path, overwrite: bool = True) -> list[Path]:
+    """Markdown and CSV tables and two log-log plots per response; returns the files written
+    (each atomically; an existing file is replaced only with ``overwrite``)."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     names = list(rows[0].values)
     files = []
-    csv_path = out / f"{case.name}_work_precision.csv"
-    with open(csv_path, "w", newline="") as fh:
+    planned = report_files(case, out)
+    csv_path = planned[0]
+    with atomic_path(csv_path, overwrite) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["dt", "method", "wall_time_s", "response", "value", "value_rel_error", "gradient_rel_error"])
         for r in rows:
@@ -177,8 +188,7 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path) -> list[Path]:
             lines.append(f"| {r.dt:g} | {r.method} | {r.wall_time:.3f} | {r.value_error[n]:.2e} | "
                          f"{r.gradient_error[n]:.2e} |")
         lines.append("")
-    md = out / f"{case.name}_work_precision.md"
-    md.write_text("\n".join(lines), encoding="utf-8")
+    md = atomic_write_text(planned[1], "\n".join(lines), overwrite)
     files.append(md)
     import matplotlib
     import matplotlib.ticker
@@ -201,8 +211,9 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path) -> list[Path]:
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axes[0].legend(fontsize=7)
         fig.tight_layout()
-        png = out / f"{case.name}_{n}_work_precision.png"
-        fig.savefig(png, dpi=110)
+        png = out / f"{safe_stem(case.name)}_{safe_stem(n)}_work_precision.png"
+        with atomic_path(png, overwrite) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
         plt.close(fig)
         files.append(png)
     return files

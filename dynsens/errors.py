@@ -69,6 +69,15 @@ class ConvergenceError(DynsensError, RuntimeError):
         )
 
 
+class DesignError(ModelError):
+    """A design at which an entry of the case has no finite value or breaks its range
+    (e.g. a mass expression that is negative there): a failed evaluation, never a result."""
+
+
+class RunSizeError(DynsensError, MemoryError):
+    """A run would store more than the machine's memory allows, or take a step count beyond reason."""
+
+
 class NonFiniteError(DynsensError, FloatingPointError):
     """NaN or Inf appeared in the state; says where it first appeared."""
 

@@ -53,6 +53,14 @@ FUNCTIONS: dict[str, Callable[..., Number]] = {
     "deg": lambda a: a * (180.0 / math.pi), "rad": lambda a: a * (math.pi / 180.0),
 }
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
+# number of arguments of each function (0: one or more); the rest take one
+_ARITY = {"atan2": 2, "min": 0, "max": 0}
+#: names a case may not give to its own variables, responses or events (an expression
+#: would read the constant or function instead)
+RESERVED_NAMES: frozenset[str] = frozenset(CONSTANTS) | frozenset(FUNCTIONS)
+#: deepest nesting of parentheses, calls and powers (chains of + - and * / are flat)
+MAX_DEPTH = 100
+MAX_LENGTH = 2000
 
 _BINOPS: dict[type, Callable[[Number, Number], Number]] = {
     ast.Add: lambda a, b: a + b,
@@ -64,7 +72,17 @@ _BINOPS: dict[type, Callable[[Number, Number], Number]] = {
 
 
 class ExpressionError(DynsensError, ValueError):
-    """An expression could not be parsed or names something unknown."""
+    """An expression could not be parsed, names something unknown, or has no finite value."""
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, ZeroDivisionError) or "divide" in str(exc):
+        return "division by zero"
+    if isinstance(exc, OverflowError) or "overflow" in str(exc).lower():
+        return "the result overflows (too large for a floating-point number)"
+    if "invalid" in str(exc) or isinstance(exc, ValueError):
+        return f"a value outside a function's domain ({exc})"
+    return str(exc)
 
 
 @dataclass(frozen=True)
@@ -76,8 +94,56 @@ class Expression:
     _fn: Callable[[Mapping[str, Number]], Number]
 
     def evaluate(self, env: Mapping[str, Number]) -> Number:
-        """Value of the expression with the symbol values in ``env`` (units as the symbols)."""
-        return self._fn(env)
+        """Value of the expression with the symbol values in ``env`` (units as the symbols).
+
+        Raises ExpressionError (naming the expression and the values) for a division by
+        zero, an overflow, a value outside a function's domain (e.g. ``log(-1)``), a complex
+        result from real values, or any other non-finite result.
+        """
+        try:
+            with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
+                value = self._fn(env)
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            raise ExpressionError(f"expression '{_short(self.text)}' cannot be evaluated{self._at(env)}: "
+                                  f"{_describe(exc)}") from None
+        parts = value.parts() if hasattr(value, "parts") else (value,)   # a Jet: value and its time derivatives
+        if any(np.iscomplexobj(v) for v in parts) and not any(np.iscomplexobj(env[n]) for n in self.symbols):
+            raise ExpressionError(f"expression '{_short(self.text)}' gives a complex value{self._at(env)} "
+                                  f"(found {complex(np.ravel(parts[0])[0])}): a real number was expected")
+        if not all(np.all(np.isfinite(v)) for v in parts):
+            raise ExpressionError(f"expression '{_short(self.text)}' gives {np.real(parts[0])!r}{self._at(env)}: "
+                                  "a finite number was expected")
+        return value
+
+    def derivative_problem(self, env: Mapping[str, float]) -> str | None:
+        """Why the expression has no finite derivative at the real values ``env``, or None.
+
+        The complex-step derivative of a smooth expression does not depend on the step; at a
+        singular point (``sqrt(c)`` at c = 0) it grows like a power of 1/step.  Two steps,
+        1e-30 and 1e-20, tell the two apart."""
+        for name in sorted(self.symbols):
+            d = []
+            for h in (1e-30, 1e-20):
+                pert: dict[str, Any] = dict(env)
+                pert[name] = env[name] + 1j * h
+                try:
+                    with np.errstate(all="ignore"):
+                        d.append(float(np.imag(self._fn(pert))) / h)
+                except (ArithmeticError, ValueError, TypeError):
+                    d.append(float("inf"))
+            if not all(np.isfinite(d)) or abs(d[0] - d[1]) > 1e-6 * max(abs(d[0]), abs(d[1]), 1.0):
+                return (f"expected an expression with a finite derivative, found that of '{_short(self.text)}' with "
+                        f"respect to {name} is not finite{self._at(env)} (complex-step slopes {d[0]:.3g} and "
+                        f"{d[1]:.3g} for steps 1e-30 and 1e-20): the gradient would be meaningless there")
+        return None
+
+    def _at(self, env: Mapping[str, Number]) -> str:
+        if not self.symbols:
+            return ""
+        vals = ", ".join(f"{n} = {np.real(env[n]):.6g}" if isinstance(env[n], (int, float, complex, np.number))
+                         else f"{n} = {env[n]!r}"
+                         for n in sorted(self.symbols))
+        return f" at {vals}"
 
     @property
     def is_constant(self) -> bool:
@@ -85,18 +151,57 @@ class Expression:
         return not self.symbols
 
 
+_CHAINS = ((ast.Add, ast.Sub), (ast.Mult, ast.Div))
+
+
+def _chain(node: ast.BinOp) -> tuple[list[ast.AST], list[type]]:
+    """Operands and operators of a left-nested chain ``a + b - c + ...`` (or ``* /``)."""
+    family = next(f for f in _CHAINS if isinstance(node.op, f))
+    ops: list[type] = []
+    operands: list[ast.AST] = []
+    cur: ast.AST = node
+    while isinstance(cur, ast.BinOp) and isinstance(cur.op, family):
+        ops.append(type(cur.op))
+        operands.append(cur.right)
+        cur = cur.left
+    operands.append(cur)
+    return operands[::-1], ops[::-1]
+
+
 def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
-                  text: str, functions: Mapping[str, Callable[..., Number]] | None = None
+                  text: str, depth: int = 0, functions: Mapping[str, Callable[..., Number]] | None = None
                   ) -> Callable[[Mapping[str, Number]], Number]:
     table = FUNCTIONS if functions is None else functions
 
-    def sub(n: ast.AST) -> Callable[[Mapping[str, Number]], Number]:
-        return _compile_node(n, names, known, text, functions)
+    def sub(n: ast.AST, deeper: int = 1) -> Callable[[Mapping[str, Number]], Number]:
+        return _compile_node(n, names, known, text, depth + deeper, functions)
+    if depth > MAX_DEPTH:
+        raise ExpressionError(f"expression '{_short(text)}' nests parentheses, calls or powers more than "
+                              f"{MAX_DEPTH} levels deep: split it into simpler terms")
     if isinstance(node, ast.Expression):
-        return sub(node.body)
+        return sub(node.body, 0)
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        # a long sum (or product) is evaluated in a loop, not by one nested call per term
+        operands, ops = _chain(node)
+        first, *rest = [sub(o) for o in operands]
+        if not rest:
+            return first
+        fns = [_BINOPS[o] for o in ops]
+        pairs = list(zip(fns, rest))
+
+        def chain(env: Mapping[str, Number]) -> Number:
+            acc = first(env)
+            for op, term in pairs:
+                acc = op(acc, term(env))
+            return acc
+        return chain
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
             and not isinstance(node.value, bool):
-        value = float(node.value)
+        try:
+            value = float(node.value)
+        except OverflowError:
+            raise ExpressionError(f"expression '{_short(text)}' has a number too large for a floating-point "
+                                  "value") from None
         return lambda env: value
     if isinstance(node, ast.Name):
         name = node.id
@@ -127,6 +232,12 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
             raise ExpressionError(
                 f"expression '{text}' calls '{fname}', which is not allowed "
                 f"(allowed: {', '.join(sorted(table))})")
+        want = _ARITY.get(fname, 1)
+        if (len(node.args) != want) if want else not node.args:
+            raise ExpressionError(
+                f"expression '{_short(text)}': {fname}() takes "
+                f"{f'{want} argument' + ('s' if want > 1 else '') if want else 'one or more arguments'}, "
+                f"found {len(node.args)}")
         fn = table[fname]
         args = [sub(a) for a in node.args]
         return lambda env: fn(*(a(env) for a in args))
@@ -150,12 +261,19 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
     ------
     ExpressionError : syntax errors, disallowed constructs, unknown symbols.
     """
-    if len(text) > 2000:
-        raise ExpressionError("expression longer than 2000 characters")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expected an expression of at most {MAX_LENGTH} characters, found {len(text)}")
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        names: set[str] = set()
+        fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text, 0, functions)
     except SyntaxError as exc:
-        raise ExpressionError(f"expression '{text}' is not valid: {exc.msg}") from None
-    names: set[str] = set()
-    fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text, functions)
+        raise ExpressionError(f"expression '{_short(text)}' is not valid: {exc.msg}") from None
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"expression '{_short(text)}' nests too deeply: split it into simpler terms") \
+            from None
     return Expression(text, frozenset(names), fn)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= 80 else text[:60] + " ... " + text[-15:]

@@ -30,6 +30,10 @@ class Jet:
     def __init__(self, v: Number, d: Number = 0.0, dd: Number = 0.0):
         self.v, self.d, self.dd = v, d, dd
 
+    def parts(self) -> tuple[Number, Number, Number]:
+        """(value, first, second) time derivative, for checks that look at each."""
+        return self.v, self.d, self.dd
+
     # -------------------------------------------------------------- arithmetic
     def __add__(self, o: Any) -> "Jet":
         o = lift(o)

@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .expressions import Expression
+from .errors import NonFiniteError
+from .expressions import Expression, ExpressionError
 from .models.base import Output, StepState
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -322,7 +323,10 @@ class Combination(Response):
                 env[sym] = rv.value
             else:
                 env[sym] = ctx.design[sym]
-        value = self.expr.evaluate(env)
+        try:
+            value = self.expr.evaluate(env)
+        except ExpressionError as exc:   # e.g. log of a negative response: a failed run, named
+            raise NonFiniteError(f"response '{self.name}': {exc}") from None
         # a combination of a fixed-time gradient is one too (e.g. g2_fixed_time = stroke_fixed_time/500 − 1)
         kind = "fixed_time" if any(ctx.values[s].kind == "fixed_time" for s in self.expr.symbols
                                    if s in ctx.values) else ""

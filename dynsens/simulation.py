@@ -8,8 +8,11 @@ from typing import Callable
 import numpy as np
 
 from .case.load import Case
+from .errors import CaseError, NonFiniteError
 from .march import RunResult, integrate
 from .records import RecordedQuantity, Recorder, quantities_read_by
+from .runchecks import check_design, check_result, check_run_size, stability_problem
+from .sensitivity_drift import sensitivity_constraint_residual
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,9 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         the quantities its responses read); default: yes, unless ``history=()`` asks for a run
         that stores no time histories (as the finite-difference, optimization and convergence
         runs do).
+
+    Raises DesignError (an entry invalid at ``x``), RunSizeError (the run would not fit),
+    NonFiniteError (a non-finite state, response value or gradient) with their context.
     """
     x = case.x0 if x is None else np.asarray(x)
     plan = case.plan
@@ -58,13 +64,30 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
         plan = replace(plan, history=history)
     if record is None:
         record = history is None or bool(history)
+    check_design(case, x)
+    check_run_size(case, plan)
     responses = case.new_response_set(record=record)
     if record and not case.quantities:
         specs = quantities_read_by(responses)
         if specs:
             responses.attach_recorder(Recorder(specs))
-    run = integrate(case.model, x, case.scheme, plan, responses,
-                    design_names=case.design_names, design_scale=case.scale, progress=progress)
+    try:
+        run = integrate(case.model, x, case.scheme, plan, responses,
+                        design_names=case.design_names, design_scale=case.scale, progress=progress)
+    except CaseError as exc:       # found by the model at run time (e.g. redundant joints): name the file
+        if exc.source is not None:
+            raise
+        raise CaseError(exc.problems, case.source) from None
+    except NonFiniteError as exc:  # name the stability limit when the scheme's is the cause
+        why = stability_problem(case.model, case.scheme, plan, np.real(x))
+        if why is None:
+            raise
+        raise NonFiniteError(f"{exc}. Cause: integrator.dt: {why}") from None
+    check_result(case, run)
+    if plan.sensitivity_history and run.sensitivity_history:
+        drift = sensitivity_constraint_residual(case.model, run)
+        if drift:
+            run.monitors.update(drift)
     quantities = responses.recorder.result() if responses.recorder is not None else {}
     events = {k: float(np.real(e.t)) for k, e in responses.fired.items()}
     log.debug("run at x = %s: %s, %.3f s", np.real(x), run.message, run.wall_time)

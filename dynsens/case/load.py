@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import json
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -17,7 +18,7 @@ import numpy as np
 import yaml
 
 from ..errors import CaseError, ProblemCollector
-from ..expressions import ExpressionError, compile_expression
+from ..expressions import RESERVED_NAMES, ExpressionError, compile_expression
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
 from ..march import HISTORY_FIELDS, RunPlan
 from .. import case_keys
@@ -30,9 +31,11 @@ from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, 
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
+from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 from .quantities import parse_quantities
+from .yamltext import parse_yaml, read_case_text
 
 TOP_KEYS = allowed("case")
 RESPONSE_TYPES = case_keys.RESPONSE_TYPES
@@ -70,6 +73,8 @@ class Case:
     event_names: tuple[str, ...]
     optimization: OptimizationSpec | None = None
     quantities: tuple[QuantitySpec, ...] = ()
+    parameters: ParameterTable | None = None
+    unused_design: tuple[str, ...] = ()
 
     @property
     def design_names(self) -> tuple[str, ...]:
@@ -118,23 +123,13 @@ def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> 
     """
     path = Path(path)
     src = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CaseError(f"file not found: {src}", src) from None
-    except OSError as exc:
-        raise CaseError(f"cannot read {src}: {exc.strerror}", src) from None
-    return load_case_text(text, src, overrides)
+    return load_case_text(read_case_text(path, src), src, overrides)
 
 
 def load_case_text(text: str, source: str = "<string>", overrides: list[str] | tuple[str, ...] = ()) -> Case:
-    """Validate a case given as YAML text (safe loading only)."""
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise CaseError(f"not valid YAML{where}: {getattr(exc, 'problem', exc)}", source) from None
+    """Validate a case given as YAML text (safe loading; duplicate keys, alias bombs and deep
+    nesting are refused with their key paths)."""
+    raw = parse_yaml(text, source)
     if not isinstance(raw, dict):
         raise CaseError(f"expected a mapping at the top level, found {type(raw).__name__}", source)
     return load_case_dict(raw, source, overrides, text=text)
@@ -152,6 +147,11 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
+    # a list or mapping where a name belongs would reach the builders' look-ups: stop here
+    n_before = len(pc.problems)
+    check_reference_types(raw, "", pc)
+    if len(pc.problems) > n_before:
+        pc.raise_if_any()
     design, declared = _design(raw.get("design", {"variables": []}), pc)
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
@@ -183,9 +183,17 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     quantities = parse_quantities(output_spec.get("quantities") if isinstance(output_spec, dict) else None,
                                   output_id, outputs, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
+    if not pc.problems and model is not None and plan is not None:
+        check_start(design, table, model, scheme, plan, pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
+    unused = unused_design_variables(table, raw.get("responses", []) or [])
+    if unused:
+        warnings.warn(f"{source}: design variable{'s' if len(unused) > 1 else ''} {', '.join(unused)} "
+                      "used by no element, load, initial condition or response: "
+                      f"{'their gradients are' if len(unused) > 1 else 'its gradient is'} zero by construction",
+                      stacklevel=2)
     return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
@@ -193,7 +201,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                     outputs, factory(), ev, recorder=Recorder(quantities) if record and quantities else None,
                     stack_parameters=model.stack_parameters),
                 response_names=rnames, event_names=tuple(e.name for e in events),
-                optimization=optimization, quantities=quantities)
+                optimization=optimization, quantities=quantities, parameters=table, unused_design=unused)
 
 
 def _plain(node: Any) -> Any:
@@ -234,7 +242,12 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
         return [], ()
     out = []
     declared: list[str] = []
-    for i, v in enumerate(spec.get("variables", []) or []):
+    variables = spec.get("variables", []) or []
+    if not isinstance(variables, list):
+        pc.add("design.variables", f"expected a list of variables, found {type(variables).__name__} "
+                                   f"{variables!r}")
+        return [], ()
+    for i, v in enumerate(variables):
         p = f"design.variables[{i}]"
         if not check_keys(v, p, allowed("design.variable"), pc, required=("name", "value")):
             continue
@@ -244,6 +257,9 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
             continue
         if name in declared:
             pc.add(f"{p}.name", f"duplicate design variable {name!r}")
+        if name in RESERVED_NAMES:
+            pc.add(f"{p}.name", reserved_message(name))
+            continue
         declared.append(name)
         value = _number(v.get("value"), f"{p}.value", pc)
         lower = _number(v.get("lower", -np.inf), f"{p}.lower", pc) if "lower" in v else -np.inf
@@ -309,6 +325,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
             newton = NewtonSettings(rtol, atol, mi)
     if t0 is not None and t_end is not None and t_end <= t0:
         pc.add("integrator.t_end", f"must be greater than t0 = {t0}, found {t_end}")
+    elif t0 is not None and t_end is not None and dt is not None and dt > t_end - t0:
+        pc.add("integrator.dt", f"expected at most t_end - t0 = {t_end - t0:g} s (a run of at least one full "
+                                f"step), found {dt:g} s")
     enabled = sens.get("enabled", True)
     if not isinstance(enabled, bool):
         pc.add("sensitivity.enabled", f"expected true or false, found {enabled!r}")
@@ -375,7 +394,13 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
         if not check_keys(ev, p, allowed("event"),
                           pc, required=("name", "quantity", "value")):
             continue
-        names.append(str(ev.get("name")))
+        ename = ev.get("name")
+        if not isinstance(ename, str) or not _IDENT.match(ename):
+            pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {ename!r}")
+        elif ename in names:
+            pc.add(f"{p}.name", f"expected each event name once, found {ename!r} again "
+                                f"(events[{names.index(ename)}] has it)")
+        names.append(str(ename))
         oid = output_id(ev.get("quantity"), f"{p}.quantity")
         level = _number(ev.get("value"), f"{p}.value", pc)
         direction = ev.get("direction", "either")
@@ -390,7 +415,7 @@ def _events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: 
             continue
         comp = _component(outputs[oid], ev.get("component"), f"{p}.component", pc)
         if comp is not None:
-            events.append(EventSpec(str(ev["name"]), oid, comp, level, direction, loc))
+            events.append(EventSpec(str(ename), oid, comp, level, direction, loc))
     return events, names
 
 
@@ -452,6 +477,8 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             continue
         if name in names or name in design_names:
             pc.add(f"{p}.name", f"{name!r} is already a response or design variable name")
+        elif name in RESERVED_NAMES:
+            pc.add(f"{p}.name", reserved_message(name))
         # register the name first: a later expression using it must not report it again
         names.append(name)
         unit = str(r.get("unit", ""))

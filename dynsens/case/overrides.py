@@ -4,9 +4,8 @@ from __future__ import annotations
 import re
 from typing import Any
 
-import yaml
-
 from ..errors import CaseError, Problem
+from .yamltext import parse_yaml
 
 _TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
 
@@ -23,9 +22,10 @@ def apply_overrides(raw: dict, overrides: list[str], source: str | None = None) 
             continue
         key, text = item.split("=", 1)
         try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            problems.append(Problem(f"--set {key}", f"value {text!r} is not valid YAML ({exc})"))
+            value = parse_yaml(text, f"--set {key}")
+        except CaseError as exc:
+            problems.append(Problem(f"--set {key}", f"value {text!r} is not valid: "
+                                                    + "; ".join(str(p) for p in exc.problems)))
             continue
         tokens = [(m.group(1), m.group(2)) for m in _TOKEN.finditer(key.strip())]
         if not tokens:

@@ -9,9 +9,12 @@ import click
 
 from ..case.load import load_case
 from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
+from ..io.paths import atomic_write_text, check_output_path
+from ..partials_audit import audit_json, audit_markdown
+from ..partials_audit import audit_partials as audit_partials_of
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, parse_float_list, set_option, verbosity_options
+from .options import case_argument, overwrite_option, parse_float_list, set_option, verbosity_options
 
 
 @cli.command("check-gradients")
@@ -25,11 +28,21 @@ from .options import case_argument, parse_float_list, set_option, verbosity_opti
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
 @click.option("--workers", type=int, default=None, help="Worker processes for the FD runs (default: 2).")
+@click.option("--audit-partials", is_flag=True,
+              help="Also sweep the forward partials' own step (1e-2 ... 1e-12) against complex-step partials "
+                   "and flag design variables without a plateau.")
+@overwrite_option
 @set_option
 @verbosity_options
 def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: float | None,
-                        report: str | None, workers: int | None, overrides: tuple[str, ...]) -> None:
+                        report: str | None, workers: int | None, audit_partials: bool, overwrite: bool,
+                        overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
+    paths: list[Path] = []
+    if report:
+        stem = Path(report)
+        stem = stem.with_suffix("") if stem.suffix in (".md", ".json") else stem
+        paths = [check_output_path(stem.with_name(stem.name + ext), overwrite) for ext in (".md", ".json")]
     case = load_case(case_file, overrides)
     with Progress(1, f"checking gradients of {case.name}") as bar:
         def progress(done: int, total: int) -> None:
@@ -37,14 +50,16 @@ def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: f
             bar.update(done, f"simulation {done} of {total}", force=True)
         rep = check_gradients(case, steps, scheme, workers=workers, progress=progress)
     md = to_markdown(rep)
+    data = to_json(rep)
+    if audit_partials:
+        audit = audit_partials_of(case)
+        md += "\n\n" + audit_markdown(audit)
+        data["partials_audit"] = audit_json(audit)
     click.echo(md)
-    if report:
-        stem = Path(report)
-        stem = stem.with_suffix("") if stem.suffix in (".md", ".json") else stem
-        stem.parent.mkdir(parents=True, exist_ok=True)
-        stem.with_suffix(".md").write_text(md, encoding="utf-8")
-        stem.with_suffix(".json").write_text(json.dumps(to_json(rep), indent=2), encoding="utf-8")
-        click.echo(f"written: {stem.with_suffix('.md')}, {stem.with_suffix('.json')}")
+    if paths:
+        atomic_write_text(paths[0], md, overwrite)
+        atomic_write_text(paths[1], json.dumps(data, indent=2), overwrite)
+        click.echo(f"written: {paths[0]}, {paths[1]}")
     if rtol is not None:
         failing = rep.failing(rtol)
         if failing:

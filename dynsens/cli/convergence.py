@@ -4,10 +4,11 @@ from __future__ import annotations
 import click
 
 from ..case.load import load_case
-from ..convergence import METHODS, observed_order, work_precision, write_report
+from ..convergence import METHODS, observed_order, report_files, work_precision, write_report
+from ..io.paths import check_output_folder
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, parse_float_list, set_option, verbosity_options
+from .options import case_argument, overwrite_option, parse_float_list, set_option, verbosity_options
 
 
 @cli.command("convergence")
@@ -18,23 +19,26 @@ from .options import case_argument, parse_float_list, set_option, verbosity_opti
               help=f"Comma-separated subset of {', '.join(METHODS)}.")
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
               help="Folder for the tables and plots.")
+@overwrite_option
 @set_option
 @verbosity_options
-def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str,
+def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str, overwrite: bool,
                     overrides: tuple[str, ...]) -> None:
     """Work-precision study of CASE_FILE: tables (markdown, CSV) and log-log plots."""
+    check_output_folder(outdir, [], overwrite)
     case = load_case(case_file, overrides)
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
     bad = [m for m in chosen if m not in METHODS]
     if bad:
         raise click.BadParameter(f"unknown methods {bad} (known: {', '.join(METHODS)})", param_hint="--methods")
+    check_output_folder(outdir, report_files(case, outdir), overwrite)
     dts = dts or [case.plan.dt * f for f in (4, 2, 1, 0.5, 0.25)]
     with Progress(1, f"convergence of {case.name}") as bar:
         def progress(done: float, total: float, note: str) -> None:
             bar.total = total
             bar.update(done, note, force=True)
         rows, _, _ = work_precision(case, dts, chosen, progress=progress)
-    files = write_report(case, rows, outdir)
+    files = write_report(case, rows, outdir, overwrite=overwrite)
     for n in rows[0].values:
         click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "
                    f"(scheme order {case.scheme.order})")

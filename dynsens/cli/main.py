@@ -1,6 +1,8 @@
 """``dynsens`` command group; maps library errors to clean messages at the boundary."""
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import warnings
 
@@ -20,6 +22,26 @@ class DynsensGroup(click.Group):
         except DynsensError as exc:
             click.echo(f"Error: {exc}", err=True)
             sys.exit(2)
+        except KeyboardInterrupt:
+            # files being written were removed on the way out (atomic writes): say so, exit 128 + SIGINT
+            click.echo("interrupted: no partial output was left", err=True)
+            sys.exit(130)
+
+
+class Terminated(SystemExit):
+    """Raised in the main thread on SIGTERM so that atomic writes clean up; exit status 143."""
+
+
+_MAIN_PID = os.getpid()
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)   # a second SIGTERM ends the process at once
+    if os.getpid() != _MAIN_PID:                    # a forked worker: end as by default
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+    click.echo("terminated: no partial output was left", err=True)
+    raise Terminated(128 + signal.SIGTERM)
 
 
 @click.group(cls=DynsensGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -40,4 +62,7 @@ def main() -> None:
         pass
     # plain one-line warnings for users of the console script (not for library callers)
     warnings.formatwarning = lambda msg, cat, *a, **k: f"Warning: {msg}\n"  # type: ignore[assignment]
+    global _MAIN_PID
+    _MAIN_PID = os.getpid()
+    signal.signal(signal.SIGTERM, _on_sigterm)
     cli(prog_name="dynsens")

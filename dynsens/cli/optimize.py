@@ -111,10 +111,16 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     from pathlib import Path
 
     from ..io.hdf5 import OutputExistsError
+    from ..io.paths import check_output_path
     if resume and overwrite:
         raise OptimizationError("--resume continues OUTPUT and --overwrite replaces it: give one of them")
     if not resume and Path(output).exists() and not overwrite:
         raise OutputExistsError(f"{output} exists: pass --overwrite to replace it, or --resume to continue it")
+    check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
+    if plots:
+        from ..io.paths import check_output_folder
+        from ..optimize.plots import plot_files
+        check_output_folder(plots, plot_files(output, plots), overwrite or resume, option="--plots")
     case = load_case(case_file, overrides)
     if case.optimization is None:
         raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "

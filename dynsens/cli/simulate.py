@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import Any
 
 import click
@@ -10,6 +11,7 @@ import numpy as np
 from ..case.load import load_case
 from ..io.hdf5 import write_result
 from ..progress import Progress
+from ..io.paths import check_output_path
 from ..simulation import run_case
 from .main import cli
 from .options import case_argument, overwrite_option, set_option, verbosity_options
@@ -54,6 +56,15 @@ def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
     return "\n".join(lines)
 
 
+def zero_gradient_columns(result, design_names) -> list[str]:  # type: ignore[no-untyped-def]
+    """Design variables whose gradient entry is exactly zero for every response with a gradient."""
+    grads = [np.real(r.gradient) for r in result.responses.values() if r.gradient is not None and not r.missing]
+    if not grads:
+        return []
+    g = np.vstack(grads)
+    return [n for j, n in enumerate(design_names) if j < g.shape[1] and not np.any(g[:, j])]
+
+
 @cli.command()
 @case_argument
 @click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
@@ -68,11 +79,7 @@ def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
 def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
              no_sensitivities: bool, plots: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
-    from pathlib import Path
-
-    from ..io.hdf5 import OutputExistsError
-    if Path(output).exists() and not overwrite:
-        raise OutputExistsError(f"{output} exists: pass --overwrite to replace it")
+    check_output_path(output, overwrite)     # before the run, not after it
     case = load_case(case_file, overrides)
     log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",
              case.name, case.plan.n_steps, case.plan.dt, len(case.design), len(case.response_names),
@@ -88,4 +95,15 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
                       f"{case.name}: {getattr(result, 'ended_by', result.message)}",
                       response_markers(case, result))
         click.echo(f"plot: {p}" if p else "plots: the case records no quantities (add output.quantities)")
+    if "sensitivity_constraint_position" in result.monitors:
+        mon = result.monitors
+        click.echo(f"constraint residual of the sensitivities (J_Phi grad q + dPhi/dx): position max "
+                   f"{mon['sensitivity_constraint_position'].max():.3g}, velocity max "
+                   f"{mon['sensitivity_constraint_velocity'].max():.3g} (scale max |J_Phi grad q| "
+                   f"{mon['sensitivity_constraint_scale'].max():.3g}); state drift max "
+                   f"{mon['constraint_position'].max():.3g}")
+    zero = zero_gradient_columns(result, case.design_names)
+    if zero:
+        click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "
+                   "(nothing in the model or responses depends on it at this design)")
     click.echo(f"written: {output}")

@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -34,30 +32,17 @@ import numpy as np
 
 from .. import __version__
 from ..errors import DynsensError
+from .paths import OutputExistsError, atomic_path  # noqa: F401  (OutputExistsError: re-exported)
 from .series import attach, decode, read_series, write_series
-
-
-class OutputExistsError(DynsensError, FileExistsError):
-    """The output file exists and ``--overwrite`` was not given."""
 
 
 @contextlib.contextmanager
 def atomic_h5(path: str | Path, overwrite: bool = False) -> Iterator[h5py.File]:
-    """Open a temporary HDF5 file next to ``path``; rename it into place on success."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path} exists: pass --overwrite to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    """Open a temporary HDF5 file next to ``path``; rename it into place on success (with the
+    umask's permissions), remove it on any failure or interruption."""
+    with atomic_path(path, overwrite) as tmp:
         with h5py.File(tmp, "w") as f:
             yield f
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
 
 
 def _real(v: Any) -> Any:

@@ -179,6 +179,11 @@ class ParameterTable:
         # positions in _exprs of the expressions naming it (for perturbed designs)
         self._base: tuple[Array, Array] | None = None
         self._naming: list[set[int]] | None = None
+        # range rules checked on the evaluated values (literals are checked when read):
+        # (entry index, "positive" | "nonnegative", YAML path); vectors that must not vanish
+        self._paths: list[str] = []
+        self._rules: list[tuple[int, str, str]] = []
+        self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
 
     def __len__(self) -> int:
         return len(self._constants)
@@ -205,6 +210,7 @@ class ParameterTable:
                 problems.add(path, f"must be >= 0, found {value!r}")
                 return -1
             self._constants.append(v)
+            self._paths.append(path)
             return idx
         if isinstance(value, str):
             try:
@@ -213,7 +219,10 @@ class ParameterTable:
                 problems.add(path, str(exc))
                 return -1
             self._constants.append(0.0)
+            self._paths.append(path)
             self._exprs.append((idx, expr))
+            if positive or nonnegative:
+                self._rules.append((idx, "positive" if positive else "nonnegative", path))
             return idx
         problems.add(path, f"expected a number or an expression, found {type(value).__name__} {value!r}")
         return -1
@@ -228,6 +237,43 @@ class ParameterTable:
             problems.add(path, f"expected {length} entries, found {len(values)}")
             return [-1] * length
         return [self.add(v, f"{path}[{i}]", problems, **kw) for i, v in enumerate(values)]
+
+    def require_nonzero(self, indices: Sequence[int], path: str, what: str) -> None:
+        """Entries ``indices`` (e.g. an axis) must not all be zero at any design."""
+        if all(i >= 0 for i in indices):
+            self._nonzero.append((tuple(indices), path, what))
+
+    def check(self, x: Array) -> list[tuple[str, str]]:
+        """(YAML path, problem) for every entry that has no finite value at the real design ``x``
+        or breaks its range rule (> 0, >= 0, a vector not zero); empty when all hold."""
+        x = np.real(np.asarray(x, dtype=complex if np.iscomplexobj(x) else float))
+        env = dict(zip(self.design_names, x))
+        values = np.array(self._constants, dtype=float)
+        out: list[tuple[str, str]] = []
+        bad: set[int] = set()
+        for i, expr in self._exprs:
+            try:
+                values[i] = float(np.real(expr.evaluate(env)))
+            except ExpressionError as exc:
+                out.append((self._paths[i], str(exc)))
+                bad.add(i)
+        for i, expr in self._exprs:
+            if expr.symbols and i not in bad:
+                why = expr.derivative_problem(env)
+                if why:
+                    out.append((self._paths[i], why))
+                    bad.add(i)
+        exprs = dict(self._exprs)
+        for i, rule, path in self._rules:
+            v = values[i]
+            if i not in bad and (v <= 0 if rule == "positive" else v < 0):
+                where = "".join(f", {n} = {env[n]:.6g}" for n in sorted(exprs[i].symbols))
+                out.append((path, f"expected {'> 0' if rule == 'positive' else '>= 0'}, found {v:.6g} "
+                                  f"(expression '{exprs[i].text}'{where})"))
+        for idx, path, what in self._nonzero:
+            if not bad.intersection(idx) and not np.any(values[list(idx)]):
+                out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
+        return out
 
     def depends_on_design(self, index: int) -> bool:
         """True when entry ``index`` is an expression of design variables."""
@@ -344,8 +390,9 @@ class Model(ABC):
     def check_state(self, t: float, s: StepState, params: Any) -> None:  # noqa: B027 (optional hook)
         """Raise ModelError when the state leaves the model's range of validity."""
 
-    def diagnose_singular(self, t: float, s: StepState, params: Any) -> str:
-        """Explain a singular iteration matrix at (t, s), e.g. which joints lost rank ('' if unknown)."""
+    def diagnose_singular(self, t: float, s: StepState, params: Any, rel_tol: float = 1e-9) -> str:
+        """Explain a singular iteration matrix at (t, s), e.g. which joints lost rank to ``rel_tol``
+        relative to the largest singular value ('' if unknown)."""
         return ""
 
     def monitors(self, t: float, s: StepState, params: Any) -> dict[str, float]:

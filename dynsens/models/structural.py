@@ -486,6 +486,9 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     index = {d: i for i, d in enumerate(dof_names)}
 
     def dof(name: Any, p: str) -> int:
+        if not isinstance(name, str):
+            problems.add(p, f"expected a DOF name, found {name!r}")
+            return n
         if name == GROUND or name in fixed:
             return n
         if name not in index:
@@ -494,7 +497,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         return index[name]
 
     def node_dofs(name: Any, p: str) -> list[int]:
-        if name not in node_coords:
+        if not isinstance(name, str) or name not in node_coords:
             problems.add(p, f"unknown node {name!r}{did_you_mean(name, node_coords)}")
             return [n] * dim
         return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
@@ -565,7 +568,11 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
                                        f"(known: {', '.join(kinds)})")
     loads = []
-    for k, ld in enumerate(spec.get("loads", []) or []):
+    load_specs = spec.get("loads", []) or []
+    if not isinstance(load_specs, list):
+        problems.add(f"{path}.loads", f"expected a list of loads, found {load_specs!r}")
+        load_specs = []
+    for k, ld in enumerate(load_specs):
         lp = f"{path}.loads[{k}]"
         if not check_keys(ld, lp, allowed("structural.load"), problems, required=("value",)):
             continue
@@ -618,7 +625,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
                                 spring_nonlinear=spring_nonlinear)
-    except (ValueError, IndexError, TypeError):
+    except (ValueError, IndexError, TypeError, KeyError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled
         raise

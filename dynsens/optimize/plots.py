@@ -12,13 +12,21 @@ import numpy as np
 from ..io.series import read_series
 from ..plots import Run, plot_runs
 from ..records import RecordedQuantity
+from ..io.paths import atomic_path
 from .problem import _fmt
 
 
 # --------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------
-def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) -> list[Path]:
+def plot_files(path: str | Path, outdir: str | Path) -> list[Path]:
+    """The files :func:`plot_optimization` may write for the optimization file ``path``."""
+    stem = Path(path).stem
+    return [Path(outdir) / f"{stem}_history.png", Path(outdir) / f"{stem}_optimum.png"]
+
+
+def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
+                      overwrite: bool = True) -> list[Path]:
     """PNG plots of an optimization file: the history and the best design's time histories.
 
     Writes ``<stem>_history.png`` (objective, max. constraint violation and KKT residual
@@ -27,7 +35,8 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
     response over the iterations against its bound, in its unit) and ``<stem>_optimum.png``
     (the recorded quantities at the start and at the optimum, with events; without recorded
     quantities the ``max_lines`` largest coordinate histories q(t) of the best design).
-    Returns the files written.
+    Returns the files written (each atomically; an existing one is replaced only with
+    ``overwrite``).
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -57,7 +66,8 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
         fig.suptitle(f"{path.name}: optimization history")
         fig.tight_layout()
         p = outdir / f"{path.stem}_history.png"
-        fig.savefig(p, dpi=100)
+        with atomic_path(p, overwrite) as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
         plt.close(fig)
         written.append(p)
         written += _bounds_plots(f, path, outdir, plt)
@@ -83,7 +93,8 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8) 
             ax.set_title(f"best design x = {_fmt(opt['optimum/x'][()])}")
             fig.tight_layout()
             p = outdir / f"{path.stem}_optimum.png"
-            fig.savefig(p, dpi=100)
+            with atomic_path(p, overwrite) as tmp:
+                fig.savefig(tmp, dpi=100, format="png")
             plt.close(fig)
             written.append(p)
     return written

@@ -19,6 +19,7 @@ from ..io.hdf5 import OutputExistsError
 from . import jobs as job_state  # the worker-side sinks are module state of .jobs
 from .jobs import _CASES, StartJob, StartOutcome, run_start
 from .problem import OptimizationError, ScaledProblem, _fmt, _spec, build_problem, scaled_evaluation, simulate
+from .store import holds_writer_lock, validate_resume_file
 from .store import (_init_file, _outcome_attrs, _outcome_from_file, _problem_attrs, _problem_from_file,
                     _set_attrs, _start_group, _store_optimum, _write_row, set_status)
 
@@ -86,6 +87,7 @@ def resolve_x0(case: Case, x0: Mapping[str, float] | None) -> np.ndarray:
     return x
 
 
+@holds_writer_lock
 def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, seed: int | None = None,
                   x0: Mapping[str, float] | None = None, maxiter: int | None = None,
                   ftol: float | None = None, workers: int | None = None, scheduler: str | None = None,
@@ -219,6 +221,7 @@ def _resume_jobs(path: Path, case: Case, starts: int | None, seed: int | None, x
         raise OptimizationError(f"--resume: {path} does not exist (run without --resume to start)")
     jobs: list[StartJob] = []
     done: dict[int, StartOutcome] = {}
+    validate_resume_file(path, len(case.design))
     try:
         f = h5py.File(path, "r")
     except OSError as exc:

@@ -1,9 +1,13 @@
 """The optimization file: rows appended per iteration, start attributes, the stored optimum."""
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import functools
 import json
+import os
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Iterator, Mapping, TypeVar
 
 import h5py
 import numpy as np
@@ -13,7 +17,66 @@ from ..io.hdf5 import append_rows, atomic_h5, write_design, write_header
 from ..io.series import make_scale, write_series
 from ..simulation import run_case
 from .jobs import StartOutcome
-from .problem import FEAS_TOL, SIM_ERRORS, ConstraintTerm, ScaledProblem
+from .problem import FEAS_TOL, SIM_ERRORS, ConstraintTerm, OptimizationError, ScaledProblem
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+# --------------------------------------------------------------------------------------
+# one writer per optimization file
+# --------------------------------------------------------------------------------------
+class OutputLockedError(OptimizationError):
+    """Another process is writing the same optimization file."""
+
+
+def lock_path(path: str | Path) -> Path:
+    """The lock file that guards ``path`` (hidden, in the same folder)."""
+    p = Path(path)
+    return p.with_name(f".{p.name}.lock")
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | Path) -> Iterator[None]:
+    """Hold an exclusive lock on the optimization file ``path`` for the duration of the block.
+
+    A second writer (another ``dynsens optimize -o`` of the same file, also ``--resume``)
+    is refused at once instead of interleaving its rows.  The lock is an ``flock`` on a
+    hidden file beside ``path``, released by the kernel when the process ends (also on
+    SIGKILL), and the file is removed on the way out.
+    """
+    lp = lock_path(path)
+    lp.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lp, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputLockedError(f"{path} is being written by another dynsens process (lock {lp}): wait for "
+                                    "it to finish, or write to another -o file") from None
+        # the holder before us may have removed the file between our open and our lock
+        try:
+            same = os.stat(lp).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lp)
+        os.close(fd)
+
+
+def holds_writer_lock(fn: F) -> F:
+    """Decorate ``fn(case, output, ...)`` to run under :func:`writer_lock` of ``output``."""
+    @functools.wraps(fn)
+    def wrapper(case: Any, output: str | Path, *args: Any, **kwargs: Any) -> Any:
+        with writer_lock(output):
+            return fn(case, output, *args, **kwargs)
+    return wrapper  # type: ignore[return-value]
 
 # --------------------------------------------------------------------------------------
 # the output file (written only by the calling process)
@@ -142,3 +205,67 @@ def read_history(path: str | Path, start: int = 0) -> dict[str, np.ndarray]:
     if "message" in out:
         out["message"] = np.array([m.decode() if isinstance(m, bytes) else m for m in out["message"]], dtype=object)
     return out
+
+
+# --------------------------------------------------------------------------------------
+# --resume: the file must be whole before anything is continued from it
+# --------------------------------------------------------------------------------------
+_OPT_ATTRS = ("f_ref", "starts", "seed", "x_starts", "objective", "constraints", "response_names")
+_HISTORY = ("x", "iteration", "segment", "elapsed")
+_FINISHED = ("x_opt", "f_opt", "g_opt", "responses_opt", "max_violation", "feasible", "success", "status",
+             "message", "nit", "nfev", "n_failed", "wall_time", "x_start")
+
+
+def validate_resume_file(path: Path, m: int) -> None:
+    """Raise OptimizationError saying plainly what is damaged when the optimization file ``path``
+    cannot be continued (unreadable, missing attributes, histories of unequal length, designs
+    of the wrong size or not finite).  ``m``: number of design variables of the case."""
+    def damaged(what: str) -> OptimizationError:
+        return OptimizationError(f"--resume: {path} is damaged: {what}. Start again without --resume "
+                                 "(with --overwrite), or restore the file from a copy")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise damaged(f"it cannot be read as HDF5 ({exc})") from None
+    try:
+        with f:
+            if "optimization" not in f:
+                return          # not an optimization file at all: the caller says so
+            a = f["optimization"].attrs
+            if "f_ref" not in a:
+                return          # interrupted before its first design: the caller says so
+            missing = [k for k in _OPT_ATTRS if k not in a]
+            if missing:
+                raise damaged(f"optimization attributes {missing} are missing")
+            n = int(a["starts"])
+            x_starts = np.asarray(a["x_starts"], dtype=float)
+            if n < 1 or x_starts.shape != (n, m) or not np.all(np.isfinite(x_starts)):
+                raise damaged(f"expected {n} start designs of {m} values, found x_starts of shape "
+                              f"{x_starts.shape}")
+            for k in range(n):
+                g = f.get(_start_group(k))
+                if g is None:
+                    continue
+                if bool(g.attrs.get("finished", False)) and "x_opt" in g.attrs:
+                    lost = [key for key in _FINISHED if key not in g.attrs]
+                    if lost:
+                        raise damaged(f"start {k} is marked finished but lacks {lost}")
+                    continue
+                h = g.get("history")
+                if h is None:
+                    continue
+                lost = [key for key in _HISTORY if key not in h]
+                if lost:
+                    raise damaged(f"the history of start {k} lacks {lost}")
+                lengths = {key: h[key].shape[0] for key in _HISTORY}
+                if len(set(lengths.values())) != 1:
+                    raise damaged(f"the history of start {k} has columns of unequal length {lengths}")
+                if lengths["x"]:
+                    x_last = np.asarray(h["x"][-1], dtype=float)
+                    if x_last.shape != (m,) or not np.all(np.isfinite(x_last)):
+                        raise damaged(f"the last design of start {k} is {x_last.tolist()}, expected {m} finite "
+                                      "values")
+    except OptimizationError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise damaged(f"reading it failed ({type(exc).__name__}: {exc})") from None

@@ -26,6 +26,8 @@ from .linalg import Counters, Factor, SingularMatrixError
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
 ROUNDOFF = 1e-13
+# σ_min/σ_max of the constraint Jacobian below which a failing step is reported as a lock-up
+LOCK_RTOL = 1e-2
 
 
 @dataclass(frozen=True)
@@ -170,11 +172,18 @@ class StepSolver:
             if self._converged(z, dz) or self._stagnated(history, z, dz):
                 s = correct(pred, *self._split(z))
                 return self._accept(t, s, params, coeffs, lin, factor, it, fresh=True)
+        # a mechanism that locks (near-dependent constraint equations at the step's start) is not
+        # helped by a smaller step: say so instead
+        locked = ""
+        if self.model.traits.n_lam:
+            locked = self.model.diagnose_singular(t, correct(pred, *self._split(z0)), params, rel_tol=LOCK_RTOL)
         raise ConvergenceError(
             "Newton-Raphson did not converge", t=t, step=step, iterations=st.max_iterations,
             residual_history=history,
-            hint="reduce the time step, check that the loads and parameters are physical, "
-                 "or raise solver.max_iterations")
+            hint=(f"the mechanism locks here, near a singular pose ({locked}); a smaller time step "
+                  "does not help: check the geometry, the joint set and the driving motion" if locked else
+                  "reduce the time step, check that the loads and parameters are physical, "
+                  "or raise solver.max_iterations"))
 
     def _accept(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
                 lin: Linearization | None, factor: Factor | None, iterations: int,
@@ -205,7 +214,16 @@ class StepSolver:
             return (f"{head}: the solution diverges at {labels[k]} (|q| = {q[k]:.3g}); reduce the time "
                     "step, check the stiffness signs and the load magnitudes")
         k = int(np.flatnonzero(~np.isfinite(R))[0])
-        where = labels[k] if k < len(labels) else f"equation {k}"
+        n_q, n_lam = self.model.traits.n_q, self.model.traits.n_lam
+        owners = list(getattr(self.model, "eq_owner", []))    # constraint rows' joints, where known
+        if k < len(labels):
+            where = labels[k]
+        elif n_q <= k < n_q + n_lam and k - n_q < len(owners):
+            where = f"constraint {owners[k - n_q]}"
+        elif k >= n_q + n_lam:
+            where = f"first-order state p[{k - n_q - n_lam}]"
+        else:
+            where = f"equation {k}"
         return (f"{head}: first in the equation of {where}; check the parameters of the elements "
                 "acting there, the initial conditions and the time step")
 

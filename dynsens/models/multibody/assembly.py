@@ -129,7 +129,7 @@ def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = Non
     Singular values ≤ rel_tol·σ_max count as zero (default: round-off, 1e3·ε·max(shape));
     the equations named are those with a visible share (> 1e-6) in the left null vectors.
     """
-    if J.shape[0] == 0:
+    if J.shape[0] == 0 or not np.all(np.isfinite(J)):   # no rank to judge
         return None
     U, sv, _ = np.linalg.svd(np.real(J), full_matrices=True)
     rel = max(J.shape) * np.finfo(float).eps * 1e3 if rel_tol is None else rel_tol
@@ -145,6 +145,9 @@ def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = Non
 
 def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str) -> None:
     """CaseError naming the equations (joints) involved when J (n_eq, n_q) is rank-deficient."""
+    if not np.all(np.isfinite(J)):
+        raise CaseError(f"{where}: expected a finite constraint Jacobian at the initial pose, found NaN or "
+                        "infinite entries: a body position, joint point or axis is too large or not finite")
     dep = dependent_equations(J, labels)
     if dep is None:
         return
@@ -181,7 +184,7 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
         return float(np.linalg.norm(np.real(_F(model, qq, mm, params))))
 
     best = (np.inf, q)
-    for _ in range(a.max_iterations):
+    for it in range(1, a.max_iterations + 1):
         F = _F(model, q, mu, params)
         f0 = float(np.linalg.norm(np.real(F)))
         phin = float(np.linalg.norm(np.real(F[n_q:])))
@@ -192,7 +195,10 @@ def assemble(model: "MultibodyModel", params: MBParams) -> tuple[Array, Array]:
             dx = np.linalg.solve(K, -F)
         except np.linalg.LinAlgError:
             _rank_check(model, jacobian_rows(eqs, q, params, a.t0), labels, "assembly")
-            raise
+            raise ModelError(f"assembly failed: the assembly matrix is singular at Newton iteration {it} "
+                             "(the joints' equations are dependent at this pose, or a body's mass or "
+                             "inertia leaves it undetermined): check the initial poses, joints and holds") \
+                from None
         # backtracking on ‖F‖ (decided on real parts) keeps far-off guesses from diverging
         step = 1.0
         while step > 1e-3 and fnorm(q + step * dx[:n_q], mu + step * dx[n_q:]) > f0 and f0 > 1e-14 * scale:

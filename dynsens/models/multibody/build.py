@@ -175,6 +175,7 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
             rd.problems.add(f"{jp}.axis", f"missing (the {kind} joint's axis, global at the initial pose)")
             return None
         axis = rd.vec3(j.get("axis"), f"{jp}.axis", [0.0, 0.0, 1.0])
+        rd.table.require_nonzero(axis, f"{jp}.axis", "joint axis")
     else:
         axis = rd.vec3([0.0, 0.0, 1.0], f"{jp}.axis")
     keys.update(rd.frame_recipes(name, axis, b1, b2))

@@ -301,17 +301,18 @@ class MultibodyModel(Model):
             c = kin.kp.ec[i][0]
             cyl.check(np.sqrt(kin.X[0, lay.n_cp + i, 0]) - c[2], params, t, c)
 
-    def diagnose_singular(self, t: float, s: StepState, params: MBParams) -> str:
+    def diagnose_singular(self, t: float, s: StepState, params: MBParams, rel_tol: float = 1e-9) -> str:
         """Name the joints whose equations became linearly dependent at (t, s) (a dead-centre
         or change-point configuration), from the rank of J_Φ; '' when J_Φ has full rank.
 
         The iteration matrix is judged singular at a pivot ratio of 1e-14; J_Φ at the same
         iterate is rank-deficient to the looser 1e-9·σ_max (it is met one Newton correction
-        away from the singular configuration itself).
+        away from the singular configuration itself).  A looser ``rel_tol`` (e.g. 1e-2) names
+        the joints of a pose *near* a singular one (a mechanism that locks).
         """
         from .assembly import dependent_equations, jacobian_rows
         J = jacobian_rows(self.eqs, np.real(s.q), params, t)
-        dep = dependent_equations(J, self.eq_owner, rel_tol=1e-9)
+        dep = dependent_equations(J, self.eq_owner, rel_tol=rel_tol)
         if dep is None:
             return ""
         rank, involved, owners = dep

@@ -157,6 +157,9 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
     head = heads[0]
     check_keys(spec, path, (head, "kind"), problems, required=("kind",))
     name, kind = spec[head], spec.get("kind")
+    if not isinstance(name, str):
+        problems.add(f"{path}.{head}", f"expected the name of one {head}, found {name!r}")
+        return None
     fn: Callable[[float, StepState, Any], Any]
     if head == "joint":
         joints = {j.name: j for j in model.joints}

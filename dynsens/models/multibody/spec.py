@@ -77,11 +77,13 @@ class Reader:
             body.point_mass = bool(point)
             body.mass = self.num(b.get("mass"), f"{bp}.mass", positive=True)
             inertia = [0.0, 0.0, 0.0] if point else b.get("inertia")
-            if isinstance(inertia, (list, tuple)) and len(inertia) == 3:
-                body.inertia = tuple(self.table.add_many(inertia, f"{bp}.inertia", self.problems)) + \
-                    tuple(self.num(0.0, f"{bp}.inertia") for _ in range(3))
-            elif isinstance(inertia, (list, tuple)) and len(inertia) == 6:
-                body.inertia = tuple(self.table.add_many(inertia, f"{bp}.inertia", self.problems))
+            if isinstance(inertia, (list, tuple)) and len(inertia) in (3, 6):
+                # principal moments > 0 (also when given as expressions), none for a point mass;
+                # products of any sign
+                body.inertia = tuple(self.num(v, f"{bp}.inertia[{i}]", positive=i < 3 and not point)
+                                     for i, v in enumerate(inertia))
+                if len(inertia) == 3:
+                    body.inertia += tuple(self.num(0.0, f"{bp}.inertia") for _ in range(3))
             else:
                 self.problems.add(f"{bp}.inertia", "expected [Ixx, Iyy, Izz] or [Ixx, Iyy, Izz, Ixy, "
                                                    f"Ixz, Iyz] about the COM in body axes, found {inertia!r}")
@@ -100,12 +102,15 @@ class Reader:
             return ("identity",)
         if isinstance(o, dict) and "euler_parameters" in o:
             check_keys(o, path, allowed("multibody.orientation.euler"), self.problems)
-            return ("ep", tuple(self.table.add_many(o["euler_parameters"], f"{path}.euler_parameters",
-                                                    self.problems, length=4)))
+            ep = tuple(self.table.add_many(o["euler_parameters"], f"{path}.euler_parameters",
+                                           self.problems, length=4))
+            self.table.require_nonzero(ep, f"{path}.euler_parameters", "set of Euler parameters")
+            return ("ep", ep)
         if not check_keys(o, path, allowed("multibody.orientation.axis_angle"), self.problems, required=("angle",)):
             return ("identity",)
-        return ("axis", self.vec3(o.get("axis"), f"{path}.axis", [0.0, 0.0, 1.0]),
-                self.num(o.get("angle"), f"{path}.angle"))
+        axis = self.vec3(o.get("axis"), f"{path}.axis", [0.0, 0.0, 1.0])
+        self.table.require_nonzero(axis, f"{path}.axis", "rotation axis")
+        return ("axis", axis, self.num(o.get("angle"), f"{path}.angle"))
 
     def _markers(self, body: BodyDef, spec: Any, path: str) -> None:
         if spec is None:
