@@ -75,6 +75,11 @@ class ExpressionError(DynsensError, ValueError):
     """An expression could not be parsed, names something unknown, or has no finite value."""
 
 
+def _parts(value: Any) -> tuple[Any, ...]:
+    """The numbers a value is made of: itself, or a jet's value and time derivatives."""
+    return value.parts() if hasattr(value, "parts") else (value,)
+
+
 def _describe(exc: BaseException) -> str:
     if isinstance(exc, ZeroDivisionError) or "divide" in str(exc):
         return "division by zero"
@@ -106,8 +111,9 @@ class Expression:
         except (ArithmeticError, ValueError, TypeError) as exc:
             raise ExpressionError(f"expression '{_short(self.text)}' cannot be evaluated{self._at(env)}: "
                                   f"{_describe(exc)}") from None
-        parts = value.parts() if hasattr(value, "parts") else (value,)   # a Jet: value and its time derivatives
-        if any(np.iscomplexobj(v) for v in parts) and not any(np.iscomplexobj(env[n]) for n in self.symbols):
+        parts = _parts(value)
+        if any(np.iscomplexobj(v) for v in parts) and \
+                not any(np.iscomplexobj(v) for n in self.symbols for v in _parts(env[n])):
             raise ExpressionError(f"expression '{_short(self.text)}' gives a complex value{self._at(env)} "
                                   f"(found {complex(np.ravel(parts[0])[0])}): a real number was expected")
         if not all(np.all(np.isfinite(v)) for v in parts):
