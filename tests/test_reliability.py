@@ -502,10 +502,13 @@ def test_optimize_plots_not_overwritten(runner, tmp_path):
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["opt_history.png", "plots"]
 
 
-def test_redundant_joints_found_at_run_time_name_the_case_file(runner, tmp_path):
+def test_inconsistent_redundant_joints_name_the_case_file(runner, tmp_path):
+    # consistent redundant joints are accepted (tests/test_multibody_redundant.py); a loop of
+    # revolutes with one axis tilted cannot close and is refused, naming the file and the joints
     raw = yaml.safe_load((CASES / "four_bar.yaml").read_text())
-    raw["model"]["joints"][3]["type"] = "revolute"           # all axes parallel: over-constrained in 3D
-    simulate_refused(runner, tmp_path, raw, "invalid case", "case.yaml", "redundant", "O4.")
+    raw["model"]["joints"][3]["type"] = "revolute"
+    raw["model"]["joints"][3]["axis"] = [0, 0.2, 1]
+    simulate_refused(runner, tmp_path, raw, "invalid case", "case.yaml", "inconsistent redundant joints")
 
 
 def test_read_only_output_folder_is_refused_before_the_run(runner, tmp_path, monkeypatch):

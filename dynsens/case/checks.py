@@ -37,7 +37,9 @@ def check_reference_types(node: Any, path: str, pc: ProblemCollector) -> None:
     if isinstance(node, dict):
         for key, value in node.items():
             p = f"{path}.{key}" if path else str(key)
-            if key in NAME_LIST_KEYS and isinstance(value, list):
+            # a recorded quantity may name several components
+            listed = key in NAME_LIST_KEYS or (key == "component" and ".quantities[" in p)
+            if listed and isinstance(value, list):
                 bad = [v for v in value if not isinstance(v, _SCALARS)]
                 if bad:
                     pc.add(p, f"expected a list of names, found an entry {bad[0]!r}")
