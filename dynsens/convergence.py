@@ -11,6 +11,11 @@ allows, else the finest run itself.  Methods:
     finite differences of the whole simulation (m + 1 and 2m runs, relative steps 1e-6 and 1e-4);
 ``cs``
     complex step of the whole simulation (m complex runs).
+
+The runs are independent: they go to an executor (:mod:`dynsens.executor`), by default one
+after the other in this process, because the wall times are part of the measurement and
+runs sharing cores slow each other.  With ``workers``/``scheduler`` they run in parallel;
+compare wall times only between runs made the same way.
 """
 from __future__ import annotations
 
@@ -24,6 +29,7 @@ import numpy as np
 import yaml
 
 from .case.load import Case, load_case_dict
+from .executor import cached_case, make_executor, remember_case
 from .simulation import run_case
 
 METHODS = ("ddm-forward", "ddm-central", "ddm-complex", "fd-forward", "fd-central", "cs")
@@ -80,13 +86,26 @@ def _evaluate(case: Case, method: str) -> tuple[dict[str, float], dict[str, np.n
     return vals, grads, time.perf_counter() - t0
 
 
-def work_precision(case: Case, dts: list[float], methods: list[str]) -> tuple[list[Row], dict, dict]:
-    """Run the ladder; returns the rows and the reference values and gradients."""
+def _evaluate_task(job: tuple[str, str, float, str]) -> tuple[dict[str, float], dict[str, np.ndarray], float]:
+    """One rung of the ladder on a worker: (case text, source, Δt, method) -> values, gradients, wall time."""
+    text, source, dt, method = job
+    return _evaluate(_with(cached_case(text, source), [f"integrator.dt={dt}"]), method)
+
+
+def work_precision(case: Case, dts: list[float], methods: list[str], *, workers: int | None = None,
+                   scheduler: str | None = None) -> tuple[list[Row], dict, dict]:
+    """Run the ladder; returns the rows and the reference values and gradients.
+
+    ``workers`` local processes (default 1: in this process, so that wall times are not
+    shared) or the Dask ``scheduler`` at that address run the (Δt, method) pairs.
+    """
     dts = sorted(dts, reverse=True)
-    refs = []
-    for dt in dts[-2:]:
-        vals, grads, _ = _evaluate(_with(case, [f"integrator.dt={dt}"]), "ddm-complex")
-        refs.append((dt, vals, grads))
+    remember_case(case)
+    pairs = [(dt, "ddm-complex") for dt in dts[-2:]] + [(dt, m) for dt in dts for m in methods]
+    with make_executor(workers, scheduler, tasks=len(pairs), default_workers=1) as ex:
+        outs = ex.map(_evaluate_task, [(case.text, case.source, dt, m) for dt, m in pairs])
+    n_ref = len(dts[-2:])
+    refs = [(dt, vals, grads) for (dt, _), (vals, grads, _) in zip(pairs[:n_ref], outs[:n_ref])]
     (dt1, v1, g1), (dt2, v2, g2) = refs if len(refs) == 2 else (refs[0], refs[0])
     p = case.scheme.order
     ratio = dt1 / dt2 if dt2 < dt1 else 1.0
@@ -97,14 +116,11 @@ def work_precision(case: Case, dts: list[float], methods: list[str]) -> tuple[li
     else:
         ref_v, ref_g = v2, g2
     rows = []
-    for dt in dts:
-        c = _with(case, [f"integrator.dt={dt}"])
-        for method in methods:
-            vals, grads, wall = _evaluate(c, method)
-            rows.append(Row(dt, method, wall, vals, grads,
-                            {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
-                            {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
-                             for n in grads}))
+    for (dt, method), (vals, grads, wall) in zip(pairs[n_ref:], outs[n_ref:]):
+        rows.append(Row(dt, method, wall, vals, grads,
+                        {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
+                        {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
+                         for n in grads}))
     return rows, ref_v, ref_g
 
 

@@ -4,24 +4,22 @@ The layout follows Table 1 of the paper: the direct-differentiation gradient of 
 response and its wall time beside the finite-difference gradients for each relative
 step h (Δx_j = h·|x_j|), their wall times and relative differences
 ‖∇_FD − ∇_SA‖ / ‖∇_SA‖.  Finite-difference runs are independent and are spread over
-worker processes.
+worker processes or a Dask cluster (:mod:`dynsens.executor`).
 """
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .case.load import Case
+from .executor import Executor, cached_case, make_executor, remember_case
 from .simulation import run_case
 
 SCHEMES = ("forward", "central", "complex")
-_WORKER_CASE: Case | None = None
+DEFAULT_WORKERS = 2
 
 
 @dataclass
@@ -68,9 +66,10 @@ def _values(case: Case, x: np.ndarray) -> tuple[dict[str, Any], float]:
     return {k: v.value for k, v in res.responses.items()}, time.perf_counter() - t0
 
 
-def _worker(x: np.ndarray) -> tuple[dict[str, Any], float]:
-    assert _WORKER_CASE is not None
-    return _values(_WORKER_CASE, x)
+def _values_task(job: tuple[str, str, np.ndarray]) -> tuple[dict[str, Any], float]:
+    """One finite-difference run on a worker: (case text, case source, design) -> values, wall time."""
+    text, source, x = job
+    return _values(cached_case(text, source), x)
 
 
 def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
@@ -81,9 +80,13 @@ def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
 
 
 def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
-                    x: np.ndarray | None = None, workers: int | None = None) -> GradientReport:
-    """Semi-analytical vs finite-difference gradients at design ``x`` (default x0)."""
-    global _WORKER_CASE
+                    x: np.ndarray | None = None, workers: int | None = None, scheduler: str | None = None,
+                    executor: Executor | None = None) -> GradientReport:
+    """Semi-analytical vs finite-difference gradients at design ``x`` (default x0).
+
+    The finite-difference runs go to ``executor`` when given, else to ``workers`` local
+    processes (default 2; 1 runs them here) or the Dask ``scheduler`` at that address.
+    """
     if scheme not in SCHEMES:
         raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
     x = case.x0 if x is None else np.asarray(x, dtype=float)
@@ -105,17 +108,13 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
             jobs.append(x + dx)
             if scheme == "central":
                 jobs.append(x - dx)
-    workers = workers or min(os.cpu_count() or 1, 2)
-    if workers > 1 and len(jobs) > 1:
-        _WORKER_CASE = case
-        try:
-            ctx = mp.get_context("fork")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                outs = list(pool.map(_worker, jobs))
-        finally:
-            _WORKER_CASE = None
+    remember_case(case)                       # in-process runs reuse the loaded case
+    tasks = [(case.text, case.source, xj) for xj in jobs]
+    if executor is not None:
+        outs = executor.map(_values_task, tasks)
     else:
-        outs = [_values(case, xj) for xj in jobs]
+        with make_executor(workers, scheduler, tasks=len(tasks), default_workers=DEFAULT_WORKERS) as ex:
+            outs = ex.map(_values_task, tasks)
     columns = []
     per = 2 if scheme == "central" else 1
     for k, h in enumerate(steps):

@@ -10,7 +10,7 @@ import click
 from ..case.load import load_case
 from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
 from .main import cli
-from .options import case_argument, parse_float_list, set_option
+from .options import case_argument, parse_float_list, scheduler_option, set_option, workers_option
 
 
 @cli.command("check-gradients")
@@ -23,13 +23,15 @@ from .options import case_argument, parse_float_list, set_option
               help="Exit with status 1 unless every gradient agrees within RTOL at its best step.")
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
-@click.option("--workers", type=int, default=None, help="Worker processes for the FD runs (default: 2).")
+@workers_option("2")
+@scheduler_option
 @set_option
 def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: float | None,
-                        report: str | None, workers: int | None, overrides: tuple[str, ...]) -> None:
+                        report: str | None, workers: int | None, scheduler: str | None,
+                        overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
     case = load_case(case_file, overrides)
-    rep = check_gradients(case, steps, scheme, workers=workers)
+    rep = check_gradients(case, steps, scheme, workers=workers, scheduler=scheduler)
     md = to_markdown(rep)
     click.echo(md)
     if report:

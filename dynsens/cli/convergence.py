@@ -6,7 +6,7 @@ import click
 from ..case.load import load_case
 from ..convergence import METHODS, observed_order, work_precision, write_report
 from .main import cli
-from .options import case_argument, parse_float_list, set_option
+from .options import case_argument, parse_float_list, scheduler_option, set_option, workers_option
 
 
 @cli.command("convergence")
@@ -17,9 +17,11 @@ from .options import case_argument, parse_float_list, set_option
               help=f"Comma-separated subset of {', '.join(METHODS)}.")
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
               help="Folder for the tables and plots.")
+@workers_option("1: the wall times are part of the study")
+@scheduler_option
 @set_option
 def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str,
-                    overrides: tuple[str, ...]) -> None:
+                    workers: int | None, scheduler: str | None, overrides: tuple[str, ...]) -> None:
     """Work-precision study of CASE_FILE: tables (markdown, CSV) and log-log plots."""
     case = load_case(case_file, overrides)
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
@@ -27,7 +29,7 @@ def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdi
     if bad:
         raise click.BadParameter(f"unknown methods {bad} (known: {', '.join(METHODS)})", param_hint="--methods")
     dts = dts or [case.plan.dt * f for f in (4, 2, 1, 0.5, 0.25)]
-    rows, _, _ = work_precision(case, dts, chosen)
+    rows, _, _ = work_precision(case, dts, chosen, workers=workers, scheduler=scheduler)
     files = write_report(case, rows, outdir)
     for n in rows[0].values:
         click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "
