@@ -17,5 +17,12 @@ from .case.load import Case, load_case, load_case_dict  # noqa: E402
 from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noqa: E402
 from .simulation import run_case  # noqa: E402
 
+
+def read_study(path):  # type: ignore[no-untyped-def]
+    """Read a ``dynsens study`` file: ``dynsens.read_study(path).to_dataframe()`` (see dynsens.study)."""
+    from .study import read_study as _read
+    return _read(path)
+
+
 __all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "__version__",
-           "load_case", "load_case_dict", "run_case"]
+           "load_case", "load_case_dict", "read_study", "run_case"]
