@@ -283,7 +283,7 @@ def test_plots(tmp_path: Path) -> None:
     r = invoke("study", SDOF, "-o", out, "--sample", "lhs:6", "--seed", "3", "--gradients", "--workers", "1",
                "--plots", tmp_path / "plots", *SHORT)
     assert r.exit_code == 0, r.output
-    for name in ("study_responses.png", "study_sensitivity.png"):
+    for name in ("study_responses.png", "study_sensitivity.png", "study_pairs.png"):
         assert (tmp_path / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the stiffness dominates the displacement of the SDOF oscillator under a step load
     assert "sensitivity (gradient shares" in r.output

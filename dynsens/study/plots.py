@@ -70,9 +70,65 @@ def format_summary(table: StudyTable) -> str:
     return "\n".join(lines).rstrip()
 
 
+def objective_and_feasibility(table: StudyTable) -> tuple[str, np.ndarray | None]:
+    """The response to map over the design space (the case's objective, else the first
+    response) and, when the case has constraints, which rows satisfy all of them."""
+    from ..case.load import load_case_text
+    spec = load_case_text(table.case_text, table.case_source).optimization
+    if spec is None:
+        return table.response_names[0], None
+    feasible = ~table.failed
+    for c in spec.constraints:
+        v = table.values[:, table.response_names.index(c.response)]
+        with np.errstate(invalid="ignore"):
+            if c.lower is not None:
+                feasible &= v >= c.lower
+            if c.upper is not None:
+                feasible &= v <= c.upper
+    return spec.objective, feasible
+
+
+def _plot_pairs(table: StudyTable, path: Path) -> None:
+    """The objective over every pair of design variables; feasible designs filled."""
+    import matplotlib.pyplot as plt
+    names, m = table.design_names, len(table.design_names)
+    obj, feasible = objective_and_feasibility(table)
+    f = table.values[:, table.response_names.index(obj)]
+    ok = ~table.failed & np.isfinite(f)
+    pairs = [(a, b) for a in range(m) for b in range(a + 1, m)]
+    cols = min(3, len(pairs))
+    rows = -(-len(pairs) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols + 1.0, 3.4 * rows), squeeze=False,
+                             layout="constrained")
+    vmin, vmax = (np.min(f[ok]), np.max(f[ok])) if ok.any() else (0, 1)
+    best = None
+    if feasible is not None and (feasible & ok).any():
+        best = int(np.flatnonzero(feasible & ok)[np.argmin(f[feasible & ok])])
+    for ax, (a, b) in zip(axes.ravel(), pairs):
+        filled = ok if feasible is None else ok & feasible
+        sc = ax.scatter(table.x[filled, a], table.x[filled, b], c=f[filled], vmin=vmin, vmax=vmax, s=28)
+        if feasible is not None:
+            hollow = ok & ~feasible
+            ax.scatter(table.x[hollow, a], table.x[hollow, b], c=f[hollow], vmin=vmin, vmax=vmax, s=28,
+                       marker="x")
+        if best is not None:
+            ax.plot(table.x[best, a], table.x[best, b], "*", ms=14, mfc="none", mec="r")
+        ax.plot(table.x[table.failed, a], table.x[table.failed, b], "s", mfc="none", mec="C3", ms=6)
+        ax.set(xlabel=names[a], ylabel=names[b])
+        ax.grid(True, alpha=0.3)
+    for ax in axes.ravel()[len(pairs):]:
+        ax.axis("off")
+    fig.colorbar(sc, ax=axes.ravel().tolist(), label=obj)
+    note = "" if feasible is None else " (dots: all constraints met, x: violated, red star: best feasible)"
+    fig.suptitle(f"{obj} over the design space{note}", fontsize=10)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def plot_study(table: StudyTable, outdir: str | Path) -> list[Path]:
     """``study_responses.png`` (every response over every variable; short lines show the local
-    gradient at each design) and ``study_sensitivity.png``; returns the files written."""
+    gradient at each design), ``study_sensitivity.png`` and, for two or more design
+    variables, ``study_pairs.png`` (the objective over each pair); returns the files written."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -128,4 +184,7 @@ def plot_study(table: StudyTable, outdir: str | Path) -> list[Path]:
     files.append(out / "study_sensitivity.png")
     fig.savefig(files[1], dpi=100)
     plt.close(fig)
+    if len(names) >= 2:
+        files.append(out / "study_pairs.png")
+        _plot_pairs(table, files[2])
     return files

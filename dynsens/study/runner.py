@@ -38,8 +38,8 @@ def evaluate_design(task: DesignTask) -> dict[str, Any]:
     when asked, ``failed``, ``message`` (the error, or the missing responses and why),
     ``wall_time`` (s), ``run``, ``worker`` and ``units`` (response units, not stored per row).
     """
-    t0 = time.perf_counter()
     case = cached_case(task.case_text, task.case_source)
+    t0 = time.perf_counter()                  # the simulation's own time (not the worker's first case load)
     m, names = len(task.x), case.response_names
     values = np.full(len(names), np.nan)
     grads = np.full((len(names), m), np.nan)

@@ -126,6 +126,7 @@ class StudyTable:
 
     path: Path
     case_source: str
+    case_text: str
     status: str
     sample: str
     seed: int | None
@@ -201,7 +202,8 @@ def read_study(path: str | Path) -> StudyTable:
         order = np.argsort(index, kind="stable")
         grads = col("gradients", (nr, m)) if bool(a["gradients"]) else None
         table = StudyTable(
-            path=path, case_source=_text(f.attrs.get("case_source", "")), status=_text(f.attrs.get("status", "")),
+            path=path, case_source=_text(f.attrs.get("case_source", "")), case_text=_text(f.attrs.get("case", "")),
+            status=_text(f.attrs.get("status", "")),
             sample=_text(a["sample"]), seed=None if int(a["seed"]) < 0 else int(a["seed"]),
             design_names=names, response_names=rnames,
             response_units=json.loads(_text(a.get("response_units", "{}"))),
