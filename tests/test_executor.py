@@ -86,3 +86,35 @@ def test_unreachable_scheduler_is_a_clean_error() -> None:
     with pytest.raises(ExecutorError, match="cannot connect") as info:
         DaskExecutor("tcp://127.0.0.1:9", timeout=1)
     assert isinstance(info.value, DynsensError)
+
+
+# --------------------------------------------------------------------------------------
+# the commands behind it
+# --------------------------------------------------------------------------------------
+def test_check_gradients_and_convergence_on_dask_equal_this_process(dask_address, tmp_path) -> None:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+    from click.testing import CliRunner
+
+    import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
+    from dynsens.case.load import load_case
+    from dynsens.cli.main import cli
+    from dynsens.convergence import work_precision
+    sdof = Path(__file__).resolve().parents[1] / "cases" / "sdof_step.yaml"
+    reports = {}
+    for how in (["--workers", "1"], ["--scheduler", dask_address]):
+        stem = tmp_path / how[0].strip("-")
+        r = CliRunner().invoke(cli, ["check-gradients", str(sdof), "--steps", "1e-4,1e-6", "--set",
+                                     "integrator.t_end=1", "-o", str(stem), *how], catch_exceptions=False)
+        assert r.exit_code == 0, r.output
+        reports[how[0]] = json.loads(stem.with_suffix(".json").read_text())
+    a, b = reports["--workers"], reports["--scheduler"]
+    assert [c["gradients"] for c in a["columns"]] == [c["gradients"] for c in b["columns"]]
+    case = load_case(sdof, ["integrator.t_end=1"])
+    here, _, _ = work_precision(case, [0.004, 0.002], ["ddm-forward", "fd-forward"])
+    there, _, _ = work_precision(case, [0.004, 0.002], ["ddm-forward", "fd-forward"], scheduler=dask_address)
+    assert [(r.dt, r.method) for r in here] == [(r.dt, r.method) for r in there]
+    for r, s in zip(here, there):
+        assert r.values == s.values and all(np.array_equal(r.gradients[n], s.gradients[n]) for n in r.gradients)
