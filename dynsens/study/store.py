@@ -1,22 +1,26 @@
 """The study file: planned designs, one row appended per finished design, and reading it back.
 
-Only the calling process writes.  Each row is appended and flushed as soon as its design
-is done, so a killed study loses only the designs in flight; a kill between the datasets
-of one row leaves them with unequal lengths, and the row is then dropped on reading (and
-recomputed by ``--resume``).
+Only the calling process writes.  Every change (a row, the status) is made to a copy of the
+file that then replaces it (``os.replace``), so the file on disk is always a complete study:
+a kill, even in the middle of writing, loses only the designs in flight.  The copy costs
+little: a study file holds no time histories.
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import h5py
 import numpy as np
 
 from ..case.load import Case
-from ..io.hdf5 import append_rows, atomic_h5, write_design, write_header
+from ..io.hdf5 import atomic_h5, write_design, write_header
 from .sampling import StudyError
 
 ROWS = "study/rows"
@@ -44,36 +48,57 @@ def create_study_file(path: Path, case: Case, designs: np.ndarray, sample: str, 
                         "response_units": json.dumps(units), "runs": 1})
 
 
+@contextlib.contextmanager
+def _updated(path: Path) -> Iterator[h5py.File]:
+    """Change a copy of ``path``; the copy replaces ``path`` only when the change is complete."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "a") as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
 def set_response_units(path: Path, units: dict[str, str]) -> None:
     """Units of the responses (known once the first design has run)."""
-    with h5py.File(path, "a") as f:
+    with _updated(path) as f:
         f["study"].attrs["response_units"] = json.dumps(units)
 
 
 def append_row(path: Path, row: dict[str, Any]) -> None:
-    """Append one finished design (see :func:`dynsens.study.runner.evaluate_design`) and flush."""
+    """Append one finished design (see :func:`dynsens.study.runner.evaluate_design`)."""
     data = {k: (_str(v) if isinstance(v, str) else np.asarray(v)) for k, v in row.items()
-            if k not in ("units",) and v is not None}
-    append_rows(path, ROWS, data)
+            if k != "units" and v is not None}
+    with _updated(path) as f:
+        g = f.require_group(ROWS)
+        for k, v in data.items():
+            if k not in g:
+                g.create_dataset(k, data=v[None], maxshape=(None,) + v.shape, chunks=True)
+            else:
+                ds = g[k]
+                ds.resize(ds.shape[0] + 1, axis=0)
+                ds[-1] = v
 
 
 def set_status(path: Path, status: str, message: str) -> None:
     """Root ``status``/``message``: running, completed or interrupted."""
-    with h5py.File(path, "a") as f:
+    with _updated(path) as f:
         f.attrs["status"] = status
         f.attrs["message"] = message
 
 
-def _complete_rows(g: h5py.Group | None) -> int:
-    """Rows present in every dataset (a kill between two datasets leaves a partial row)."""
-    if g is None or not len(g):
-        return 0
-    return min(ds.shape[0] for ds in g.values())
+def _n_rows(g: h5py.Group | None) -> int:
+    return 0 if g is None or "index" not in g else int(g["index"].shape[0])
 
 
 def prepare_resume(path: Path, case: Case, sample: str | None, seed: int | None,
                    gradients: bool) -> tuple[np.ndarray, set[int], int, str, int | None]:
-    """Check that ``path`` continues this study; drop a partial last row.
+    """Check that ``path`` continues this study and count this run.
 
     Returns the planned designs, the indices already done, the number of this run
     (0 for the first), the sample specification and the seed.
@@ -81,10 +106,10 @@ def prepare_resume(path: Path, case: Case, sample: str | None, seed: int | None,
     if not path.exists():
         raise StudyError(f"--resume: {path} does not exist (run without --resume to start)")
     try:
-        f = h5py.File(path, "a")
+        h5py.File(path, "r").close()
     except OSError as exc:
         raise StudyError(f"--resume: cannot open {path}: {exc}") from None
-    with f:
+    with _updated(path) as f:
         if "study" not in f or "designs" not in f["study"]:
             raise StudyError(f"--resume: {path} is not a dynsens study file")
         if _text(f.attrs.get("case", "")) != case.text:
@@ -101,16 +126,11 @@ def prepare_resume(path: Path, case: Case, sample: str | None, seed: int | None,
             was = "with" if bool(a["gradients"]) else "without"
             raise StudyError(f"--resume: {path} was computed {was} --gradients; give the same option")
         g = f.get(ROWS)
-        n = _complete_rows(g)
-        if g is not None:
-            for ds in g.values():
-                if ds.shape[0] > n:
-                    ds.resize(n, axis=0)
-        done = set(int(i) for i in g["index"][:n]) if g is not None and n else set()
+        done = set(int(i) for i in g["index"][()]) if _n_rows(g) else set()
         run = int(a.get("runs", 1))
         a["runs"] = run + 1
-        f.flush()
-        return f["study/designs"][()], done, run, stored, (None if s < 0 else s)
+        designs = f["study/designs"][()]
+    return designs, done, run, stored, (None if s < 0 else s)
 
 
 @dataclass
@@ -192,7 +212,7 @@ def read_study(path: str | Path) -> StudyTable:
         names = tuple(_text(n) for n in f["design/names"][()])
         m, nr = len(names), len(rnames)
         g = f.get(ROWS)
-        n = _complete_rows(g)
+        n = _n_rows(g)
 
         def col(key: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
             if g is None or key not in g or n == 0:
