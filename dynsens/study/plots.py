@@ -137,7 +137,8 @@ def plot_study(table: StudyTable, outdir: str | Path) -> list[Path]:
     names, rnames = table.design_names, table.response_names
     nr, m = len(rnames), len(names)
     ok = _usable(table)
-    fig, axes = plt.subplots(nr, m, figsize=(3.1 * m, 2.0 * nr + 0.6), squeeze=False, sharex="col")
+    fig, axes = plt.subplots(nr, m, figsize=(3.1 * m, 2.0 * nr + 0.6), squeeze=False, sharex="col",
+                             layout="constrained")
     span = table.upper - table.lower
     for i, r in enumerate(rnames):
         rows = ok & np.isfinite(table.values[:, i])
@@ -164,7 +165,6 @@ def plot_study(table: StudyTable, outdir: str | Path) -> list[Path]:
     extra = (" Orange: local slope ∂r/∂x_j." if table.gradients is not None else "") + \
         (" Red lines: failed designs." if (~ok).any() else "")
     fig.suptitle(f"{Path(table.case_source).stem}: {int(ok.sum())} designs ({table.sample}).{extra}", fontsize=10)
-    fig.tight_layout()
     files = [out / "study_responses.png"]
     fig.savefig(files[0], dpi=90)
     plt.close(fig)

@@ -59,8 +59,6 @@ def evaluate_design(task: DesignTask) -> dict[str, Any]:
             values[i] = float(np.real(r.value))
             if task.gradients and r.gradient is not None:
                 grads[i] = np.real(r.gradient)
-        if res.status != "completed":
-            notes.insert(0, f"{res.status}: {res.message}")
         message = "; ".join(notes)
     return {"index": task.index, "x": np.asarray(task.x, dtype=float), "values": values,
             "gradients": grads if task.gradients else None, "failed": failed, "message": message,
