@@ -219,7 +219,7 @@ class DaskExecutor(Executor):
             raise ExecutorError("--scheduler needs Dask distributed: pip install 'dynsens[dask]'") from None
         try:
             self._client = Client(address, timeout=timeout)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:     # ValueError: not an address
             raise ExecutorError(f"--scheduler {address}: cannot connect ({exc})") from None
         n = len(self._client.scheduler_info().get("workers", {}))
         self.workers = max(n, 1)
