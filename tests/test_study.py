@@ -187,17 +187,17 @@ def test_missing_response_is_noted(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------------------
 def test_killed_study_resumes_without_recomputing_a_row(tmp_path: Path) -> None:
     out = tmp_path / "s.h5"
-    args = ["study", str(SDOF), "-o", str(out), "--sample", "lhs:10", "--seed", "4", "--gradients",
-            "--workers", "1"]
+    args = ["study", str(SDOF), "-o", str(out), "--sample", "lhs:8", "--seed", "4", "--gradients",
+            "--workers", "1", "--set", "integrator.t_end=4"]
     code = "import sys; from dynsens.cli.main import main; sys.argv = ['dynsens'] + sys.argv[1:]; main()"
     proc = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     printed = []
     assert proc.stdout is not None
-    for line in proc.stdout:                       # kill -9 once three rows are on disk
+    for line in proc.stdout:                       # kill -9 once two rows are on disk
         if line.startswith("["):
             printed.append(int(line.split("design ")[1].split(":")[0]))
-        if len(printed) == 3:
+        if len(printed) == 2:
             proc.send_signal(signal.SIGKILL)
             break
     proc.wait(timeout=60)
@@ -205,16 +205,17 @@ def test_killed_study_resumes_without_recomputing_a_row(tmp_path: Path) -> None:
     before = read_study(out)
     assert before.status == "running"             # nobody marked it finished
     done = set(before.index.tolist())
-    assert set(printed) <= done and len(done) < 10
-    r = invoke("study", SDOF, "-o", out, "--gradients", "--resume", "--workers", "1")
+    assert set(printed) <= done and len(done) < 8
+    r = invoke("study", SDOF, "-o", out, "--gradients", "--resume", "--workers", "1", "--set", "integrator.t_end=4")
     assert r.exit_code == 0, r.output
     resumed = [int(line.split("design ")[1].split(":")[0]) for line in r.output.splitlines() if line.startswith("[")]
-    assert sorted(resumed) == sorted(set(range(10)) - done)      # only the missing ones, each once
+    assert sorted(resumed) == sorted(set(range(8)) - done)       # only the missing ones, each once
     t = read_study(out)
-    assert t.status == "completed" and t.index.tolist() == list(range(10))
+    assert t.status == "completed" and t.index.tolist() == list(range(8))
     assert set(t.index[t.run == 0]) == done and set(t.index[t.run == 1]) == set(resumed)
     # the resumed rows equal an uninterrupted study
-    ref = run_study(load_case(SDOF), tmp_path / "ref.h5", "lhs:10", seed=4, gradients=True, workers=1)
+    ref = run_study(load_case(SDOF, ["integrator.t_end=4"]), tmp_path / "ref.h5", "lhs:8", seed=4, gradients=True,
+                    workers=1)
     np.testing.assert_array_equal(t.x, ref.x)
     np.testing.assert_array_equal(t.values, ref.values)
     np.testing.assert_array_equal(t.gradients, ref.gradients)
