@@ -28,7 +28,7 @@ from .options import case_argument, overwrite_option, scheduler_option, set_opti
 @overwrite_option
 @set_option
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
-              help="Write study_responses.png and study_sensitivity.png to DIR.")
+              help="Write study_responses.png, study_sensitivity.png and study_pairs.png to DIR.")
 def study(case_file: str, output: str, sample: str | None, gradients: bool, seed: int | None,
           workers: int | None, scheduler: str | None, resume: bool, overwrite: bool,
           overrides: tuple[str, ...], plots: str | None) -> None:
