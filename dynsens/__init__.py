@@ -4,6 +4,10 @@ Governing equation -> Newmark-beta time integration -> Newton-Raphson, run once 
 state and once more, with matrix right-hand sides, for the design sensitivities.
 """
 import os as _os
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
+if _TYPE_CHECKING:  # pragma: no cover
+    from . import study as _study
 
 # The per-step matrices are small (mechanisms, chains) or sparse: a threaded BLAS only adds
 # overhead and, on a busy machine, contention.  Parallelism in dynsens is across simulations
@@ -18,8 +22,11 @@ from .errors import CaseError, ConvergenceError, DynsensError, ModelError  # noq
 from .simulation import run_case  # noqa: E402
 
 
-def read_study(path):  # type: ignore[no-untyped-def]
-    """Read a ``dynsens study`` file: ``dynsens.read_study(path).to_dataframe()`` (see dynsens.study)."""
+def read_study(path: "str | _os.PathLike[str]") -> "_study.StudyTable":
+    """Read a ``dynsens study`` file: ``dynsens.read_study(path).to_dataframe()`` (see dynsens.study).
+
+    Imported on use, so that ``import dynsens`` does not load the study package.
+    """
     from .study import read_study as _read
     return _read(path)
 
