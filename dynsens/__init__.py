@@ -4,6 +4,10 @@ Governing equation -> Newmark-beta time integration -> Newton-Raphson, run once 
 state and once more, with matrix right-hand sides, for the design sensitivities.
 """
 import os as _os
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
+if _TYPE_CHECKING:  # pragma: no cover
+    from . import study as _study
 
 # The per-step matrices are small (mechanisms, chains) or sparse: a threaded BLAS only adds
 # overhead and, on a busy machine, contention.  Parallelism in dynsens is across simulations
@@ -20,7 +24,17 @@ from .io.reader import Result, read_result  # noqa: E402
 from .api import OptimizeResult, Simulation, check_gradients, simulate  # noqa: E402
 from . import optimize  # noqa: E402  (the subpackage; calling it runs dynsens.api.optimize)
 
+
+def read_study(path: "str | _os.PathLike[str]") -> "_study.StudyTable":
+    """Read a ``dynsens study`` file: ``dynsens.read_study(path).to_dataframe()`` (see dynsens.study).
+
+    Imported on use, so that ``import dynsens`` does not load the study package.
+    """
+    from .study import read_study as _read
+    return _read(_os.fspath(path))
+
+
 # The public API; everything else (dynsens.models, dynsens.march, ...) may change between versions.
 __all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Result",
            "Simulation", "SimulationResult", "__version__", "check_gradients", "load_case", "load_case_dict",
-           "optimize", "read_result", "run_case", "simulate"]
+           "optimize", "read_result", "read_study", "run_case", "simulate"]

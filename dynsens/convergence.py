@@ -11,6 +11,11 @@ allows, else the finest run itself.  Methods:
     finite differences of the whole simulation (m + 1 and 2m runs, relative steps 1e-6 and 1e-4);
 ``cs``
     complex step of the whole simulation (m complex runs).
+
+The runs are independent: they go to an executor (:mod:`dynsens.executor`), by default one
+after the other in this process, because the wall times are part of the measurement and
+runs sharing cores slow each other.  With ``workers``/``scheduler`` they run in parallel;
+compare wall times only between runs made the same way.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ import yaml
 
 from .case.load import Case, load_case_dict
 from .io.paths import atomic_path, atomic_write_text, safe_stem
+from .executor import cached_case, make_executor, remember_case
 from .simulation import run_case
 
 log = logging.getLogger(__name__)
@@ -89,34 +95,46 @@ def _evaluate(case: Case, method: str) -> tuple[dict[str, float], dict[str, np.n
 _RUNS = {"fd-forward": 1.0, "fd-central": 2.0, "cs": 1.5}
 
 
-def work_precision(case: Case, dts: list[float], methods: list[str],
+def _evaluate_task(job: tuple[str, str, float, str]) -> tuple[dict[str, float], dict[str, np.ndarray], float]:
+    """One rung of the ladder on a worker: (case text, source, Δt, method) -> values, gradients, wall time."""
+    text, source, dt, method = job
+    return _evaluate(_with(cached_case(text, source), [f"integrator.dt={dt}"]), method)
+
+
+def work_precision(case: Case, dts: list[float], methods: list[str], *, workers: int | None = None,
+                   scheduler: str | None = None,
                    progress: Callable[[float, float, str], None] | None = None
                    ) -> tuple[list[Row], dict, dict]:
     """Run the ladder; returns the rows and the reference values and gradients.
 
+    ``workers`` local processes (default 1: in this process, so that wall times are not
+    shared) or the Dask ``scheduler`` at that address run the (Δt, method) pairs.
     ``progress(done, total, note)`` is called after every (Δt, method) run with the work done so
-    far in estimated simulation-step units (a run costs ∝ 1/Δt)."""
+    far in estimated simulation-step units (a run costs ∝ 1/Δt).
+    """
     dts = sorted(dts, reverse=True)
     from .warmup import warm_case
     warm_case(case)  # compile first: no reported wall time includes numba compilation
+    remember_case(case)
     m = case.x0.size
+    pairs = [(dt, "ddm-complex") for dt in dts[-2:]] + [(dt, me) for dt in dts for me in methods]
 
     def cost(dt: float, method: str) -> float:
         return (1.0 + m * _RUNS.get(method, 0.2)) / dt
-    total = sum(cost(dt, "ddm-complex") for dt in dts[-2:]) + sum(cost(dt, me) for dt in dts for me in methods)
+    total = sum(cost(dt, me) for dt, me in pairs)
     done = 0.0
 
-    def tick(dt: float, method: str) -> None:
+    def tick(i: int) -> None:
         nonlocal done
+        dt, method = pairs[i]
         done += cost(dt, method)
         log.info("convergence: Δt = %g s, %s done", dt, method)
         if progress is not None:
             progress(done, total, f"Δt = {dt:g} s, {method}")
-    refs = []
-    for dt in dts[-2:]:
-        vals, grads, _ = _evaluate(_with(case, [f"integrator.dt={dt}"]), "ddm-complex")
-        refs.append((dt, vals, grads))
-        tick(dt, "ddm-complex")
+    with make_executor(workers, scheduler, tasks=len(pairs), default_workers=1) as ex:
+        outs = ex.map(_evaluate_task, [(case.text, case.source, dt, me) for dt, me in pairs], tick)
+    n_ref = len(dts[-2:])
+    refs = [(dt, vals, grads) for (dt, _), (vals, grads, _) in zip(pairs[:n_ref], outs[:n_ref])]
     (dt1, v1, g1), (dt2, v2, g2) = refs if len(refs) == 2 else (refs[0], refs[0])
     p = case.scheme.order
     ratio = dt1 / dt2 if dt2 < dt1 else 1.0
@@ -127,15 +145,11 @@ def work_precision(case: Case, dts: list[float], methods: list[str],
     else:
         ref_v, ref_g = v2, g2
     rows = []
-    for dt in dts:
-        c = _with(case, [f"integrator.dt={dt}"])
-        for method in methods:
-            vals, grads, wall = _evaluate(c, method)
-            tick(dt, method)
-            rows.append(Row(dt, method, wall, vals, grads,
-                            {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
-                            {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
-                             for n in grads}))
+    for (dt, method), (vals, grads, wall) in zip(pairs[n_ref:], outs[n_ref:]):
+        rows.append(Row(dt, method, wall, vals, grads,
+                        {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
+                        {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
+                         for n in grads}))
     return rows, ref_v, ref_g
 
 

@@ -4,26 +4,24 @@ The layout follows Table 1 of the paper: the direct-differentiation gradient of 
 response and its wall time beside the finite-difference gradients for each relative
 step h (Δx_j = h·|x_j|), their wall times and relative differences
 ‖∇_FD − ∇_SA‖ / ‖∇_SA‖.  Finite-difference runs are independent and are spread over
-worker processes.
+worker processes or a Dask cluster (:mod:`dynsens.executor`).
 """
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
 from .case.load import Case
+from .executor import Executor, cached_case, make_executor, remember_case
 from .simulation import run_case
 
 SCHEMES = ("forward", "central", "complex")
 log = logging.getLogger(__name__)
-_WORKER_CASE: Case | None = None
+DEFAULT_WORKERS = 2
 
 
 @dataclass
@@ -81,9 +79,10 @@ def _values(case: Case, x: np.ndarray) -> tuple[dict[str, Any], float]:
     return {k: v.value for k, v in res.responses.items()}, time.perf_counter() - t0
 
 
-def _worker(x: np.ndarray) -> tuple[dict[str, Any], float]:
-    assert _WORKER_CASE is not None
-    return _values(_WORKER_CASE, x)
+def _values_task(job: tuple[str, str, np.ndarray]) -> tuple[dict[str, Any], float]:
+    """One finite-difference run on a worker: (case text, case source, design) -> values, wall time."""
+    text, source, x = job
+    return _values(cached_case(text, source), x)
 
 
 def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
@@ -94,13 +93,16 @@ def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
 
 
 def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
-                    x: np.ndarray | None = None, workers: int | None = None,
+                    x: np.ndarray | None = None, workers: int | None = None, scheduler: str | None = None,
+                    executor: Executor | None = None,
                     progress: Callable[[int, int], None] | None = None) -> GradientReport:
     """Semi-analytical vs finite-difference gradients at design ``x`` (default x0).
 
+    The finite-difference runs go to ``executor`` when given, else to ``workers`` local
+    processes (default 2; 1 runs them here) or the Dask ``scheduler`` at that address.
     ``progress(done, total)`` is called after every simulation (the semi-analytical and the
-    primal run, then each finite-difference run as it finishes)."""
-    global _WORKER_CASE
+    primal run, then each finite-difference run as it finishes).
+    """
     if scheme not in SCHEMES:
         raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
     x = case.x0 if x is None else np.asarray(x, dtype=float)
@@ -134,25 +136,16 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
             jobs.append(x + dx)
             if scheme == "central":
                 jobs.append(x - dx)
-    workers = workers or min(os.cpu_count() or 1, 2)
-    if workers > 1 and len(jobs) > 1:
-        _WORKER_CASE = case
-        try:
-            ctx = mp.get_context("fork")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                futures = {pool.submit(_worker, xj): k for k, xj in enumerate(jobs)}
-                results: dict[int, tuple[dict[str, Any], float]] = {}
-                for fut in as_completed(futures):
-                    results[futures[fut]] = fut.result()
-                    tick(f"finite-difference run {futures[fut] + 1}")
-                outs = [results[k] for k in range(len(jobs))]
-        finally:
-            _WORKER_CASE = None
+    remember_case(case)                       # in-process runs reuse the loaded case
+    tasks = [(case.text, case.source, xj) for xj in jobs]
+
+    def fd_done(k: int) -> None:
+        tick(f"finite-difference run {k + 1}")
+    if executor is not None:
+        outs = executor.map(_values_task, tasks, fd_done)
     else:
-        outs = []
-        for k, xj in enumerate(jobs):
-            outs.append(_values(case, xj))
-            tick(f"finite-difference run {k + 1}")
+        with make_executor(workers, scheduler, tasks=len(tasks), default_workers=DEFAULT_WORKERS) as ex:
+            outs = ex.map(_values_task, tasks, fd_done)
     columns = []
     per = 2 if scheme == "central" else 1
     for k, h in enumerate(steps):

@@ -14,7 +14,8 @@ from ..partials_audit import audit_json, audit_markdown
 from ..partials_audit import audit_partials as audit_partials_of
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, overwrite_option, parse_float_list, set_option, verbosity_options
+from .options import (case_argument, overwrite_option, parse_float_list, scheduler_option, set_option,
+                      verbosity_options, workers_option)
 
 
 @cli.command("check-gradients")
@@ -27,7 +28,8 @@ from .options import case_argument, overwrite_option, parse_float_list, set_opti
               help="Exit with status 1 unless every gradient agrees within RTOL at its best step.")
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
-@click.option("--workers", type=int, default=None, help="Worker processes for the FD runs (default: 2).")
+@workers_option("2")
+@scheduler_option
 @click.option("--audit-partials", is_flag=True,
               help="Also sweep the forward partials' own step (1e-2 ... 1e-12) against complex-step partials "
                    "and flag design variables without a plateau.")
@@ -35,8 +37,8 @@ from .options import case_argument, overwrite_option, parse_float_list, set_opti
 @set_option
 @verbosity_options
 def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: float | None,
-                        report: str | None, workers: int | None, audit_partials: bool, overwrite: bool,
-                        overrides: tuple[str, ...]) -> None:
+                        report: str | None, workers: int | None, scheduler: str | None, audit_partials: bool,
+                        overwrite: bool, overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
     paths: list[Path] = []
     if report:
@@ -48,7 +50,7 @@ def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: f
         def progress(done: int, total: int) -> None:
             bar.total = total
             bar.update(done, f"simulation {done} of {total}", force=True)
-        rep = check_gradients(case, steps, scheme, workers=workers, progress=progress)
+        rep = check_gradients(case, steps, scheme, workers=workers, scheduler=scheduler, progress=progress)
     md = to_markdown(rep)
     data = to_json(rep)
     if audit_partials:

@@ -8,7 +8,8 @@ from ..convergence import METHODS, observed_order, report_files, work_precision,
 from ..io.paths import check_output_folder
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, overwrite_option, parse_float_list, set_option, verbosity_options
+from .options import (case_argument, overwrite_option, parse_float_list, scheduler_option, set_option,
+                      verbosity_options, workers_option)
 
 
 @cli.command("convergence")
@@ -19,10 +20,13 @@ from .options import case_argument, overwrite_option, parse_float_list, set_opti
               help=f"Comma-separated subset of {', '.join(METHODS)}.")
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
               help="Folder for the tables and plots.")
+@workers_option("1: the wall times are part of the study")
+@scheduler_option
 @overwrite_option
 @set_option
 @verbosity_options
-def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str, overwrite: bool,
+def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdir: str,
+                    workers: int | None, scheduler: str | None, overwrite: bool,
                     overrides: tuple[str, ...]) -> None:
     """Work-precision study of CASE_FILE: tables (markdown, CSV) and log-log plots."""
     check_output_folder(outdir, [], overwrite)
@@ -37,7 +41,7 @@ def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdi
         def progress(done: float, total: float, note: str) -> None:
             bar.total = total
             bar.update(done, note, force=True)
-        rows, _, _ = work_precision(case, dts, chosen, progress=progress)
+        rows, _, _ = work_precision(case, dts, chosen, workers=workers, scheduler=scheduler, progress=progress)
     files = write_report(case, rows, outdir, overwrite=overwrite)
     for n in rows[0].values:
         click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "

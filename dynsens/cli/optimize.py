@@ -13,7 +13,7 @@ from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOu
 from ..optimize.summary import decision_summary
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, overwrite_option, set_option, verbosity_options
+from .options import case_argument, overwrite_option, scheduler_option, set_option, verbosity_options
 
 
 def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]:
@@ -91,8 +91,7 @@ def format_verdict(o: StartOutcome) -> str:
 @click.option("--seed", type=int, default=None, help="Seed of the Latin hypercube [default: random, stored].")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes for several starts [default: min(starts, CPUs)].")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Run the starts on this Dask distributed scheduler (pip install 'dynsens[dask]').")
+@scheduler_option
 @click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write PNG plots to DIR: history (objective, violation, KKT), design variables and "

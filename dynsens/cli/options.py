@@ -12,6 +12,16 @@ set_option = click.option("--set", "overrides", multiple=True, metavar="KEY=VALU
                           help="Override a case entry, e.g. --set integrator.dt=5e-4 "
                                "--set design.variables[0].value=3 (repeatable).")
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+scheduler_option = click.option("--scheduler", default=None, metavar="ADDRESS",
+                                 help="Run the simulations on this Dask distributed scheduler, e.g. "
+                                      "tcp://host:8786 (pip install 'dynsens[dask]'; see the README).")
+
+
+def workers_option(default: str) -> Callable:
+    """``--workers N``: local worker processes (``spawn``); 1 runs in this process."""
+    return click.option("--workers", type=click.IntRange(min=1), default=None,
+                        help=f"Local worker processes; 1 runs in this process [default: {default}]. "
+                             "Ignored with --scheduler.")
 
 
 def parse_float_list(ctx: Any, param: Any, value: str | None) -> list[float] | None:

@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from ..case.load import Case, load_case_text
+from ..executor import cached_case, publish
 from .problem import FEAS_TOL, Evaluation, Evaluator, ScaledProblem, Sink, kkt_measure, max_violation
 
 # --------------------------------------------------------------------------------------
-# one start (runs in the caller, a worker process or a Dask worker)
+# one start (runs in the caller, a worker process or a Dask worker: see dynsens.executor)
 # --------------------------------------------------------------------------------------
 @dataclass
 class StartJob:
@@ -29,8 +29,6 @@ class StartJob:
     elapsed0: float = 0.0      # s, over earlier segments
     resume: bool = False
     seed_eval: Evaluation | None = None
-    sink: str = "direct"       # direct | queue | dask
-    topic: str = ""
 
 
 @dataclass
@@ -56,19 +54,6 @@ class StartOutcome:
     slsqp_nit: int = 0
 
 
-_CASES: dict[tuple[str, str], Case] = {}
-_QUEUE: Any = None
-_DIRECT_SINK: Sink | None = None
-
-
-def _case_from_text(text: str, source: str) -> Case:
-    key = (text, source)
-    if key not in _CASES:
-        _CASES.clear()
-        _CASES[key] = load_case_text(text, source)
-    return _CASES[key]
-
-
 def _plain(v: Any) -> Any:
     """numpy → plain Python (msgpack-friendly for Dask events)."""
     if isinstance(v, np.ndarray):
@@ -78,25 +63,14 @@ def _plain(v: Any) -> Any:
     return v
 
 
-def _make_sink(job: StartJob) -> Sink:
-    if job.sink == "queue":
-        q = _QUEUE
-        return lambda msg: q.put(msg)
-    if job.sink == "dask":
-        from distributed import get_worker
-        worker = get_worker()
-        return lambda msg: worker.log_event(job.topic, msg)
-    assert _DIRECT_SINK is not None
-    return _DIRECT_SINK
-
-
 def run_start(job: StartJob) -> StartOutcome:
-    """Run SLSQP for one start; stream every evaluation and iteration row to the job's sink."""
+    """Run SLSQP for one start; stream every evaluation and iteration row to the caller
+    (:func:`dynsens.executor.publish`)."""
     from scipy.optimize import Bounds, minimize
     t_begin = time.perf_counter()
-    case = _case_from_text(job.case_text, job.case_source)
+    case = cached_case(job.case_text, job.case_source)
     problem = job.problem
-    sink = _make_sink(job)
+    sink: Sink = publish
     sent: list[dict[str, Any]] = []
     seq = [0]
     state: dict[str, Any] = {"n_sim": 0, "failed": 0, "message": "", "t_last": t_begin, "it": job.iteration0}

@@ -1,12 +1,7 @@
 """Running the starts: the first at x0, the rest from a Latin hypercube, in worker processes or on
-a Dask cluster; the final table and verdict."""
+a Dask cluster (:mod:`dynsens.executor`); the final table and verdict."""
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import queue as _queue
-import uuid
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, cast
@@ -15,9 +10,9 @@ import h5py
 import numpy as np
 
 from ..case.load import Case
+from ..executor import make_executor, remember_case
 from ..io.hdf5 import OutputExistsError
-from . import jobs as job_state  # the worker-side sinks are module state of .jobs
-from .jobs import _CASES, StartJob, StartOutcome, run_start
+from .jobs import StartJob, StartOutcome, run_start
 from .problem import OptimizationError, ScaledProblem, _fmt, _spec, build_problem, scaled_evaluation, simulate
 from .store import holds_writer_lock, validate_resume_file
 from .store import (_init_file, _outcome_attrs, _outcome_from_file, _problem_attrs, _problem_from_file,
@@ -164,7 +159,7 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
         for k, xs in enumerate(pts):
             jobs.append(StartJob(k, case.text, case.source, problem, xs, maxiter, ftol,
                                  seed_eval=ev0 if k == 0 else None))
-    _CASES[(case.text, case.source)] = case
+    remember_case(case)
     if resume:
         _set_attrs(path, "", {"status": "running", "message": ""})
         _set_attrs(path, "optimization", {"maxiter": maxiter, "ftol": ftol})
@@ -192,18 +187,8 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
 
     try:
         if jobs:
-            n_workers = min(len(jobs), workers or (os.cpu_count() or 1))
-            if scheduler:
-                _run_dask(jobs, scheduler, handle, finish)
-            elif n_workers > 1:
-                _run_pool(jobs, n_workers, handle, finish)
-            else:
-                job_state._DIRECT_SINK = handle
-                try:
-                    for j in jobs:
-                        finish(run_start(j))
-                finally:
-                    job_state._DIRECT_SINK = None
+            with make_executor(workers, scheduler, tasks=len(jobs)) as executor:
+                executor.run(run_start, jobs, lambda i, o: finish(o), handle)
     except KeyboardInterrupt:
         set_status(path, "interrupted", "interrupted: continue with --resume")
         raise
@@ -257,76 +242,6 @@ def _resume_jobs(path: Path, case: Case, starts: int | None, seed: int | None, x
             else:
                 jobs.append(StartJob(k, case.text, case.source, problem, pts[k], maxiter, ftol))
     return problem, pts, jobs, done
-
-
-def _run_pool(jobs: list[StartJob], n_workers: int, handle: Callable[[dict[str, Any]], None],
-              finish: Callable[[StartOutcome], None]) -> None:
-    """Starts in forked worker processes; rows come back through a queue to this process."""
-    ctx = mp.get_context("fork")
-    job_state._QUEUE = ctx.Queue()
-    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
-    try:
-        futs: dict[Future, StartJob] = {}
-        for j in jobs:
-            j.sink = "queue"
-            futs[pool.submit(run_start, j)] = j
-        _drain(lambda: job_state._QUEUE.get(timeout=0.05), futs, handle, finish)
-    except BaseException:
-        # stop the starts still running (our own worker processes) instead of waiting for them
-        procs = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in procs:
-            proc.terminate()
-        raise
-    else:
-        pool.shutdown(wait=True)
-    finally:
-        job_state._QUEUE = None
-
-
-def _drain(get: Callable[[], dict[str, Any]], futs: dict[Any, StartJob],
-           handle: Callable[[dict[str, Any]], None], finish: Callable[[StartOutcome], None]) -> None:
-    left = dict(futs)
-    while left:
-        try:
-            handle(get())
-            continue
-        except _queue.Empty:
-            pass
-        for fu in [fu for fu in left if fu.done()]:
-            del left[fu]
-            finish(fu.result())
-
-
-def _run_dask(jobs: list[StartJob], address: str, handle: Callable[[dict[str, Any]], None],
-              finish: Callable[[StartOutcome], None]) -> None:
-    """Starts as tasks on a Dask distributed cluster; rows come back as worker events."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise OptimizationError("--scheduler needs Dask distributed: pip install 'dynsens[dask]'") from None
-    topic = f"dynsens-optimize-{uuid.uuid4().hex}"
-    q: _queue.Queue = _queue.Queue()
-    try:
-        client = Client(address, timeout=30)
-    except (OSError, TimeoutError) as exc:
-        raise OptimizationError(f"--scheduler {address}: cannot connect ({exc})") from None
-    with client:
-        client.subscribe_topic(topic, lambda ev: q.put(ev[1]))
-        try:
-            futs = {}
-            for j in jobs:
-                j.sink, j.topic = "dask", topic
-                futs[client.submit(run_start, j, pure=False)] = j
-            try:
-                _drain(lambda: q.get(timeout=0.05), futs, handle, finish)
-            except BaseException:
-                client.cancel(list(futs))
-                raise
-        finally:
-            client.unsubscribe_topic(topic)
-
-
 
 
 def _finalize(path: Path, case: Case, problem: ScaledProblem, outs: list[StartOutcome]) -> OptimizationResult:
