@@ -15,7 +15,10 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .derivatives.adjoint import AdjointMode
+from .derivatives.checkpoints import DEFAULT_MEMORY_BUDGET, RecordStore
 from .derivatives.direct import DirectMode
+from .errors import CaseError
 from .integrators.newmark import Newmark
 from .models.base import Model, StepState
 from .responses import EventHit, ResponseSet, ResponseValue
@@ -46,6 +49,10 @@ class RunPlan:
     sensitivity_history : store the sensitivity histories of the same fields.
     max_step_cuts : how often a step whose Newton iteration fails is halved before the run
         stops (responses and histories keep the regular grid; the sub-steps are internal).
+    method : ``direct`` | ``adjoint`` | ``auto``: how the sensitivities are computed
+        (:func:`choose_method` decides ``auto``).
+    memory_budget : bytes of step records the adjoint keeps; beyond it, checkpoints and
+        recomputed segments.
     """
 
     t0: float
@@ -59,6 +66,8 @@ class RunPlan:
     history: tuple[str, ...] = ("q", "qd", "qdd")
     sensitivity_history: bool = False
     max_step_cuts: int = 6
+    method: str = "direct"
+    memory_budget: float = DEFAULT_MEMORY_BUDGET
 
     @property
     def n_steps(self) -> int:
@@ -88,6 +97,8 @@ class RunResult:
     status: str
     message: str
     labels: dict[str, list[str]]
+    method: str = ""          # the derivative mode that ran (direct | adjoint), "" without
+    method_reason: str = ""   # why it was chosen
 
 
 class RunStore:
@@ -130,7 +141,7 @@ class GridFeed:
     (the direct mode trails the state by up to ``trail_length`` steps; without derivatives,
     every step goes at once).  Sub-steps of step cuts go to the mode, not to the responses."""
 
-    def __init__(self, mode: DirectMode | None, responses: ResponseSet, store: RunStore):
+    def __init__(self, mode: DirectMode | AdjointMode | None, responses: ResponseSet, store: RunStore):
         self.mode, self.responses, self.store = mode, responses, store
         self.length = mode.trail_length if mode is not None else 1
         self.marks: list[tuple[int, float, StepState, float, EventHit | None, int]] = []
@@ -139,8 +150,7 @@ class GridFeed:
     def add(self, i: int, t: float, h: float, records: list[StepRecord], event: EventHit | None) -> None:
         """Grid step i (ending at t, s; size h) made of ``records``, and what the events said."""
         if self.mode is not None:
-            for rec in records:
-                self.mode.take(rec)
+            self.mode.take_step(records)
             self.taken += len(records)
         self.marks.append((i, t, records[-1].state, h, event, self.taken - 1))
         if event is not None or len(self.marks) >= self.length:
@@ -166,6 +176,51 @@ def _solver(model: Model, plan: RunPlan, counters: Counters, partials: DesignPar
                       reuse_tolerance=partials.relative_error if partials is not None else 0.0)
 
 
+METHODS = ("direct", "adjoint", "auto")
+
+
+def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, str]:
+    """The derivative mode of a run and why (method.md §6–7).
+
+    Direct differentiation costs, per step, m solve columns and m directions of the pseudo load
+    and outputs; the adjoint r transposed-solve columns (r: responses that read outputs; mass and
+    expressions of responses need no sweep) plus about one solve's worth of seeds, and it keeps
+    (or recomputes) the step records.  ``auto`` takes the adjoint when it covers the case and
+    2(r + 1) ≤ m, the paper's rule of thumb (adjoint when the design variables outnumber the
+    functions) with the adjoint's overheads priced at one extra function and a factor 2."""
+    r = sum(1 for rsp in responses.responses if rsp.output_ids)
+    why_not = responses.adjoint_unsupported()
+    if plan.method == "direct":
+        return "direct", "sensitivity.method: direct"
+    if plan.method == "adjoint":
+        if why_not:
+            raise CaseError(f"sensitivity.method: adjoint does not cover this case yet ({'; '.join(why_not)}); "
+                            "use sensitivity.method: direct (or auto)")
+        return "adjoint", "sensitivity.method: adjoint"
+    if why_not:
+        return "direct", f"auto: the adjoint does not cover {'; '.join(why_not)}"
+    if 2 * (r + 1) <= m:
+        return "adjoint", f"auto: {r} functions against {m} design variables (2(r + 1) <= m)"
+    return "direct", f"auto: {r} functions against {m} design variables (2(r + 1) > m)"
+
+
+def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
+          partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet,
+          counters: Counters) -> DirectMode | AdjointMode | None:
+    """The derivative mode that consumes the step records (None without sensitivities)."""
+    if partials is None:
+        return None
+    if method == "direct":
+        return DirectMode(model, scheme, solver, partials, counters)
+
+    def grid(i: int) -> tuple[float, float]:
+        """(t_prev, h) of grid step i exactly as the loop of :func:`integrate` forms them."""
+        t_prev = plan.t0 if i == 1 else plan.t0 + (i - 2) * plan.dt + plan.step_size(i - 1)
+        return t_prev, plan.step_size(i)
+    records = RecordStore(stepper, grid, plan.memory_budget, counters)
+    return AdjointMode(model, scheme, partials, counters, responses.outputs, records)
+
+
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
               responses: ResponseSet, *, design_names: tuple[str, ...] = (),
               design_scale: np.ndarray | None = None,
@@ -184,13 +239,15 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     params = partials.params0 if partials is not None else model.parameters(np.asarray(x))
     solver = _solver(model, plan, counters, partials)
     stepper = PrimalStepper(model, scheme, solver, params, plan.max_step_cuts, counters)
-    mode = DirectMode(model, scheme, solver, partials, counters) if partials is not None else None
+    method, reason = choose_method(plan, responses, m) if partials is not None else ("", "")
+    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters)
 
     rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
     ds = mode.start(rec) if mode is not None else None
     store = RunStore(plan, model, params, rec.state, m, ds is not None)
-    responses.start(params, partials, None if partials is not None else model.stack_parameters([params]),
-                    model.traits.n_z)
+    responses.start(params, partials if method == "direct" else None,
+                    None if method == "direct" else model.stack_parameters([params]),
+                    model.traits.n_z, trace=method == "adjoint")
     store.record(0, plan.t0, rec.state)
     store.record_sensitivities(0, ds)
     responses.push(0, plan.t0, rec.state, ds, 0.0, responses.watch(plan.t0, rec.state))
@@ -224,11 +281,13 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
             if partials is not None else None
         return value, grad
 
-    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0, mass)
+    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0, mass,
+                              adjoint=mode.gradients if isinstance(mode, AdjointMode) else None)
     n = store.last + 1
     return RunResult(
         x=np.asarray(x), time=store.times[:n], history={f: v[:n] for f, v in store.hist.items()},
         sensitivity_history={f: v[:n] for f, v in store.shist.items()},
         monitors={k: v[:n] for k, v in store.mons.items()}, responses=values,
         counters=counters.as_dict(), wall_time=_time.perf_counter() - wall0,
-        status=status, message=message, labels={"q": stepper.labels})
+        status=status, message=message, labels={"q": stepper.labels}, method=method,
+        method_reason=reason)

@@ -57,6 +57,18 @@ class Samples:
 
 
 @dataclass
+class OutputTrace:
+    """The outputs' values at every instant fed to the responses (kept in adjoint mode: the
+    adjoint weights of a response may need its whole history, e.g. a KS maximum).
+
+    t : (K,) times (s); value[oid] : (K, k).
+    """
+
+    t: np.ndarray
+    value: dict[int, np.ndarray]
+
+
+@dataclass
 class ResponseValue:
     """Final value of a response with its gradient; ``missing`` explains an absent value."""
 
@@ -81,6 +93,21 @@ class Response(ABC):
     @abstractmethod
     def finish(self, ctx: "FinishContext") -> ResponseValue:
         """Final value and gradient."""
+
+    # ---- adjoint hooks (additive: a response that reads outputs implements both to be
+    # differentiated by the adjoint mode; until it does, the adjoint refuses the case)
+    def adjoint_unsupported(self) -> str | None:
+        """Why the adjoint mode cannot differentiate this response, or None when it can.
+        Responses that read no outputs (mass, expressions of other responses, end time) need
+        no seeds; the default refuses any response reading outputs."""
+        return f"response type {type(self).__name__} has no adjoint seeds" if self.output_ids else None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+        """The response's gradient as a weighted sum of the outputs' total gradients:
+        W[oid] (K, k) with dJ/dx = Σ_i Σ_c W[oid][i, c] ∇v_oid,c(t_i) over the K instants of the
+        trace (called once the run has ended; the weights may use the whole history).  These
+        are the adjoint seeds: the adjoint mode turns them into ∂J/∂state_i and ∂_x J."""
+        raise NotImplementedError(type(self).__name__)
 
 
 @dataclass
@@ -146,6 +173,29 @@ class ValueAt(Response):
                         self._hit = (prev[1] + w * (v[j] - prev[1]), g_hit)
         self._prev = (samples.t[-1], v[-1], None if g is None else g[-1])
 
+    def adjoint_unsupported(self) -> str | None:
+        return "a value at an event" if self.event is not None else None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+        oid = self.output_ids[0]
+        W = np.zeros(trace.value[oid].shape)
+        if self.time is None:
+            W[-1, self.component] = 1.0
+            return {oid: W}
+        # the instant (or the two around it) that :meth:`feed` picked
+        tr = np.real(trace.t)
+        tol = 1e-12 * max(1.0, abs(self.time))
+        after = np.flatnonzero(tr >= self.time - tol)
+        if after.size:
+            j = int(after[0])
+            if abs(tr[j] - self.time) <= tol:
+                W[j, self.component] = 1.0
+            elif j and tr[j - 1] < self.time:
+                w = (self.time - trace.t[j - 1]) / (trace.t[j] - trace.t[j - 1])
+                W[j - 1, self.component] = 1.0 - w
+                W[j, self.component] = w
+        return {oid: W}
+
     def finish(self, ctx: FinishContext) -> ResponseValue:
         kind = "fixed_time" if self.fixed_time else ""
         if self.event is not None and self.event not in ctx.events:
@@ -195,6 +245,16 @@ class KSAggregate(Response):
             contrib = w @ G.reshape(v.size, -1)
             self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
 
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+        # the softmax weights w_k = exp(ρ(g_k − g_max)) / Σ exp(ρ(g − g_max)) of the final sum
+        out = {oid: np.zeros(trace.value[oid].shape) for oid in self.output_ids}
+        for oid, comp in zip(self.output_ids, self.components):
+            out[oid][:, comp] += np.real(np.exp(self.rho * (trace.value[oid][:, comp] - self._gmax)) / self._sum)
+        return out
+
     def finish(self, ctx: FinishContext) -> ResponseValue:
         value = self._gmax + np.log(self._sum) / self.rho
         grad = None if self._wgrad is None else self._wgrad / self._sum
@@ -234,6 +294,17 @@ class TimeIntegral(Response):
                     dg = dg + mean[-1] * samples.dt_dx  # the end of the last interval moves with the event
                 self._grad = dg if self._grad is None else self._grad + dg
         self._prev = last
+
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+        oid = self.output_ids[0]
+        W = np.zeros(trace.value[oid].shape)
+        half = 0.5 * np.real(np.diff(trace.t))          # trapezoid: half an interval to each end
+        W[:-1, self.component] += half
+        W[1:, self.component] += half
+        return {oid: W}
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         grad = self._grad if self._grad is not None else (np.zeros(ctx.m) if ctx.m else None)
@@ -353,12 +424,16 @@ class ResponseSet:
         self._params: Any = None
         self._partials: Any = None
         self._params_one: Any = None
+        self._trace: list[Samples] | None = None
 
-    def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int) -> None:
+    def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int,
+              *, trace: bool = False) -> None:
         """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
-        sensitivities), ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
-        model does not evaluate batches) and the size of a state (n_z)."""
+        sensitivities, or in adjoint mode), ``stacked_one`` = ``model.stack_parameters([params])``
+        (None when the model does not evaluate batches) and the size of a state (n_z);
+        ``trace`` keeps the outputs' values of every instant (:meth:`trace`, adjoint mode)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
+        self._trace = [] if trace else None
         entries = partials.block_entries if partials is not None else 1
         # the parameter sets are stacked once per entry and step of a block (without
         # sensitivities one set serves the whole block)
@@ -471,7 +546,25 @@ class ResponseSet:
                 grad[oid] = None
         return Samples(times, value, grad, dict(grad))
 
+    def adjoint_unsupported(self) -> list[str]:
+        """What keeps the adjoint mode from differentiating this set (empty: nothing)."""
+        why = ["terminating events (event-time responses)"] if self.events else []
+        for r in self.responses:
+            reason = r.adjoint_unsupported()
+            if reason:
+                why.append(f"response '{r.name}': {reason}")
+        return why
+
+    def trace(self) -> OutputTrace:
+        """The outputs' values at every instant fed (``start(..., trace=True)``)."""
+        assert self._trace is not None, "start(..., trace=True) first"
+        blocks = self._trace
+        return OutputTrace(np.concatenate([b.t for b in blocks]),
+                           {oid: np.concatenate([b.value[oid] for b in blocks]) for oid in blocks[0].value})
+
     def _feed(self, samples: Samples) -> None:
+        if self._trace is not None:
+            self._trace.append(samples)
         for r in self.responses:
             if r.output_ids:
                 r.feed(samples)
@@ -486,10 +579,21 @@ class ResponseSet:
             self.end_dt_dx = np.zeros(m) if m else None
 
     def finish(self, design: dict[str, Any], m: int,
-               mass: Callable[[], tuple[Any, np.ndarray | None]]) -> dict[str, ResponseValue]:
-        """Final values of all responses, in order."""
+               mass: Callable[[], tuple[Any, np.ndarray | None]],
+               adjoint: Callable[[OutputTrace, dict[str, dict[int, np.ndarray]]], dict[str, np.ndarray]]
+               | None = None) -> dict[str, ResponseValue]:
+        """Final values of all responses, in order.  In adjoint mode, ``adjoint(trace, weights)``
+        turns the responses' adjoint weights into their gradients (before the expressions that
+        combine them are evaluated)."""
         values: dict[str, ResponseValue] = {}
+        grads: dict[str, np.ndarray] = {}
+        if adjoint is not None:
+            trace = self.trace()
+            grads = adjoint(trace, {r.name: r.adjoint_weights(trace) for r in self.responses if r.output_ids})
         ctx = FinishContext(self.fired, self.end_time, self.end_dt_dx, values, design, m, mass)
         for r in self.responses:
-            values[r.name] = r.finish(ctx)
+            rv = r.finish(ctx)
+            if r.name in grads and not rv.missing:
+                rv.gradient = grads[r.name]
+            values[r.name] = rv
         return values

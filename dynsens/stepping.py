@@ -103,6 +103,18 @@ class PrimalStepper:
         self.aux = self.scheme.start(out.state)
         return StepRecord(0, t0, 0.0, out.state, out.lin, out.factor, out.iterations)
 
+    def snapshot(self, s: StepState) -> tuple[StepState, Aux, Any]:
+        """A checkpoint after a grid step that ended in the state s: the state, the scheme's
+        algorithmic accelerations and the solver's convergence memory."""
+        assert self.aux is not None
+        return s, self.aux, self.solver.snapshot()
+
+    def restore(self, checkpoint: tuple[StepState, Aux, Any]) -> StepState:
+        """Return to a :meth:`snapshot`; the state to advance from."""
+        s, self.aux, snap = checkpoint
+        self.solver.restore(snap)
+        return s
+
     def advance(self, i: int, t_prev: float, h: float, s: StepState) -> list[StepRecord]:
         """Grid step i from the state s at t_prev by h (s): its records (more than one after
         step cuts), the last one ending at t_prev + h."""

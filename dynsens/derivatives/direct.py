@@ -72,10 +72,10 @@ class DirectMode:
         self.daux = self.scheme.start(self.ds)
         return self.ds
 
-    def take(self, rec: StepRecord) -> None:
-        """Add a step record to the trail (its sensitivities follow at :meth:`catch_up`)."""
-        assert rec.factor is not None
-        self.trail.append(rec)
+    def take_step(self, records: list[StepRecord]) -> None:
+        """Add the records of a grid step to the trail (their sensitivities follow at
+        :meth:`catch_up`)."""
+        self.trail.extend(records)
 
     def catch_up(self) -> list[StepState | None]:
         """Sensitivities of the trailing records, in order (the trail is emptied)."""
