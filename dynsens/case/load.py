@@ -26,6 +26,7 @@ from ..models.registry import build_model
 from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
+from .derivative_keys import adjoint_problems, derivative_settings
 from ..solver.newton import NewtonSettings
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
@@ -163,6 +164,8 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     factory, rnames = _responses(raw.get("responses", []) or [], output_id, outputs, event_names,
                                  declared, model, plan, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
+    if plan is not None and not pc.problems:
+        adjoint_problems(plan.method, ResponseSet(outputs, factory(), events).adjoint_unsupported(), pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
@@ -246,7 +249,7 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                                         "solver", "event_location", "max_step_cuts"), pc, required=("dt", "t_end"))
     if sens is None:
         sens = {}
-    ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix"), pc)
+    ok &= check_keys(sens, "sensitivity", ("enabled", "partials", "step", "matrix", "method", "memory_budget"), pc)
     if output is None:
         output = {}
     ok &= check_keys(output, "output", ("history", "sensitivity_history"), pc)
@@ -314,11 +317,12 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     loc = spec.get("event_location", "interpolate")
     if loc not in ("interpolate", "step"):
         pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
+    derivative = derivative_settings(sens, pc)
     if None in (dt, t0, t_end) or pc.problems:
         return scheme, None, str(loc)
     plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
                    partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
-                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts)
+                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts, **derivative)
     return scheme, plan, str(loc)
 
 

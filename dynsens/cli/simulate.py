@@ -30,6 +30,13 @@ def format_summary(result, design_names) -> str:  # type: ignore[no-untyped-def]
                   f"(+{c['sensitivity_residual_evaluations']} for sensitivities), "
                   f"solves {c['solves']} ({c['solve_columns']} right-hand sides), "
                   f"wall time {result.wall_time:.3f} s"]
+    if getattr(result, "method", ""):
+        lines.append(f"derivatives: {result.method} ({result.method_reason})")
+        if result.method == "adjoint":
+            lines.append(f"backward sweep: {c['backward_solves']} transposed solves, "
+                         f"{c['backward_residual_evaluations']} residual evaluations for the design "
+                         f"partials, {c['backward_output_evaluations']} output evaluations, "
+                         f"{c['recomputed_steps']} recomputed steps")
     return "\n".join(lines)
 
 
