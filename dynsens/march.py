@@ -21,7 +21,7 @@ from .derivatives.direct import DirectMode
 from .errors import CaseError
 from .integrators.newmark import Newmark
 from .models.base import Model, StepState
-from .responses import EventHit, ResponseSet, ResponseValue
+from .responses import EventHit, EventTime, ResponseSet, ResponseValue
 from .sensitivity import DesignPartials
 from .solver.linalg import Counters
 from .solver.newton import NewtonSettings, StepSolver
@@ -183,12 +183,12 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
     """The derivative mode of a run and why (method.md §6–7).
 
     Direct differentiation costs, per step, m solve columns and m directions of the pseudo load
-    and outputs; the adjoint r transposed-solve columns (r: responses that read outputs; mass and
-    expressions of responses need no sweep) plus about one solve's worth of seeds, and it keeps
+    and outputs; the adjoint r transposed-solve columns (r: responses that read outputs or an
+    event time; mass and expressions of responses need no sweep) plus about one solve's worth of seeds, and it keeps
     (or recomputes) the step records.  ``auto`` takes the adjoint when it covers the case and
     2(r + 1) ≤ m, the paper's rule of thumb (adjoint when the design variables outnumber the
     functions) with the adjoint's overheads priced at one extra function and a factor 2."""
-    r = sum(1 for rsp in responses.responses if rsp.output_ids)
+    r = sum(1 for rsp in responses.responses if rsp.output_ids or isinstance(rsp, EventTime))
     why_not = responses.adjoint_unsupported()
     if plan.method == "direct":
         return "direct", "sensitivity.method: direct"
@@ -218,7 +218,8 @@ def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, steppe
         t_prev = plan.t0 if i == 1 else plan.t0 + (i - 2) * plan.dt + plan.step_size(i - 1)
         return t_prev, plan.step_size(i)
     records = RecordStore(stepper, grid, plan.memory_budget, counters)
-    return AdjointMode(model, scheme, partials, counters, responses.outputs, records)
+    return AdjointMode(model, scheme, partials, counters, responses.outputs, records,
+                       lambda k: plan.t0 + (k - 1) * plan.dt + plan.step_size(k) if k else plan.t0)
 
 
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,

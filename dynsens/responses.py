@@ -62,10 +62,28 @@ class OutputTrace:
     adjoint weights of a response may need its whole history, e.g. a KS maximum).
 
     t : (K,) times (s); value[oid] : (K, k).
+    event : when a terminating event fired, its last instant is the event instant, interpolated
+        between the grid steps K − 2 and K − 1 (see :class:`EventInstant`); else None.
     """
 
     t: np.ndarray
     value: dict[int, np.ndarray]
+    event: "EventInstant | None" = None
+
+
+@dataclass(frozen=True)
+class EventInstant:
+    """How the event instant was formed (what its gradients depend on): the event, the crossing
+    values e0, e1 of its watched component at the grid steps before and at the crossing, the
+    fraction ``frac`` of the step taken (ϑ, or 1 in ``step`` mode), the step size dt (s) and the
+    outputs' values at the grid step of the crossing (``cur``, (k,) each)."""
+
+    spec: "EventSpec"
+    e0: Any
+    e1: Any
+    frac: Any
+    dt: float
+    cur: dict[int, np.ndarray]
 
 
 @dataclass
@@ -98,16 +116,25 @@ class Response(ABC):
     # differentiated by the adjoint mode; until it does, the adjoint refuses the case)
     def adjoint_unsupported(self) -> str | None:
         """Why the adjoint mode cannot differentiate this response, or None when it can.
-        Responses that read no outputs (mass, expressions of other responses, end time) need
-        no seeds; the default refuses any response reading outputs."""
+        Responses that read no outputs (mass, expressions of other responses) need no seeds;
+        the default refuses any response reading outputs."""
         return f"response type {type(self).__name__} has no adjoint seeds" if self.output_ids else None
 
-    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
-        """The response's gradient as a weighted sum of the outputs' total gradients:
-        W[oid] (K, k) with dJ/dx = Σ_i Σ_c W[oid][i, c] ∇v_oid,c(t_i) over the K instants of the
-        trace (called once the run has ended; the weights may use the whole history).  These
-        are the adjoint seeds: the adjoint mode turns them into ∂J/∂state_i and ∂_x J."""
-        raise NotImplementedError(type(self).__name__)
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """The response's gradient as a weighted sum of the gradients the direct mode feeds it
+        (called once the run has ended; the weights may use the whole history).  Keys:
+
+        * ``oid`` → W (K, k): weights of the total gradients ∇v_oid(t_i) at the K instants of
+          the trace, dJ/dx = Σ_i Σ_c W[i, c] ∇v_oid,c(t_i) + …;
+        * ``("fixed", oid)`` → W (K, k): weights of the fixed-time gradients (they differ from
+          the total ones only at an event instant);
+        * ``"dt_dx"`` → c: weight of the gradient of the event time (the end of an event run).
+
+        These are the adjoint seeds: the adjoint mode turns them into ∂J/∂state_i and ∂_x J.
+        None (the default for responses that read no outputs): no sweep needed."""
+        if self.output_ids:
+            raise NotImplementedError(type(self).__name__)
+        return None
 
 
 @dataclass
@@ -174,14 +201,14 @@ class ValueAt(Response):
         self._prev = (samples.t[-1], v[-1], None if g is None else g[-1])
 
     def adjoint_unsupported(self) -> str | None:
-        return "a value at an event" if self.event is not None else None
+        return None
 
-    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
         oid = self.output_ids[0]
         W = np.zeros(trace.value[oid].shape)
-        if self.time is None:
+        if self.time is None or self.event is not None:          # the last instant (or the event's)
             W[-1, self.component] = 1.0
-            return {oid: W}
+            return {("fixed", oid) if self.fixed_time else oid: W}
         # the instant (or the two around it) that :meth:`feed` picked
         tr = np.real(trace.t)
         tol = 1e-12 * max(1.0, abs(self.time))
@@ -248,7 +275,7 @@ class KSAggregate(Response):
     def adjoint_unsupported(self) -> str | None:
         return None
 
-    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
         # the softmax weights w_k = exp(ρ(g_k − g_max)) / Σ exp(ρ(g − g_max)) of the final sum
         out = {oid: np.zeros(trace.value[oid].shape) for oid in self.output_ids}
         for oid, comp in zip(self.output_ids, self.components):
@@ -298,13 +325,16 @@ class TimeIntegral(Response):
     def adjoint_unsupported(self) -> str | None:
         return None
 
-    def adjoint_weights(self, trace: OutputTrace) -> dict[int, np.ndarray]:
-        oid = self.output_ids[0]
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        oid, c = self.output_ids[0], self.component
         W = np.zeros(trace.value[oid].shape)
         half = 0.5 * np.real(np.diff(trace.t))          # trapezoid: half an interval to each end
-        W[:-1, self.component] += half
-        W[1:, self.component] += half
-        return {oid: W}
+        W[:-1, c] += half
+        W[1:, c] += half
+        out: dict[Any, Any] = {oid: W}
+        if trace.event is not None and len(trace.t) >= 2:     # the last interval ends at the event
+            out["dt_dx"] = 0.5 * (trace.value[oid][-2, c] + trace.value[oid][-1, c])
+        return out
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         grad = self._grad if self._grad is not None else (np.zeros(ctx.m) if ctx.m else None)
@@ -316,6 +346,10 @@ class EventTime(Response):
 
     def __init__(self, name: str, event: str | None):
         self.name, self.unit, self.event = name, "s", event
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        fired = trace.event is not None and (self.event is None or trace.event.spec.name == self.event)
+        return {"dt_dx": 1.0} if fired else None
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         if self.event is None:
@@ -425,6 +459,7 @@ class ResponseSet:
         self._partials: Any = None
         self._params_one: Any = None
         self._trace: list[Samples] | None = None
+        self._event: EventInstant | None = None
 
     def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int,
               *, trace: bool = False) -> None:
@@ -506,6 +541,7 @@ class ResponseSet:
                 grad_fixed[k] = pg + frac * (cg - pg)
                 grad[k] = grad_fixed[k] + dv[:, :, None] * dtheta
         self.fired[ev.name] = EventRecord(t_event, dt_dx, step)
+        self._event = EventInstant(ev, e0, e1, frac, dt, {k: v[0] for k, v in cur.value.items()})
         self._feed(Samples(np.array([t_event]), value, grad, grad_fixed, dt_dx))
         self.end_time, self.end_dt_dx = t_event, dt_dx
 
@@ -548,7 +584,7 @@ class ResponseSet:
 
     def adjoint_unsupported(self) -> list[str]:
         """What keeps the adjoint mode from differentiating this set (empty: nothing)."""
-        why = ["terminating events (event-time responses)"] if self.events else []
+        why = []
         for r in self.responses:
             reason = r.adjoint_unsupported()
             if reason:
@@ -560,7 +596,8 @@ class ResponseSet:
         assert self._trace is not None, "start(..., trace=True) first"
         blocks = self._trace
         return OutputTrace(np.concatenate([b.t for b in blocks]),
-                           {oid: np.concatenate([b.value[oid] for b in blocks]) for oid in blocks[0].value})
+                           {oid: np.concatenate([b.value[oid] for b in blocks]) for oid in blocks[0].value},
+                           self._event)
 
     def _feed(self, samples: Samples) -> None:
         if self._trace is not None:
@@ -589,7 +626,9 @@ class ResponseSet:
         grads: dict[str, np.ndarray] = {}
         if adjoint is not None:
             trace = self.trace()
-            grads = adjoint(trace, {r.name: r.adjoint_weights(trace) for r in self.responses if r.output_ids})
+            weights = {r.name: r.adjoint_weights(trace) for r in self.responses}
+            grads = adjoint(trace, {name: grid_weights(trace, w, self.outputs) for name, w in weights.items()
+                                    if w is not None})
         ctx = FinishContext(self.fired, self.end_time, self.end_dt_dx, values, design, m, mass)
         for r in self.responses:
             rv = r.finish(ctx)
@@ -597,3 +636,46 @@ class ResponseSet:
                 rv.gradient = grads[r.name]
             values[r.name] = rv
         return values
+
+
+def grid_weights(trace: OutputTrace, weights: dict[Any, Any], outputs: list[Output]) -> dict[int, np.ndarray]:
+    """A response's adjoint weights on the outputs' gradients at the grid steps 0 … K − 1 of the
+    run (the adjoint's seeds), from its weights on the trace's instants.  Without an event the
+    two are the same.  With one, the event instant is a combination of the grid steps K − 2 and
+    K − 1 (method.md §5): fixed-time gradient (1 − frac) ∇v_{K−2} + frac ∇v_{K−1}, total gradient
+    that plus (v_{K−1} − v_{K−2}) dϑ/dx, and dϑ/dx = (e0 ∇e_{K−1} − e1 ∇e_{K−2})/(e1 − e0)² with e
+    the watched component; the event time's gradient is Δt dϑ/dx.  All of it transposed here."""
+    shape = {oid: trace.value[oid].shape for oid in trace.value}
+    G: dict[int, np.ndarray] = {}
+
+    def at(oid: int) -> np.ndarray:
+        if oid not in G:
+            G[oid] = np.zeros(shape[oid] if oid in shape else (len(trace.t), len(outputs[oid].labels)))
+        return G[oid]
+
+    for key, W in weights.items():
+        if key != "dt_dx":
+            at(key[1] if isinstance(key, tuple) else key)[:] += np.real(W)
+    ev = trace.event
+    if ev is None:
+        return G
+    K = len(trace.t)
+    c_theta = np.real(weights.get("dt_dx", 0.0)) * ev.dt
+    frac = np.real(ev.frac)
+    for key, W in weights.items():
+        if key == "dt_dx":
+            continue
+        oid = key[1] if isinstance(key, tuple) else key
+        w = np.real(W[-1])
+        g = at(oid)
+        g[-1] -= w                          # the event instant is not the grid step K − 1 …
+        g[-2] += (1.0 - frac) * w           # … but this interpolation of it
+        g[-1] += frac * w
+        if not isinstance(key, tuple):      # a total gradient: the event instant moves
+            c_theta = c_theta + w @ np.real(ev.cur[oid] - trace.value[oid][-2]) if K >= 2 else c_theta
+    if np.any(c_theta != 0.0):
+        de = np.real(ev.e1 - ev.e0) ** 2
+        g = at(ev.spec.output_id)
+        g[-2, ev.spec.component] += c_theta * np.real(-ev.e1) / de
+        g[-1, ev.spec.component] += c_theta * np.real(ev.e0) / de
+    return G

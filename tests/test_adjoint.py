@@ -25,7 +25,8 @@ from dynsens.responses import Response, ResponseValue
 from helpers import complex_step_gradients, rel_err
 from scripts_path import hard_step_case
 
-# event-free variants of the cases with events (events are not covered by the adjoint yet)
+# event-free variants of the cases with events (short runs for every scheme; the events have
+# tests of their own below)
 NO_EVENTS = {
     "hydraulic_lever": ["events=[]", "integrator.t_end=0.15", "responses=["
                         "{name: pivot_ks, type: ks, quantity: {joint: pivot, kind: reaction_force_norm}, rho: 0.01},"
@@ -146,12 +147,68 @@ def test_checkpointing_through_step_cuts_is_bit_identical():
     assert np.array_equal(tight.responses["q_ks"].gradient, kept.responses["q_ks"].gradient)
 
 
-def test_adjoint_refuses_events_with_one_clear_error():
-    with pytest.raises(CaseError, match="sensitivity.method: the adjoint does not cover terminating events"):
-        dynsens.load_case(CASES / "hydraulic_lever.yaml", ["sensitivity.method=adjoint"])
-    case = dynsens.load_case(CASES / "hydraulic_lever.yaml", ["sensitivity.method=auto", "integrator.t_end=0.05"])
+@pytest.mark.parametrize("location", ["interpolate", "step"])
+@pytest.mark.parametrize("name", ["hydraulic_lever", "pendulum_3d"])
+def test_event_time_responses_in_both_location_modes(name, location):
+    """Event times, values at the event (total and fixed-time), KS and integrals up to it."""
+    case = dynsens.load_case(CASES / f"{name}.yaml", ["sensitivity.partials=complex",
+                                                       f"integrator.event_location={location}"])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
+
+
+def test_event_instant_weights_against_complex_step():
+    """Integral up to an event (the end of its last interval moves) and the end time, against the
+    complex step of the whole run (interpolate mode: the exact derivative of the procedure)."""
+    case = dynsens.load_case(CASES / "hydraulic_lever.yaml", [
+        "sensitivity.partials=complex", "responses=["
+        "{name: t_end, type: end_time},"
+        "{name: stroke_int, type: integral, quantity: {element: cyl, kind: stroke}},"
+        "{name: p1_fixed, type: value, quantity: {element: cyl, kind: pressure_1}, event: lifted,"
+        " derivative: fixed_time}]"])
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    ref = complex_step_gradients(case)
+    for r in ("t_end", "stroke_int"):
+        assert rel_err(adjoint.responses[r].gradient, ref[r]) < 1e-8, r
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    _compare(direct, adjoint, 1e-10)
+
+
+@pytest.mark.slow
+def test_weir_with_both_methods():
+    """The whole weir (both events, the cleaning-time constraint g3, fixed-time stroke)."""
+    case = dynsens.load_case(CASES / "tyrolean_weir.yaml", ["sensitivity.partials=complex"])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
+
+
+def test_auto_falls_back_to_direct_for_a_response_it_cannot_seed():
+    class Peak(Response):
+        def __init__(self):
+            self.name, self.output_ids = "peak", (0,)
+
+        def finish(self, ctx):
+            return ResponseValue(0.0, None)
+
+    case = dynsens.load_case(CASES / "duffing_chain.yaml", [
+        "integrator.t_end=0.01", "sensitivity.method=auto",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u20, kind: displacement}}]"])
+    base = case.new_response_set
+
+    def with_peak():
+        rs = base()
+        rs.responses.append(Peak())
+        return rs
+    case.new_response_set = with_peak
     res = dynsens.run_case(case)
-    assert res.method == "direct" and "does not cover" in res.method_reason
+    assert res.method == "direct" and "response 'peak': response type Peak has no adjoint seeds" \
+        in res.method_reason
+    with pytest.raises(CaseError, match="sensitivity.method: adjoint does not cover this case yet"):
+        dynsens.run_case(_with_method(case, "adjoint"))
 
 
 def test_a_response_type_without_adjoint_hooks_is_refused():

@@ -42,13 +42,14 @@ class AdjointMode:
     trail_length = 1   # nothing trails: the responses take the values of every step at once
 
     def __init__(self, model: Model, scheme: Newmark, partials: DesignPartials, counters: Counters,
-                 outputs: list[Output], store: RecordStore):
+                 outputs: list[Output], store: RecordStore, grid_time: Callable[[int], float]):
         self.model, self.scheme, self.partials, self.counters = model, scheme, partials, counters
         tr = model.traits
         self.n_q, self.n_lam, self.n_p = tr.n_q, tr.n_lam, tr.n_p
         self.block = trail_length(tr, partials.m)
         self.seeds = OutputSeeds(model, outputs, partials)
         self.store = store             # the records (all, or checkpoints and recomputation)
+        self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
         self._pending = 0
 
     # ------------------------------------------------------------------ forward: keep records
@@ -90,7 +91,7 @@ class AdjointMode:
             w = {oid: W[k] for oid, W in stacked.items() if np.any(W[k])}
             if not w:
                 return None
-            ybar, xpart = self.seeds.seeds(trace.t[k], rec.state, w, r)
+            ybar, xpart = self.seeds.seeds(self.grid_time(k), rec.state, w, r)
             xbar += xpart
             return ybar
 
