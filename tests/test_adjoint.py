@@ -23,7 +23,8 @@ from conftest import CASES
 from dynsens.errors import CaseError
 from dynsens.responses import Response, ResponseValue
 from helpers import complex_step_gradients, rel_err
-from scripts_path import hard_step_case
+from scripts_path import hard_step_case  # (puts scripts/ on the path)
+from bench_peers import chain_case
 
 # event-free variants of the cases with events (short runs for every scheme; the events have
 # tests of their own below)
@@ -233,7 +234,11 @@ def test_auto_picks_by_the_count_of_functions_and_design_variables():
         "integrator.t_end=0.05", "sensitivity.method=auto",
         "responses=[{name: tip_end, type: value, quantity: {dof: u20, kind: displacement}}]"])
     res = dynsens.run_case(one)
-    assert res.method == "adjoint" and "1 functions against 4 design variables" in res.method_reason
+    assert res.method == "direct" and "1 functions against 4 design variables (m < 4(r + 1))" in res.method_reason
+    per_element = dynsens.load_case_dict(chain_case(10, 0.05, True), overrides=[
+        "sensitivity.method=auto", "responses=[{name: tip_end, type: value, quantity: {dof: u10, kind: displacement}}]"])
+    res = dynsens.run_case(per_element)
+    assert res.method == "adjoint" and "1 functions against 10 design variables (m >= 4(r + 1))" in res.method_reason
 
 
 def test_case_keys_are_validated():
