@@ -36,6 +36,10 @@ from .direct import trail_length
 from .output_seeds import OutputSeeds
 
 
+# records whose output seeds are taken together (held a little longer during the sweep)
+SEED_BLOCK = 64
+
+
 class AdjointMode:
     """Keeps the step records of the forward run and sweeps back over them at the end."""
 
@@ -85,23 +89,34 @@ class AdjointMode:
             raise RuntimeError(f"adjoint: {K} output instants for {self.store.n_grid} grid steps")
         xbar = np.zeros((m, r))
 
-        def seed(k: int, rec: StepRecord) -> np.ndarray | None:
-            """∂J/∂y at grid instant k (flat state), adding ∂_x J to x̄."""
+        def seeds(grid: list[tuple[int, StepRecord]]) -> dict[int, np.ndarray]:
+            """∂J/∂y (flat state) at grid instants, adding their ∂_x J to x̄."""
             nonlocal xbar
-            w = {oid: W[k] for oid, W in stacked.items() if np.any(W[k])}
-            if not w:
-                return None
-            ybar, xpart = self.seeds.seeds(self.grid_time(k), rec.state, w, r)
-            xbar += xpart
-            return ybar
+            ks, recs, ws = [], [], []
+            for k, rec in grid:
+                w = {oid: W[k] for oid, W in stacked.items() if np.any(W[k])}
+                if w:
+                    ks.append(k)
+                    recs.append(rec)
+                    ws.append(w)
+            if not ks:
+                return {}
+            found = self.seeds.seeds_block([self.grid_time(k) for k in ks], [rec.state for rec in recs], ws, r)
+            for _, xpart in found:
+                xbar += xpart
+            return {k: ybar for k, (ybar, _) in zip(ks, found)}
 
-        xbar += self._sweep(seed, r)
+        xbar += self._sweep(seeds, r)
         self.counters.backward_output_evaluations += self.seeds.evaluations
         return {name: xbar[:, col] for col, name in enumerate(names)}
 
-    def _sweep(self, seed: Callable[[int, StepRecord], np.ndarray | None], r: int) -> np.ndarray:
-        """Σ over the records of ∂_xF_Rᵀ μ, plus the initial state's term: x̄ (m, r)."""
+    def _sweep(self, seeds: Callable[[list[tuple[int, StepRecord]]], dict[int, np.ndarray]], r: int
+               ) -> np.ndarray:
+        """Σ over the records of ∂_xF_Rᵀ μ, plus the initial state's term: x̄ (m, r).  The records
+        come in blocks (their seeds take a few batched output calls per block)."""
         sizes = [self.n_q] * 3 + [self.n_lam] + [self.n_p] * 2
+        ends = np.cumsum(sizes).tolist()
+        fields = list(zip([0] + ends[:-1], ends))
         bar = [np.zeros((n, r)) for n in sizes]                   # q, q̇, q̈, λ, p, ṗ
         aux = [np.zeros((self.n_q, r)), np.zeros((self.n_p, r))]  # a, b
         xbar = np.zeros((self.partials.m, r))
@@ -115,20 +130,24 @@ class AdjointMode:
                 self.counters.backward_residual_evaluations += self.partials.evaluations_per_call * len(queue)
                 queue.clear()
 
-        for idx, rec, grid_k in self.store.backward():
-            if grid_k is not None:
-                ybar = seed(grid_k, rec)
+        def sweep(block: list[tuple[int, StepRecord, int | None]]) -> None:
+            ybars = seeds([(k, rec) for _, rec, k in block if k is not None])
+            for idx, rec, grid_k in block:
+                ybar = ybars.get(grid_k) if grid_k is not None else None
                 if ybar is not None:
-                    ends = np.cumsum(sizes)
-                    for f, (a, b) in enumerate(zip(np.concatenate([[0], ends[:-1]]), ends)):
+                    for f, (a, b) in enumerate(fields):
                         bar[f] += ybar[a:b]
-            if idx == 0:
-                mu = self._initial_step(rec, bar, aux)
-            else:
-                mu = self._step(rec, bar, aux)
-            queue.append((rec.t, rec.state, mu))
-            if len(queue) >= self.block:
-                flush()
+                mu = self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux)
+                queue.append((rec.t, rec.state, mu))
+                if len(queue) >= self.block:
+                    flush()
+
+        block: list[tuple[int, StepRecord, int | None]] = []
+        for item in self.store.backward():
+            block.append(item)
+            if len(block) >= SEED_BLOCK or item[0] == 0:
+                sweep(block)
+                block = []
         flush()
         dq0, dqd0, dp0 = initial_state_gradient(self.model, self.partials)
         return xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]

@@ -30,6 +30,8 @@ STATE_STEP = 1e-30
 # relative sizes of the two perturbations of the probe states that find the dependencies
 PROBE_SIZES = (1e-3, 0.3)
 PROBE_CHUNK = 256
+# most states in one call of a batched output (instants × directions)
+BLOCK_STATES = 4096
 
 
 class _Dependence:
@@ -73,10 +75,14 @@ class OutputSeeds:
         return np.stack([np.asarray(o.fn(t, StepState(*(v[e] for v in leaves)), params[e]))
                          for e in range(E)])
 
-    @staticmethod
-    def _split(Y: np.ndarray, sizes: list[int]) -> list[np.ndarray]:
-        ends = np.cumsum(sizes)
-        return [Y[:, a:b] for a, b in zip(np.concatenate([[0], ends[:-1]]), ends)]
+    def _split(self, Y: np.ndarray, sizes: list[int]) -> list[np.ndarray]:
+        """The six state fields of flat states Y (E, n_y)."""
+        key = tuple(sizes)
+        if getattr(self, "_slices_key", None) != key:
+            ends = np.cumsum(sizes).tolist()
+            self._slices = [slice(a, b) for a, b in zip([0] + ends[:-1], ends)]
+            self._slices_key = key
+        return [Y[:, sl] for sl in self._slices]
 
     def _state_jacobian(self, o: Output, t: float, y: np.ndarray, sizes: list[int],
                         comps: np.ndarray) -> np.ndarray:
@@ -155,16 +161,60 @@ class OutputSeeds:
               ) -> tuple[np.ndarray, np.ndarray]:
         """(∂J/∂y (n_y, r), ∂_x J (m, r)) at the state s of time t (s) for the weights
         W[oid] (k, r) of the outputs at this instant (y: the flat state q, q̇, q̈, λ, p, ṗ)."""
-        sizes = [v.shape[0] for v in s]
-        y = np.concatenate(s)
-        ybar = np.zeros((y.size, r))
-        xbar = np.zeros((self.partials.m, r))
-        for oid, W in weights.items():
+        return self.seeds_block([t], [s], [weights], r)[0]
+
+    def seeds_block(self, ts: list[float], states: list[StepState], weights: list[dict[int, np.ndarray]],
+                    r: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """:meth:`seeds` at several instants; outputs that evaluate batches and do not depend on
+        time explicitly take all instants (and directions) in one call."""
+        sizes = [v.shape[0] for v in states[0]]
+        ys = [np.concatenate(s) for s in states]
+        out = [(np.zeros((y.size, r)), np.zeros((self.partials.m, r))) for y in ys]
+        for oid in sorted({o for w in weights for o in w}):
             o = self.outputs[oid]
-            dep = self._dependence(oid, t, y, sizes)
-            if dep.state.size:
-                ybar[dep.state] += self._state_jacobian(o, t, y, sizes, dep.state).T @ W
+            at = [b for b, w in enumerate(weights) if oid in w]
+            dep = self._dependence(oid, ts[at[0]], ys[at[0]], sizes)
+            if o.batched and o.autonomous and self.stacked_one is not None:
+                self._block(o, dep, [ys[b] for b in at], [weights[b][oid] for b in at], sizes,
+                            [out[b] for b in at])
+                continue
+            for b in at:
+                W, y = weights[b][oid], ys[b]
+                if dep.state.size:
+                    out[b][0][dep.state] += self._state_jacobian(o, ts[b], y, sizes, dep.state).T @ W
+                if dep.cols.size:
+                    D = self._design_partial(self._design_values(o, ts[b], y, sizes, dep), dep)
+                    out[b][1][dep.cols] += np.real(D).T @ W
+        return out
+
+    def _block(self, o: Output, dep: _Dependence, ys: list[np.ndarray], Ws: list[np.ndarray],
+               sizes: list[int], out: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """Seeds of a batched, autonomous output at several instants, a few calls in all."""
+        D, P = dep.state.size, len(dep.batch)
+        per = max(1, BLOCK_STATES // max(D, P, 1))
+        for start in range(0, len(ys), per):
+            Y0 = np.stack(ys[start:start + per])                                  # (B, n_y)
+            W = np.stack(Ws[start:start + per])                                   # (B, k, r)
+            B = Y0.shape[0]
+            if D:
+                Y = np.repeat(Y0.astype(complex), D, axis=0)                      # (B·D, n_y)
+                Y[np.arange(B * D), np.tile(dep.state, B)] += 1j * STATE_STEP
+                F = self._eval(o, 0.0, self._split(Y, sizes), [], self.stacked_one)
+                J = (np.imag(F) / STATE_STEP).reshape(B, D, -1)                   # (B, D, k)
+                ybar = np.einsum("bdk,bkr->bdr", J, W)
+                for b in range(B):
+                    out[start + b][0][dep.state] += ybar[b]
             if dep.cols.size:
-                D = self._design_partial(self._design_values(o, t, y, sizes, dep), dep)
-                xbar[dep.cols] += np.real(D).T @ W
-        return ybar, xbar
+                Y = np.repeat(Y0, P, axis=0)                                      # (B·P, n_y)
+                F = self._eval(o, 0.0, self._split(Y, sizes), [], self._stacked_copies(dep, B))
+                F = F.reshape(B, P, -1)
+                for b in range(B):
+                    Dx = self._design_partial(F[b], dep)                          # (k, cols)
+                    out[start + b][1][dep.cols] += np.real(Dx).T @ W[b]
+
+    def _stacked_copies(self, dep: _Dependence, B: int) -> Any:
+        """The output's reduced parameter sets stacked B times (cached per B)."""
+        cache = dep.__dict__.setdefault("copies", {})
+        if B not in cache:
+            cache[B] = self.model.stack_parameters(dep.batch * B)
+        return cache[B]
