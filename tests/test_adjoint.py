@@ -273,3 +273,17 @@ def test_optimize_a_per_element_chain_with_the_adjoint(tmp_path):
     out = CliRunner().invoke(cli, ["optimize", str(path), "-o", str(tmp_path / "opt.h5")])
     assert out.exit_code == 0, out.output
     assert "converged" in out.output and "feasible" in out.output
+
+
+def test_check_gradients_uses_the_adjoint(tmp_path):
+    """``dynsens check-gradients`` with ``--set sensitivity.method=adjoint``: the adjoint gradient
+    against complex step of the whole run."""
+    import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
+    from click.testing import CliRunner
+
+    from dynsens.cli.main import cli
+    out = CliRunner().invoke(cli, ["check-gradients", str(CASES / "slider_crank.yaml"), "--scheme", "complex",
+                                   "--steps", "1e-20", "--rtol", "1e-9", "--workers", "1",
+                                   "--set", "integrator.t_end=0.1", "--set", "sensitivity.partials=complex",
+                                   "--set", "sensitivity.method=adjoint"])
+    assert out.exit_code == 0, out.output
