@@ -179,6 +179,14 @@ def _solver(model: Model, plan: RunPlan, counters: Counters, partials: DesignPar
 METHODS = ("direct", "adjoint", "auto")
 
 
+def adjoint_obstacles(plan: RunPlan, responses: ResponseSet) -> list[str]:
+    """What keeps the adjoint from serving this run (empty: nothing)."""
+    why = responses.adjoint_unsupported()
+    if plan.sensitivity_history:
+        why.append("output.sensitivity_history (the adjoint computes no sensitivity states)")
+    return why
+
+
 def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, str]:
     """The derivative mode of a run and why (method.md §6–7).
 
@@ -191,7 +199,7 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
     the measured chain runs of BENCHMARKS.md (r = 4: adjoint ≈ 1.8× the primal whatever m;
     direct 1.3× at m = 10, 2.9× at m = 100)."""
     r = sum(1 for rsp in responses.responses if rsp.output_ids or isinstance(rsp, EventTime))
-    why_not = responses.adjoint_unsupported()
+    why_not = adjoint_obstacles(plan, responses)
     if plan.method == "direct":
         return "direct", "sensitivity.method: direct"
     if plan.method == "adjoint":

@@ -287,3 +287,15 @@ def test_check_gradients_uses_the_adjoint(tmp_path):
                                    "--set", "integrator.t_end=0.1", "--set", "sensitivity.partials=complex",
                                    "--set", "sensitivity.method=adjoint"])
     assert out.exit_code == 0, out.output
+
+
+def test_adjoint_with_sensitivity_history_is_refused():
+    """The adjoint computes no sensitivity states: asking for their history is one clear error
+    (``auto`` runs the direct mode instead)."""
+    with pytest.raises(CaseError, match=r"sensitivity.method: .*output.sensitivity_history"):
+        dynsens.load_case(CASES / "sdof_step.yaml", ["sensitivity.method=adjoint", "output.sensitivity_history=true"])
+    one = dynsens.load_case_dict(chain_case(10, 0.02, True), overrides=[
+        "sensitivity.method=auto", "output.sensitivity_history=true",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u10, kind: displacement}}]"])
+    res = dynsens.run_case(one)
+    assert res.method == "direct" and res.sensitivity_history["q"].shape[-1] == 10

@@ -19,7 +19,7 @@ import yaml
 from ..errors import CaseError, ProblemCollector
 from ..expressions import ExpressionError, compile_expression
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
-from ..march import HISTORY_FIELDS, RunPlan
+from ..march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
@@ -165,7 +165,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                                  declared, model, plan, pc)
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     if plan is not None and not pc.problems:
-        adjoint_problems(plan.method, ResponseSet(outputs, factory(), events).adjoint_unsupported(), pc)
+        adjoint_problems(plan.method, adjoint_obstacles(plan, ResponseSet(outputs, factory(), events)), pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
