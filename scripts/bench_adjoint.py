@@ -82,6 +82,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="N = 10 and 100 only, one repeat")
     ap.add_argument("--no-weir", action="store_true")
     ap.add_argument("--src", type=Path, help="another source tree: its primal and direct runs too")
+    ap.add_argument("--checkpoint-steps", type=int, metavar="S",
+                    help="only the memory row: chain N = 1000, m = N, S steps, adjoint with the default "
+                         "budget and with 64 MiB (checkpointing), and the primal")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "bench_adjoint.json")
     args = ap.parse_args()
     repeats = 1 if args.quick else args.repeats
@@ -94,7 +97,10 @@ def main() -> None:
                 variants.insert(3, "adjoint_tight")
             rows.append(({"case": "chain", "n": n, "per_element": per, "t_end": t_end,
                           "budget": 64 * 2**20}, variants))
-    if not args.quick and not args.no_weir:
+    if args.checkpoint_steps:
+        rows = [({"case": "chain", "n": 1000, "per_element": True, "t_end": args.checkpoint_steps * 1e-3,
+                  "budget": 64 * 2**20}, ["primal", "adjoint", "adjoint_tight"])]
+    elif not args.quick and not args.no_weir:
         rows.append(({"case": "weir", "t_end": None}, ["primal", "direct", "adjoint"]))
     results = []
     for spec, variants in rows:
@@ -117,7 +123,8 @@ def main() -> None:
                 "src_median_s": {v: statistics.median(r["wall"] for r in rs) for v, rs in others.items()}}
         results.append(line)
         p = med["primal"]
-        print(f"{label}: primal {p:.2f} s | direct {med['direct']:.2f} s ({med['direct'] / p:.1f}x) | "
+        print(f"{label}: primal {p:.2f} s | " + (f"direct {med['direct']:.2f} s ({med['direct'] / p:.1f}x) | "
+                                                if "direct" in med else "") +
               f"adjoint {med['adjoint']:.2f} s ({med['adjoint'] / p:.1f}x, {rss['adjoint']:.0f} MB)"
               + (f" | adjoint, 64 MiB budget {med['adjoint_tight']:.2f} s ({rss['adjoint_tight']:.0f} MB, "
                  f"{line['tight_counters']['recomputed_steps']} recomputed steps)" if "adjoint_tight" in med else "")

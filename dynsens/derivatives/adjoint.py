@@ -108,6 +108,8 @@ class AdjointMode:
 
         xbar += self._sweep(seeds, r)
         self.counters.backward_output_evaluations += self.seeds.evaluations
+        # (the forward run's peak; a recomputed segment holds at most half the budget again)
+        self.counters.extra["adjoint_records_peak_bytes"] = self.store.peak
         return {name: xbar[:, col] for col, name in enumerate(names)}
 
     def _sweep(self, seeds: Callable[[list[tuple[int, StepRecord]]], dict[int, np.ndarray]], r: int

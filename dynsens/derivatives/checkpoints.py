@@ -64,6 +64,7 @@ class RecordStore:
         self.segments: list[tuple[int, Any, list[StepRecord] | None]] = []
         self.segment_bytes: list[int] = []
         self.held = 0
+        self.peak = 0                                 # most bytes of records held at once
         self.n_grid = 0
         self._seen: set[int] = set()
         self.dropped = 0
@@ -100,6 +101,7 @@ class RecordStore:
         if self.n_grid - first >= self.segment_steps:          # the segment is complete
             self.segments.append((self.n_grid, self.stepper.snapshot(records[-1].state), []))
             self.segment_bytes.append(0)
+        self.peak = max(self.peak, self.held)
         k = 0
         while self.held > self.budget and k < len(self.segments) - 1:
             if self.segments[k][2] is not None:
