@@ -129,6 +129,18 @@ class RunStore:
             for name, val in self.model.monitors(t, s, self.params).items():
                 self.mons[name][k] = val
 
+    def result(self, x: np.ndarray, responses: dict[str, ResponseValue], counters: dict[str, int],
+               wall_time: float, status: str, message: str, labels: list[str], method: str,
+               reason: str) -> RunResult:
+        """The run's result, histories cut at the last grid step taken."""
+        n = self.last + 1
+        return RunResult(
+            x=x, time=self.times[:n], history={f: v[:n] for f, v in self.hist.items()},
+            sensitivity_history={f: v[:n] for f, v in self.shist.items()},
+            monitors={k: v[:n] for k, v in self.mons.items()}, responses=responses, counters=counters,
+            wall_time=wall_time, status=status, message=message, labels={"q": labels}, method=method,
+            method_reason=reason)
+
     def record_sensitivities(self, k: int, ds: StepState | None) -> None:
         """The sensitivities of grid step k (when they are stored)."""
         if self.store_sens and ds is not None:
@@ -146,6 +158,12 @@ class GridFeed:
         self.length = mode.trail_length if mode is not None else 1
         self.marks: list[tuple[int, float, StepState, float, EventHit | None, int]] = []
         self.taken = 0
+
+    def start(self, t0: float, s0: StepState, ds0: StepState | None) -> None:
+        """The initial state (and its sensitivities) at t0 (s): stored and to the responses."""
+        self.store.record(0, t0, s0)
+        self.store.record_sensitivities(0, ds0)
+        self.responses.push(0, t0, s0, ds0, 0.0, self.responses.watch(t0, s0))
 
     def add(self, i: int, t: float, h: float, records: list[StepRecord], event: EventHit | None) -> None:
         """Grid step i (ending at t, s; size h) made of ``records``, and what the events said."""
@@ -165,6 +183,17 @@ class GridFeed:
             self.responses.push(i, t, s, ds, h, event)
         self.marks.clear()
         self.taken = 0
+
+
+def _mass(model: Model, params: Any, partials: DesignPartials | None
+          ) -> Callable[[], tuple[Any, np.ndarray | None]]:
+    """The structural mass and its gradient (by the design partials), when a response asks."""
+    def mass() -> tuple[Any, np.ndarray | None]:
+        value = model.structural_mass(params)
+        grad = partials.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0] \
+            if partials is not None else None
+        return value, grad
+    return mass
 
 
 def _solver(model: Model, plan: RunPlan, counters: Counters, partials: DesignPartials | None) -> StepSolver:
@@ -259,11 +288,9 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     responses.start(params, partials if method == "direct" else None,
                     None if method == "direct" else model.stack_parameters([params]),
                     model.traits.n_z, trace=method == "adjoint")
-    store.record(0, plan.t0, rec.state)
-    store.record_sensitivities(0, ds)
-    responses.push(0, plan.t0, rec.state, ds, 0.0, responses.watch(plan.t0, rec.state))
-    counters.output_evaluations += 1
     feed = GridFeed(mode, responses, store)
+    feed.start(plan.t0, rec.state, ds)
+    counters.output_evaluations += 1
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
     s, t = rec.state, plan.t0
     for i in range(1, plan.n_steps + 1):                            # predict, Newton, correct
@@ -284,21 +311,9 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         if progress is not None:
             progress(i, plan.n_steps)
     feed.catch_up()
-    responses.close(t, m)
-
-    def mass() -> tuple[Any, np.ndarray | None]:
-        value = model.structural_mass(params)
-        grad = partials.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0] \
-            if partials is not None else None
-        return value, grad
-
-    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0, mass,
+    responses.close(t, m)                                             # responses, gradients
+    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0,
+                              _mass(model, params, partials),
                               adjoint=mode.gradients if isinstance(mode, AdjointMode) else None)
-    n = store.last + 1
-    return RunResult(
-        x=np.asarray(x), time=store.times[:n], history={f: v[:n] for f, v in store.hist.items()},
-        sensitivity_history={f: v[:n] for f, v in store.shist.items()},
-        monitors={k: v[:n] for k, v in store.mons.items()}, responses=values,
-        counters=counters.as_dict(), wall_time=_time.perf_counter() - wall0,
-        status=status, message=message, labels={"q": stepper.labels}, method=method,
-        method_reason=reason)
+    return store.result(np.asarray(x), values, counters.as_dict(), _time.perf_counter() - wall0,
+                        status, message, stepper.labels, method, reason)

@@ -7,9 +7,12 @@ Outputs are only available as complex-safe functions v(t, s, params), so:
 
 * the state part is taken by complex step along the state components the output depends on
   (exact to round-off, whatever the partials method); the dependency is found once per output,
-  by complex steps along every state component at two perturbed copies of the first state it
-  is needed at (a generic point: an output of k components of a few coordinates costs a few
-  evaluations per instant, not the size of the state);
+  by complex steps along every state component at the first state it is needed at and at two
+  random perturbations of it (generic points: an output of k components of a few coordinates
+  then costs a few evaluations per instant, not the size of the state).  A dependence that
+  vanishes at all three points (a branch, e.g. a contact, inactive there) would be missed:
+  the shipped outputs have none, and the adjoint-against-direct tests on every shipped case
+  would show one;
 * the design part uses the run's own design partials (the same perturbed parameter sets and
   difference quotients as the direct mode), restricted to the design variables the output
   depends on explicitly, found the same way; outputs declared ``linear`` have none.
@@ -27,8 +30,10 @@ from ..sensitivity import DesignPartials
 
 # imaginary step of the state derivatives (complex step: no cancellation, any small size)
 STATE_STEP = 1e-30
-# relative sizes of the two perturbations of the probe states that find the dependencies
-PROBE_SIZES = (1e-3, 0.3)
+# relative sizes of the perturbations of the probe states that find the dependencies (the state
+# itself, and two random perturbations of it: a dependence that vanishes at one point, a
+# derivative zero at rest, shows at the others)
+PROBE_SIZES = (0.0, 1e-3, 0.3)
 PROBE_CHUNK = 256
 # most states in one call of a batched output (instants × directions)
 BLOCK_STATES = 4096
