@@ -4,8 +4,10 @@ The paper's flowchart (method.md §2–4): the primal stepper (:mod:`.stepping`)
 F_R(z) = 0 by Newton and corrects, and hands back one record per accepted step (its converged
 state, linearization and factor); a derivative mode consumes the records — the direct mode
 (:mod:`.derivatives.direct`) carries the sensitivities forward, trailing the state by a block
-of steps; the outputs of every grid step go to the responses.  What a case does not need is
-decided once in :class:`RunPlan` and never re-tested inside the loop's numerics.
+of steps, the adjoint mode (:mod:`.derivatives.adjoint`) keeps them and sweeps back over them
+once the responses know their weights; the outputs of every grid step go to the responses.
+What a case does not need is decided once in :class:`RunPlan` and never re-tested inside the
+loop's numerics.
 """
 from __future__ import annotations
 
