@@ -299,3 +299,12 @@ def test_adjoint_with_sensitivity_history_is_refused():
         "responses=[{name: tip_end, type: value, quantity: {dof: u10, kind: displacement}}]"])
     res = dynsens.run_case(one)
     assert res.method == "direct" and res.sensitivity_history["q"].shape[-1] == 10
+
+
+@pytest.mark.parametrize("scheme", ["hht", "generalized_alpha"])
+def test_event_time_responses_with_the_dissipative_schemes(scheme):
+    case = dynsens.load_case(CASES / "hydraulic_lever.yaml", ["sensitivity.partials=complex", *SCHEMES[scheme]])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
