@@ -120,13 +120,18 @@ SECTIONS: dict[str, Section] = {
         _k("atol", "number", "absolute tolerance on the correction", default=0.0),
         _k("max_iterations", "integer", "iterations per step before a step cut", default=25),
     )),
-    "sensitivity": Section("sensitivity", "Direct-differentiation design sensitivities.", (
+    "sensitivity": Section("sensitivity", "Design sensitivities: direct differentiation or the adjoint.", (
         _k("enabled", "bool", "compute gradients", default=True),
         _k("partials", "enum", "numerical partials ∂F_R/∂x at fixed state", values=("forward", "central", "complex"),
            default="forward"),
         _k("step", "number", "relative step of the partials", default="1e-8 / 1e-5 / 1e-20 (by method)"),
         _k("matrix", "enum", "reuse the last Newton factor (error below the partials') or refactorize at the "
                              "solution", values=("reuse", "converged"), default="reuse"),
+        _k("method", "enum", "derivative mode: direct differentiation, the discrete adjoint, or chosen by the "
+                             "counts of design variables and responses", values=("direct", "adjoint", "auto"),
+           default="direct"),
+        _k("memory_budget", "any", "memory the adjoint may keep for its step records (bytes, or with a unit such "
+                                   "as 500 MB); beyond it, checkpoints and recomputed segments", default="2 GiB"),
     )),
     "output": Section("output", "What `dynsens simulate` writes besides responses and gradients.", (
         _k("history", "any", "state histories: a list from q qd qdd lam p pd, or 'all' or 'none'",

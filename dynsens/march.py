@@ -1,14 +1,13 @@
 """The time loop: one routine for the primal state and its design sensitivities.
 
-Per step (method.md §2–4): predict → Newton on F_R(z) = 0 → correct; then, when
-sensitivities are requested, predict the sensitivity matrices with the same scheme,
-form the pseudo load P at the converged state and solve S ∇z = −P with the factor of
-the converged Newton matrix → correct.  The sensitivity steps trail the state steps by a
-block (each step keeps its converged linearization and factor), so that the explicit design
-partials of a whole block take one batched residual call; the arithmetic per step is the
-same (small constant-matrix models advance the block by the transition matrix of that very
-step).  What a case does not need is decided once in :class:`RunPlan` and never re-tested
-inside the loop's numerics.
+The paper's flowchart (method.md §2–4): the primal stepper (:mod:`.stepping`) predicts, solves
+F_R(z) = 0 by Newton and corrects, and hands back one record per accepted step (its converged
+state, linearization and factor); a derivative mode consumes the records — the direct mode
+(:mod:`.derivatives.direct`) carries the sensitivities forward, trailing the state by a block
+of steps, the adjoint mode (:mod:`.derivatives.adjoint`) keeps them and sweeps back over them
+once the responses know their weights; the outputs of every grid step go to the responses.
+What a case does not need is decided once in :class:`RunPlan` and never re-tested inside the
+loop's numerics.
 """
 from __future__ import annotations
 
@@ -18,15 +17,17 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import ConvergenceError, NonFiniteError
-from .integrators.newmark import Aux, Newmark, Prediction
+from .derivatives.adjoint import AdjointMode
+from .derivatives.checkpoints import DEFAULT_MEMORY_BUDGET, RecordStore
+from .derivatives.direct import DirectMode
+from .errors import CaseError
+from .integrators.newmark import Newmark
 from .models.base import Model, StepState
-from .responses import ResponseSet, ResponseValue
-from .sensitivity import DesignPartials, initial_state_gradient, pseudo_load, pseudo_load_with
+from .responses import EventHit, EventTime, ResponseSet, ResponseValue
+from .sensitivity import DesignPartials
 from .solver.linalg import Counters
 from .solver.newton import NewtonSettings, StepSolver
-
-HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
+from .stepping import HISTORY_FIELDS, PrimalStepper, StepRecord
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,10 @@ class RunPlan:
     sensitivity_history : store the sensitivity histories of the same fields.
     max_step_cuts : how often a step whose Newton iteration fails is halved before the run
         stops (responses and histories keep the regular grid; the sub-steps are internal).
+    method : ``direct`` | ``adjoint`` | ``auto``: how the sensitivities are computed
+        (:func:`choose_method` decides ``auto``).
+    memory_budget : bytes of step records the adjoint keeps; beyond it, checkpoints and
+        recomputed segments.
     """
 
     t0: float
@@ -63,6 +68,8 @@ class RunPlan:
     history: tuple[str, ...] = ("q", "qd", "qdd")
     sensitivity_history: bool = False
     max_step_cuts: int = 6
+    method: str = "direct"
+    memory_budget: float = DEFAULT_MEMORY_BUDGET
 
     @property
     def n_steps(self) -> int:
@@ -92,42 +99,171 @@ class RunResult:
     status: str
     message: str
     labels: dict[str, list[str]]
+    method: str = ""          # the derivative mode that ran (direct | adjoint), "" without
+    method_reason: str = ""   # why it was chosen
 
 
-def _split(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return z[:n_q], z[n_q:n_q + n_lam], z[n_q + n_lam:]
+class RunStore:
+    """The histories and monitors of a run at the grid steps, in arrays sized once."""
+
+    def __init__(self, plan: RunPlan, model: Model, params: Any, s0: StepState, m: int,
+                 sensitivities: bool):
+        n = plan.n_steps + 1
+        self.model, self.params = model, params
+        self.fields = [f for f in plan.history if f in HISTORY_FIELDS]
+        self.times = np.empty(n)
+        self.hist = {f: np.empty((n, getattr(s0, f).shape[0]), dtype=getattr(s0, f).dtype)
+                     for f in self.fields}
+        self.store_sens = plan.sensitivity_history and sensitivities
+        self.shist = {f: np.empty((n, getattr(s0, f).shape[0], m)) for f in self.fields} \
+            if self.store_sens else {}
+        self.monitor_names = list(model.monitors(plan.t0, s0, params))
+        self.mons = {k: np.empty(n) for k in self.monitor_names}
+        self.last = 0
+
+    def record(self, k: int, t: float, s: StepState) -> None:
+        """The state s of grid step k at time t (s)."""
+        self.times[k] = t
+        self.last = k
+        for f in self.fields:
+            self.hist[f][k] = getattr(s, f)
+        if self.monitor_names:
+            for name, val in self.model.monitors(t, s, self.params).items():
+                self.mons[name][k] = val
+
+    def result(self, x: np.ndarray, responses: dict[str, ResponseValue], counters: dict[str, int],
+               wall_time: float, status: str, message: str, labels: list[str], method: str,
+               reason: str) -> RunResult:
+        """The run's result, histories cut at the last grid step taken."""
+        n = self.last + 1
+        return RunResult(
+            x=x, time=self.times[:n], history={f: v[:n] for f, v in self.hist.items()},
+            sensitivity_history={f: v[:n] for f, v in self.shist.items()},
+            monitors={k: v[:n] for k, v in self.mons.items()}, responses=responses, counters=counters,
+            wall_time=wall_time, status=status, message=message, labels={"q": labels}, method=method,
+            method_reason=reason)
+
+    def record_sensitivities(self, k: int, ds: StepState | None) -> None:
+        """The sensitivities of grid step k (when they are stored)."""
+        if self.store_sens and ds is not None:
+            for f in self.fields:
+                self.shist[f][k] = getattr(ds, f)
 
 
-def _check_finite(s: StepState, t: float, step: int, labels: list[str]) -> None:
-    # one sum: NaN or Inf anywhere makes it non-finite; then find the entry (an overflowing
-    # sum of finite entries finds none and passes)
-    if np.isfinite(np.concatenate(s).sum()):
-        return
-    for name, v in zip(HISTORY_FIELDS, s):
-        if v.size and not np.all(np.isfinite(v)):
-            k = int(np.flatnonzero(~np.isfinite(v))[0])
-            where = labels[k] if name in ("q", "qd", "qdd") and k < len(labels) else f"{name}[{k}]"
-            raise NonFiniteError(
-                f"NaN/Inf first appeared in {name} of {where} at t = {t:.6g} s (step {step}): "
-                "reduce the time step or check parameters and loads")
+class GridFeed:
+    """Hands the grid steps to the responses once the derivative mode has their sensitivities
+    (the direct mode trails the state by up to ``trail_length`` steps; without derivatives,
+    every step goes at once).  Sub-steps of step cuts go to the mode, not to the responses."""
+
+    def __init__(self, mode: DirectMode | AdjointMode | None, responses: ResponseSet, store: RunStore):
+        self.mode, self.responses, self.store = mode, responses, store
+        self.length = mode.trail_length if mode is not None else 1
+        self.marks: list[tuple[int, float, StepState, float, EventHit | None, int]] = []
+        self.taken = 0
+
+    def start(self, t0: float, s0: StepState, ds0: StepState | None) -> None:
+        """The initial state (and its sensitivities) at t0 (s): stored and to the responses."""
+        self.store.record(0, t0, s0)
+        self.store.record_sensitivities(0, ds0)
+        self.responses.push(0, t0, s0, ds0, 0.0, self.responses.watch(t0, s0))
+
+    def add(self, i: int, t: float, h: float, records: list[StepRecord], event: EventHit | None) -> None:
+        """Grid step i (ending at t, s; size h) made of ``records``, and what the events said."""
+        if self.mode is not None:
+            self.mode.take_step(records)
+            self.taken += len(records)
+        self.marks.append((i, t, records[-1].state, h, event, self.taken - 1))
+        if event is not None or len(self.marks) >= self.length:
+            self.catch_up()
+
+    def catch_up(self) -> None:
+        """Sensitivities of the records taken so far, then the marked grid steps to the responses."""
+        ds_of = self.mode.catch_up() if self.mode is not None else []
+        for i, t, s, h, event, k in self.marks:
+            ds = ds_of[k] if k >= 0 else None
+            self.store.record_sensitivities(i, ds)
+            self.responses.push(i, t, s, ds, h, event)
+        self.marks.clear()
+        self.taken = 0
 
 
-TRAIL_STEPS = 128
-TRAIL_BYTES = 32 * 2**20
-# Largest sensitivity state (∇q, ∇q̇, ∇q̈, ∇λ, ∇p, ∇ṗ and the scheme's ∇a, ∇b stacked) for
-# which constant-matrix steps advance by a transition matrix (its product costs n_x² m; above
-# this size the step's own solve is cheaper)
-TRANSITION_MAX = 32
+def _mass(model: Model, params: Any, partials: DesignPartials | None
+          ) -> Callable[[], tuple[Any, np.ndarray | None]]:
+    """The structural mass and its gradient (by the design partials), when a response asks."""
+    def mass() -> tuple[Any, np.ndarray | None]:
+        value = model.structural_mass(params)
+        grad = partials.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0] \
+            if partials is not None else None
+        return value, grad
+    return mass
 
 
-def _trail_length(traits: Any, m: int) -> int:
-    """Steps the sensitivities may trail the state: up to TRAIL_STEPS, while the held dense
-    linearizations and factors (≈ 4 n_z² + 6 m n_z numbers per step) stay within TRAIL_BYTES;
-    one step (no trail) for sparse models, whose factors are large."""
-    if traits.sparse:
-        return 1
-    per_step = 8 * (4 * traits.n_z * traits.n_z + 6 * m * traits.n_z)
-    return max(1, min(TRAIL_STEPS, TRAIL_BYTES // per_step))
+def _solver(model: Model, plan: RunPlan, counters: Counters, partials: DesignPartials | None) -> StepSolver:
+    """The Newton solver of the run: what it factorizes and keeps follows the plan."""
+    tr, sens = model.traits, partials is not None
+    return StepSolver(model, plan.newton, counters, newton=not tr.linear, refactor=not tr.constant_matrices,
+                      need_converged_factor=sens and plan.sensitivity_matrix == "converged",
+                      sensitivities=sens,
+                      reuse_tolerance=partials.relative_error if partials is not None else 0.0)
+
+
+METHODS = ("direct", "adjoint", "auto")
+
+
+def adjoint_obstacles(plan: RunPlan, responses: ResponseSet) -> list[str]:
+    """What keeps the adjoint from serving this run (empty: nothing)."""
+    why = responses.adjoint_unsupported()
+    if plan.sensitivity_history:
+        why.append("output.sensitivity_history (the adjoint computes no sensitivity states)")
+    recorder = getattr(responses, "recorder", None)
+    if recorder is not None and recorder.gradient_outputs:
+        why.append("recorded quantities with sensitivity: true (their gradient histories are sensitivity states)")
+    return why
+
+
+def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, str]:
+    """The derivative mode of a run and why (method.md §6–7).
+
+    Direct differentiation costs, per step, m solve columns and m directions of the pseudo load
+    and outputs; the adjoint r transposed-solve columns (r: responses that read outputs or an
+    event time; mass and expressions of responses need no sweep) plus its fixed costs: the
+    outputs' seeds, the transposed sweep and the records it keeps (or recomputes).  ``auto``
+    takes the adjoint when it covers the case and m ≥ 4 (r + 1): the paper's rule of thumb
+    (adjoint when the design variables outnumber the functions) with the fixed costs priced from
+    the measured chain runs of BENCHMARKS.md (r = 4: adjoint ≈ 1.8× the primal whatever m;
+    direct 1.3× at m = 10, 2.9× at m = 100)."""
+    r = sum(1 for rsp in responses.responses if rsp.output_ids or isinstance(rsp, EventTime))
+    why_not = adjoint_obstacles(plan, responses)
+    if plan.method == "direct":
+        return "direct", "sensitivity.method: direct"
+    if plan.method == "adjoint":
+        if why_not:
+            raise CaseError(f"sensitivity.method: adjoint does not cover this case yet ({'; '.join(why_not)}); "
+                            "use sensitivity.method: direct (or auto)")
+        return "adjoint", "sensitivity.method: adjoint"
+    if why_not:
+        return "direct", f"auto: the adjoint does not cover {'; '.join(why_not)}"
+    if m >= 4 * (r + 1):
+        return "adjoint", f"auto: {r} functions against {m} design variables (m >= 4(r + 1))"
+    return "direct", f"auto: {r} functions against {m} design variables (m < 4(r + 1))"
+
+
+def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
+          partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet,
+          counters: Counters) -> DirectMode | AdjointMode | None:
+    """The derivative mode that consumes the step records (None without sensitivities)."""
+    if partials is None:
+        return None
+    if method == "direct":
+        return DirectMode(model, scheme, solver, partials, counters)
+
+    def grid(i: int) -> tuple[float, float]:
+        """(t_prev, h) of grid step i exactly as the loop of :func:`integrate` forms them."""
+        t_prev = plan.t0 if i == 1 else plan.t0 + (i - 2) * plan.dt + plan.step_size(i - 1)
+        return t_prev, plan.step_size(i)
+    records = RecordStore(stepper, grid, plan.memory_budget, counters)
+    return AdjointMode(model, scheme, partials, counters, responses.outputs, records,
+                       lambda k: plan.t0 + (k - 1) * plan.dt + plan.step_size(k) if k else plan.t0)
 
 
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
@@ -139,222 +275,50 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     ``x`` may be complex (complex step of the whole simulation); sensitivities must then
     be off.  Raises ConvergenceError, NonFiniteError or ModelError with context.
     """
-    wall0 = _time.perf_counter()
-    tr = model.traits
-    n_q, n_lam = tr.n_q, tr.n_lam
-    counters = Counters()
-    sens = plan.sensitivities and np.size(x) > 0
+    wall0, counters, m = _time.perf_counter(), Counters(), np.size(x)
+    sens = plan.sensitivities and m > 0
     if sens and np.iscomplexobj(x):
         raise ValueError("sensitivities cannot be computed on a complex design; switch them off")
     partials = DesignPartials(model, np.asarray(x), plan.partials, plan.partials_step,
                               design_scale) if sens else None
     params = partials.params0 if partials is not None else model.parameters(np.asarray(x))
-    m = np.size(x)
-    solver = StepSolver(model, plan.newton, counters, newton=not tr.linear,
-                        refactor=not tr.constant_matrices,
-                        need_converged_factor=sens and plan.sensitivity_matrix == "converged",
-                        sensitivities=sens,
-                        reuse_tolerance=partials.relative_error if partials is not None else 0.0)
-    labels = model.dof_labels()
-    n_steps = plan.n_steps
+    solver = _solver(model, plan, counters, partials)
+    stepper = PrimalStepper(model, scheme, solver, params, plan.max_step_cuts, counters)
+    method, reason = choose_method(plan, responses, m) if partials is not None else ("", "")
+    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters)
 
-    # --- initial state and consistent initial accelerations (coefficients 0: S0 = ∂F_R/∂z)
-    q0, qd0, p0 = model.initial_state(params)
-    lam_guess, pd_guess = model.initial_guess(params)
-    dtype = np.result_type(q0, qd0, p0, float)
-    z0 = np.concatenate([np.zeros(n_q, dtype), np.asarray(lam_guess, dtype), np.asarray(pd_guess, dtype)])
-    pred = Prediction(q0, qd0, p0, q0[:0], p0[:0])
-
-    def correct0(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
-        return StepState(pr.q, pr.qd, qdd, lam, pr.p, pd)
-
-    out = solver.solve_step(plan.t0, 0, pred, z0, params, (0.0, 0.0, 0.0), correct0)
-    s = out.state
-    _check_finite(s, plan.t0, 0, labels)
-    ds: StepState | None = None
-    if partials is not None:
-        dq0, dqd0, dp0 = initial_state_gradient(model, partials)
-        P = pseudo_load(model, plan.t0, s, out.lin, dq0, dqd0, dp0, partials)
-        counters.sensitivity_residual_evaluations += partials.evaluations_per_call
-        assert out.factor is not None
-        dz = solver.solve_sensitivity(out.factor, P)
-        dqdd, dlam, dpd = _split(dz, n_q, n_lam)
-        ds = StepState(dq0, dqd0, dqdd, dlam, dp0, dpd)
-    aux = scheme.start(s)
-    daux = scheme.start(ds) if ds is not None else None
-
-    # --- storage, decided once
-    hist_fields = [f for f in plan.history if f in HISTORY_FIELDS]
-    store_sens = plan.sensitivity_history and ds is not None
-    times = np.empty(n_steps + 1)
-    hist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0]), dtype=getattr(s, f).dtype)
-            for f in hist_fields}
-    shist = {f: np.empty((n_steps + 1, getattr(s, f).shape[0], m)) for f in hist_fields} if store_sens else {}
-    mon_names = list(model.monitors(plan.t0, s, params))
-    mons = {k: np.empty(n_steps + 1) for k in mon_names}
-    responses.start(params, partials, None if partials is not None else model.stack_parameters([params]),
-                    tr.n_z)
-
-    def record(k: int, t: float, st: StepState) -> None:
-        times[k] = t
-        for f in hist_fields:
-            hist[f][k] = getattr(st, f)
-        if mon_names:
-            for name, val in model.monitors(t, st, params).items():
-                mons[name][k] = val
-
-    def record_sensitivities(k: int, dst: StepState) -> None:
-        for f in hist_fields:
-            shist[f][k] = getattr(dst, f)
-
-    record(0, plan.t0, s)
-    if store_sens and ds is not None:
-        record_sensitivities(0, ds)
-    responses.push(0, plan.t0, s, ds, 0.0, responses.watch(plan.t0, s))
+    rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
+    ds = mode.start(rec) if mode is not None else None
+    store = RunStore(plan, model, params, rec.state, m, ds is not None)
+    responses.start(params, partials if method == "direct" else None,
+                    None if method == "direct" else model.stack_parameters([params]),
+                    model.traits.n_z, trace=method == "adjoint")
+    feed = GridFeed(mode, responses, store)
+    feed.start(plan.t0, rec.state, ds)
     counters.output_evaluations += 1
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
-    last = 0
-    t = plan.t0
-
-    # The sensitivities trail the state by a block of steps: the explicit design partials of
-    # the block's converged states take one batched residual call (Model.residual_batch_steps),
-    # then each step solves S ∇z = −P with its own converged linearization and factor, in step
-    # order (method.md §4).  Sub-steps of step cuts are in the trail; the grid steps are marked.
-    def sensitivity_step(ds: StepState, daux: Aux, design_part: np.ndarray, lin: Any, factor: Any,
-                         h: float) -> tuple[StepState, Aux]:
-        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct."""
-        dpred = scheme.predict(ds, daux, h)
-        P = pseudo_load_with(design_part, lin, dpred.q, dpred.qd, dpred.p)
-        dz = solver.solve_sensitivity(factor, P)
-        ds = scheme.correct(dpred, *_split(dz, n_q, n_lam), h)
-        return ds, scheme.advance(dpred, ds)
-
-    # Constant matrices (linear models): every step with the same step size applies the same
-    # linear map, X' = T X + U ∂_xF_R on the stacked sensitivity state X; T and U are that very
-    # step applied to unit columns, so a step costs one small product instead of a solve.
-    sizes = [n_q, n_q, n_q, n_lam, tr.n_p, tr.n_p, n_q, tr.n_p]
-    ends = np.cumsum(sizes).tolist()
-    pieces = [slice(a, b) for a, b in zip([0] + ends[:-1], ends)]
-    use_transitions = tr.constant_matrices and sum(sizes) <= TRANSITION_MAX
-    transitions: dict[tuple[int, int, float], tuple[Any, Any, np.ndarray, np.ndarray]] = {}
-
-    def unpack(X: np.ndarray) -> tuple[StepState, Aux]:
-        parts = [X[sl] for sl in pieces]
-        return StepState(*parts[:6]), Aux(*parts[6:])
-
-    def transition(lin: Any, factor: Any, h: float) -> tuple[np.ndarray, np.ndarray]:
-        key = (id(lin), id(factor), h)
-        if key not in transitions:    # (the entry holds lin and factor: their ids stay theirs)
-            n_x = sum(sizes)
-            ds_T, daux_T = sensitivity_step(*unpack(np.eye(n_x)), np.zeros((tr.n_z, n_x)), lin, factor, h)
-            ds_U, daux_U = sensitivity_step(*unpack(np.zeros((n_x, tr.n_z))), np.eye(tr.n_z), lin, factor, h)
-            transitions[key] = (lin, factor, np.concatenate([*ds_T, *daux_T]),
-                                np.concatenate([*ds_U, *daux_U]))
-        return transitions[key][2], transitions[key][3]
-
-    trail: list[tuple[float, float, StepState, Any, Any]] = []      # (t, h, s, lin, factor)
-    marks: list[tuple[int, float, StepState, float, Any, int]] = []  # (i, t, s, h, event, trail index)
-    trail_length = _trail_length(tr, m) if partials is not None else 1
-
-    def take_step(i: int, t_prev: float, h: float, cuts: int, s: StepState, aux: Aux
-                  ) -> tuple[StepState, Aux]:
-        """Advance the state from t_prev by h (s); on Newton failure, halve the step (up to
-        plan.max_step_cuts times).  Every step taken joins the sensitivity trail."""
-        t = t_prev + h
-        pred = scheme.predict(s, aux, h)
-        z_guess = np.concatenate([s.qdd, s.lam, s.pd])
-
-        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
-            return scheme.correct(pr, qdd, lam, pd, h)
-
-        try:
-            out = solver.solve_step(t, i, pred, z_guess, params, scheme.coefficients(h), correct)
-        except ConvergenceError as exc:
-            if cuts >= plan.max_step_cuts:
-                if plan.max_step_cuts:
-                    exc.args = (f"{exc.args[0]} (after {cuts} step cuts down to Δt = {h:.3g} s)",)
-                raise
-            counters.step_cuts += 1
-            half = 0.5 * h
-            s, aux = take_step(i, t_prev, half, cuts + 1, s, aux)
-            return take_step(i, t_prev + half, half, cuts + 1, s, aux)
-        s_new = out.state
-        _check_finite(s_new, t, i, labels)
-        model.check_state(t, s_new, params)
-        if partials is not None:
-            assert out.factor is not None
-            trail.append((t, h, s_new, out.lin, out.factor))
-        return s_new, scheme.advance(pred, s_new)
-
-    def catch_up() -> None:
-        """Sensitivities of the trailing steps, then the marked grid steps to the responses."""
-        nonlocal ds, daux
-        ds_of: list[StepState | None] = [None] * len(trail)
-        if partials is not None and trail and ds is not None and daux is not None:
-            design_part = partials.residual_partials_steps(np.array([e[0] for e in trail]),
-                                                           [e[2] for e in trail])
-            counters.sensitivity_residual_evaluations += partials.evaluations_per_call * len(trail)
-            k = 0
-            while k < len(trail):
-                _, h, _, lin, factor = trail[k]
-                end = k + 1
-                while use_transitions and end < len(trail) and trail[end][3] is lin and \
-                        trail[end][4] is factor and trail[end][1] == h:
-                    end += 1
-                if end - k == 1:
-                    ds, daux = sensitivity_step(ds, daux, design_part[k], lin, factor, h)
-                    ds_of[k] = ds
-                else:
-                    T, U = transition(lin, factor, h)
-                    W = U @ design_part[k:end]
-                    X = np.concatenate([*ds, *daux])
-                    for j in range(end - k):
-                        X = T @ X + W[j]
-                        ds_of[k + j] = unpack(X)[0]
-                    ds, daux = unpack(X)
-                k = end
-        for i, t, s, h, event, k in marks:
-            dst = ds_of[k] if k >= 0 else None
-            if store_sens and dst is not None:
-                record_sensitivities(i, dst)
-            responses.push(i, t, s, dst, h, event)
-        trail.clear()
-        marks.clear()
-
-    for i in range(1, n_steps + 1):
+    s, t = rec.state, plan.t0
+    for i in range(1, plan.n_steps + 1):                            # predict, Newton, correct
         h = plan.step_size(i)
         t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
-        s, aux = take_step(i, t_prev, h, 0, s, aux)
+        records = stepper.advance(i, t_prev, h, s)
+        s = records[-1].state
         counters.steps += 1
-        record(i, t, s)
-        last = i
+        store.record(i, t, s)
         counters.output_evaluations += 1
         event = responses.watch(t, s)
-        marks.append((i, t, s, h, event, len(trail) - 1))
-        if event is not None or len(marks) >= trail_length:
-            catch_up()
+        feed.add(i, t, h, records, event)                              # sensitivities, responses
         if event is not None:
             ev = next(reversed(responses.fired))
             status = "terminated"
             message = f"event '{ev}' at t = {float(np.real(responses.fired[ev].t)):.6g} s"
             break
         if progress is not None:
-            progress(i, n_steps)
-    catch_up()
-    responses.close(t, m)
-
-    def mass() -> tuple[Any, np.ndarray | None]:
-        value = model.structural_mass(params)
-        grad = partials.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0] \
-            if partials is not None else None
-        return value, grad
-
-    design = dict(zip(design_names, np.asarray(x)))
-    values = responses.finish(design, m if sens else 0, mass)
-    n = last + 1
-    return RunResult(
-        x=np.asarray(x), time=times[:n], history={f: v[:n] for f, v in hist.items()},
-        sensitivity_history={f: v[:n] for f, v in shist.items()},
-        monitors={k: v[:n] for k, v in mons.items()}, responses=values,
-        counters=counters.as_dict(), wall_time=_time.perf_counter() - wall0,
-        status=status, message=message, labels={"q": labels})
+            progress(i, plan.n_steps)
+    feed.catch_up()
+    responses.close(t, m)                                             # responses, gradients
+    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0,
+                              _mass(model, params, partials),
+                              adjoint=mode.gradients if isinstance(mode, AdjointMode) else None)
+    return store.result(np.asarray(x), values, counters.as_dict(), _time.perf_counter() - wall0,
+                        status, message, stepper.labels, method, reason)

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from .derivatives.weights import grid_weights
 from .errors import NonFiniteError
 from .expressions import Expression, ExpressionError
 from .models.base import Output, StepState
@@ -61,6 +62,36 @@ class Samples:
 
 
 @dataclass
+class OutputTrace:
+    """The outputs' values at every instant fed to the responses (kept in adjoint mode: the
+    adjoint weights of a response may need its whole history, e.g. a KS maximum).
+
+    t : (K,) times (s); value[oid] : (K, k).
+    event : when a terminating event fired, its last instant is the event instant, interpolated
+        between the grid steps K − 2 and K − 1 (see :class:`EventInstant`); else None.
+    """
+
+    t: np.ndarray
+    value: dict[int, np.ndarray]
+    event: "EventInstant | None" = None
+
+
+@dataclass(frozen=True)
+class EventInstant:
+    """How the event instant was formed (what its gradients depend on): the event, the crossing
+    values e0, e1 of its watched component at the grid steps before and at the crossing, the
+    fraction ``frac`` of the step taken (ϑ, or 1 in ``step`` mode), the step size dt (s) and the
+    outputs' values at the grid step of the crossing (``cur``, (k,) each)."""
+
+    spec: "EventSpec"
+    e0: Any
+    e1: Any
+    frac: Any
+    dt: float
+    cur: dict[int, np.ndarray]
+
+
+@dataclass
 class ResponseValue:
     """Final value of a response with its gradient; ``missing`` explains an absent value."""
 
@@ -85,6 +116,30 @@ class Response(ABC):
     @abstractmethod
     def finish(self, ctx: "FinishContext") -> ResponseValue:
         """Final value and gradient."""
+
+    # ---- adjoint hooks (additive: a response that reads outputs implements both to be
+    # differentiated by the adjoint mode; until it does, the adjoint refuses the case)
+    def adjoint_unsupported(self) -> str | None:
+        """Why the adjoint mode cannot differentiate this response, or None when it can.
+        Responses that read no outputs (mass, expressions of other responses) need no seeds;
+        the default refuses any response reading outputs."""
+        return f"response type {type(self).__name__} has no adjoint seeds" if self.output_ids else None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """The response's gradient as a weighted sum of the gradients the direct mode feeds it
+        (called once the run has ended; the weights may use the whole history).  Keys:
+
+        * ``oid`` → W (K, k): weights of the total gradients ∇v_oid(t_i) at the K instants of
+          the trace, dJ/dx = Σ_i Σ_c W[i, c] ∇v_oid,c(t_i) + …;
+        * ``("fixed", oid)`` → W (K, k): weights of the fixed-time gradients (they differ from
+          the total ones only at an event instant);
+        * ``"dt_dx"`` → c: weight of the gradient of the event time (the end of an event run).
+
+        These are the adjoint seeds: the adjoint mode turns them into ∂J/∂state_i and ∂_x J.
+        None (the default for responses that read no outputs): no sweep needed."""
+        if self.output_ids:
+            raise NotImplementedError(type(self).__name__)
+        return None
 
 
 @dataclass
@@ -150,6 +205,29 @@ class ValueAt(Response):
                         self._hit = (prev[1] + w * (v[j] - prev[1]), g_hit)
         self._prev = (samples.t[-1], v[-1], None if g is None else g[-1])
 
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        oid = self.output_ids[0]
+        W = np.zeros(trace.value[oid].shape)
+        if self.time is None or self.event is not None:          # the last instant (or the event's)
+            W[-1, self.component] = 1.0
+            return {("fixed", oid) if self.fixed_time else oid: W}
+        # the instant (or the two around it) that :meth:`feed` picked
+        tr = np.real(trace.t)
+        tol = 1e-12 * max(1.0, abs(self.time))
+        after = np.flatnonzero(tr >= self.time - tol)
+        if after.size:
+            j = int(after[0])
+            if abs(tr[j] - self.time) <= tol:
+                W[j, self.component] = 1.0
+            elif j and tr[j - 1] < self.time:
+                w = (self.time - trace.t[j - 1]) / (trace.t[j] - trace.t[j - 1])
+                W[j - 1, self.component] = 1.0 - w
+                W[j, self.component] = w
+        return {oid: W}
+
     def finish(self, ctx: FinishContext) -> ResponseValue:
         kind = "fixed_time" if self.fixed_time else ""
         if self.event is not None and self.event not in ctx.events:
@@ -199,6 +277,16 @@ class KSAggregate(Response):
             contrib = w @ G.reshape(v.size, -1)
             self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
 
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        # the softmax weights w_k = exp(ρ(g_k − g_max)) / Σ exp(ρ(g − g_max)) of the final sum
+        out = {oid: np.zeros(trace.value[oid].shape) for oid in self.output_ids}
+        for oid, comp in zip(self.output_ids, self.components):
+            out[oid][:, comp] += np.real(np.exp(self.rho * (trace.value[oid][:, comp] - self._gmax)) / self._sum)
+        return out
+
     def finish(self, ctx: FinishContext) -> ResponseValue:
         value = self._gmax + np.log(self._sum) / self.rho
         grad = None if self._wgrad is None else self._wgrad / self._sum
@@ -243,6 +331,20 @@ class TimeIntegral(Response):
                 self._grad = dg if self._grad is None else self._grad + dg
         self._prev = last
 
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        oid, c = self.output_ids[0], self.component
+        W = np.zeros(trace.value[oid].shape)
+        half = 0.5 * np.real(np.diff(trace.t))          # trapezoid: half an interval to each end
+        W[:-1, c] += half
+        W[1:, c] += half
+        out: dict[Any, Any] = {oid: W}
+        if trace.event is not None and len(trace.t) >= 2:     # the last interval ends at the event
+            out["dt_dx"] = 0.5 * (trace.value[oid][-2, c] + trace.value[oid][-1, c])
+        return out
+
     def finish(self, ctx: FinishContext) -> ResponseValue:
         grad = self._grad if self._grad is not None else (np.zeros(ctx.m) if ctx.m else None)
         return ResponseValue(self._value, grad, self.unit)
@@ -281,6 +383,10 @@ class EventTime(Response):
 
     def __init__(self, name: str, event: str | None):
         self.name, self.unit, self.event = name, "s", event
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        fired = trace.event is not None and (self.event is None or trace.event.spec.name == self.event)
+        return {"dt_dx": 1.0} if fired else None
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         if self.event is None:
@@ -405,20 +511,25 @@ class ResponseSet:
         self._params: Any = None
         self._partials: Any = None
         self._params_one: Any = None
+        self._trace: list[Samples] | None = None
+        self._event: EventInstant | None = None
 
     def attach_recorder(self, recorder: "Recorder") -> None:
         """Record quantities in this run (before :meth:`start`)."""
         self.recorder = recorder
         self._grad_oids |= recorder.gradient_outputs
 
-    def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int) -> None:
+    def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int,
+              *, trace: bool = False) -> None:
         """Bind the run: its parameters, its :class:`.sensitivity.DesignPartials` (None without
-        sensitivities), ``stacked_one`` = ``model.stack_parameters([params])`` (None when the
-        model does not evaluate batches) and the size of a state (n_z)."""
+        sensitivities, or in adjoint mode), ``stacked_one`` = ``model.stack_parameters([params])``
+        (None when the model does not evaluate batches) and the size of a state (n_z);
+        ``trace`` keeps the outputs' values of every instant (:meth:`trace`, adjoint mode)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
         if stacked_one is None and self._stack_parameters is not None and \
                 any(oid not in self._grad_oids for oid in range(len(self.outputs))):
             self._params_one = self._stack_parameters([params])
+        self._trace = [] if trace else None
         entries = partials.block_entries if partials is not None else 1
         # the parameter sets are stacked once per entry and step of a block (without
         # sensitivities one set serves the whole block)
@@ -493,6 +604,7 @@ class ResponseSet:
                 grad_fixed[k] = pg + frac * (cg - pg)
                 grad[k] = grad_fixed[k] + dv[:, :, None] * dtheta
         self.fired[ev.name] = EventRecord(t_event, dt_dx, step)
+        self._event = EventInstant(ev, e0, e1, frac, dt, {k: v[0] for k, v in cur.value.items()})
         self._feed(Samples(np.array([t_event]), value, grad, grad_fixed, dt_dx))
         self.end_time, self.end_dt_dx = t_event, dt_dx
 
@@ -536,7 +648,26 @@ class ResponseSet:
             self.recorder.feed(samples)
         return samples
 
+    def adjoint_unsupported(self) -> list[str]:
+        """What keeps the adjoint mode from differentiating this set (empty: nothing)."""
+        why = []
+        for r in self.responses:
+            reason = r.adjoint_unsupported()
+            if reason:
+                why.append(f"response '{r.name}': {reason}")
+        return why
+
+    def trace(self) -> OutputTrace:
+        """The outputs' values at every instant fed (``start(..., trace=True)``)."""
+        assert self._trace is not None, "start(..., trace=True) first"
+        blocks = self._trace
+        return OutputTrace(np.concatenate([b.t for b in blocks]),
+                           {oid: np.concatenate([b.value[oid] for b in blocks]) for oid in blocks[0].value},
+                           self._event)
+
     def _feed(self, samples: Samples) -> None:
+        if self._trace is not None:
+            self._trace.append(samples)
         for r in self.responses:
             if r.output_ids:
                 r.feed(samples)
@@ -551,10 +682,24 @@ class ResponseSet:
             self.end_dt_dx = np.zeros(m) if m else None
 
     def finish(self, design: dict[str, Any], m: int,
-               mass: Callable[[], tuple[Any, np.ndarray | None]]) -> dict[str, ResponseValue]:
-        """Final values of all responses, in order."""
+               mass: Callable[[], tuple[Any, np.ndarray | None]],
+               adjoint: Callable[[OutputTrace, dict[str, dict[int, np.ndarray]]], dict[str, np.ndarray]]
+               | None = None) -> dict[str, ResponseValue]:
+        """Final values of all responses, in order.  In adjoint mode, ``adjoint(trace, weights)``
+        turns the responses' adjoint weights into their gradients (before the expressions that
+        combine them are evaluated)."""
         values: dict[str, ResponseValue] = {}
+        grads: dict[str, np.ndarray] = {}
+        if adjoint is not None:
+            trace = self.trace()
+            weights = {r.name: r.adjoint_weights(trace) for r in self.responses}
+            grads = adjoint(trace, {name: grid_weights(trace, w, self.outputs) for name, w in weights.items()
+                                    if w is not None})
         ctx = FinishContext(self.fired, self.end_time, self.end_dt_dx, values, design, m, mass)
         for r in self.responses:
-            values[r.name] = r.finish(ctx)
+            rv = r.finish(ctx)
+            if r.name in grads and not rv.missing:
+                rv.gradient = grads[r.name]
+            values[r.name] = rv
         return values
+

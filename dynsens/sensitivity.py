@@ -148,6 +148,24 @@ class DesignPartials:
         steps, in one call where the model evaluates blocks (``Model.residual_batch_steps``)."""
         return self._partials_of(self.model.residual_batch_steps(ts, states, self._residual_batch))
 
+    def residual_partials_transposed_steps(self, ts: np.ndarray, states: list[StepState],
+                                           mus: np.ndarray) -> np.ndarray:
+        """Σ_k ∂_x F_R(t_k, s_k)ᵀ μ_k (m, r) for K states (times ts, s) and adjoint vectors
+        ``mus`` (K, n_z, r): the adjoint's explicit design term.  The same batched residual call
+        and differences as :meth:`residual_partials_steps`, contracted with μ before the columns
+        are formed (with column colouring: each variable takes its own rows of its colour's
+        difference), so r functions cost what one does."""
+        F = self.model.residual_batch_steps(ts, states, self._residual_batch)   # (K, n_z, B)
+        if self.colours is None:
+            diff = self._differences(F, self.m)                                 # (K, n_z, m)
+            return np.einsum("kzj,kzr->jr", diff, mus) / self._divisor[:, None]
+        diff = self._differences(F, len(self.colours))                          # (K, n_z, colours)
+        rows = self._scatter_rows
+        entries = np.real(diff[:, rows, self._scatter_colours])                  # (K, nnz)
+        out = np.zeros((self.m, mus.shape[-1]), dtype=np.result_type(mus, float))
+        np.add.at(out, self._scatter_cols, np.einsum("kn,knr->nr", entries, mus[:, rows, :]))
+        return out / self._divisor[:, None]
+
     def _partials_of(self, F: np.ndarray) -> np.ndarray:
         """Difference quotients (..., n_z, m) from residuals (..., n_z, B) of the batch."""
         if self.colours is None:

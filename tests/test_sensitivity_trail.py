@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import dynsens
+import dynsens.derivatives.direct as direct
 import dynsens.march as march
 from conftest import CASES
 from dynsens.models.base import Model, StepState
@@ -25,7 +26,7 @@ FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 
 
 def _run(case, trail: int, monkeypatch):
-    monkeypatch.setattr(march, "TRAIL_STEPS", trail)
+    monkeypatch.setattr(direct, "TRAIL_STEPS", trail)
     plan = replace(case.plan, sensitivities=True, history=FIELDS, sensitivity_history=True)
     return march.integrate(case.model, case.x0, case.scheme, plan, case.new_response_set(),
                            design_names=case.design_names, design_scale=case.scale)
@@ -76,10 +77,10 @@ def test_trail_length_follows_the_memory_it_holds():
     """Dense models trail up to TRAIL_STEPS steps while their held matrices stay within
     TRAIL_BYTES; sparse models (large factors) do not trail."""
     small = dynsens.load_case(CASES / "tyrolean_weir.yaml").model.traits
-    assert march._trail_length(small, 4) == march.TRAIL_STEPS
+    assert direct.trail_length(small, 4) == direct.TRAIL_STEPS
     big = replace(small, n_q=500, n_lam=0, n_p=0)      # 8 MB of matrices per step
-    assert 1 < march._trail_length(big, 4) < march.TRAIL_STEPS
-    assert march._trail_length(replace(small, sparse=True), 4) == 1
+    assert 1 < direct.trail_length(big, 4) < direct.TRAIL_STEPS
+    assert direct.trail_length(replace(small, sparse=True), 4) == 1
 
 
 @pytest.mark.parametrize("name", ["tyrolean_weir", "slider_crank", "hydraulic_lever", "pendulum_3d",

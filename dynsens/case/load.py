@@ -20,7 +20,7 @@ import yaml
 from ..errors import CaseError, ProblemCollector
 from ..expressions import RESERVED_NAMES, ExpressionError, compile_expression
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
-from ..march import HISTORY_FIELDS, RunPlan
+from ..march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
 from .. import case_keys
 from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
@@ -30,6 +30,7 @@ from ..records import QuantitySpec, Recorder
 from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, KSAggregate, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
+from .derivative_keys import adjoint_problems, derivative_settings
 from ..solver.newton import NewtonSettings
 from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .optimization import OptimizationSpec, validate_optimization
@@ -185,6 +186,9 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     optimization = validate_optimization(raw.get("optimization"), rnames, pc)
     if not pc.problems and model is not None and plan is not None:
         check_start(design, table, model, scheme, plan, pc)
+    if plan is not None and not pc.problems:
+        probe = ResponseSet(outputs, factory(), events, recorder=Recorder(quantities) if quantities else None)
+        adjoint_problems(plan.method, adjoint_obstacles(plan, probe), pc)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
@@ -359,12 +363,13 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     loc = spec.get("event_location", "interpolate")
     if loc not in ("interpolate", "step"):
         pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
+    derivative = derivative_settings(sens, pc)
     if None in (dt, t0, t_end) or pc.problems:
         return scheme, None, str(loc)
     assert t0 is not None and t_end is not None and dt is not None  # checked above
     plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
                    partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
-                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts)
+                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts, **derivative)
     return scheme, plan, str(loc)
 
 

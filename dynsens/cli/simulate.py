@@ -53,6 +53,13 @@ def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
                   f"solves {c['solves']} ({c['solve_columns']} right-hand sides), "
                   f"wall time {result.wall_time:.3f} s"]
     lines += format_run_notes(result)
+    if getattr(result, "method", ""):
+        lines.append(f"derivatives: {result.method} ({result.method_reason})")
+        if result.method == "adjoint":
+            lines.append(f"backward sweep: {c['backward_solves']} transposed solves, "
+                         f"{c['backward_residual_evaluations']} residual evaluations for the design "
+                         f"partials, {c['backward_output_evaluations']} output evaluations, "
+                         f"{c['recomputed_steps']} recomputed steps")
     return "\n".join(lines)
 
 

@@ -15,7 +15,8 @@ Layout (a contract; see the README):
 * ``/responses/<name>/value`` () and ``/responses/<name>/gradient`` (m,), attributes
   ``unit`` (and ``units``, the netCDF name) and ``missing`` (empty when present);
 * ``/stats`` attributes: steps, newton_iterations, factorizations, residual_evaluations,
-  ..., wall_time_s.
+  ..., wall_time_s; with sensitivities also ``derivative_method`` (direct | adjoint) and
+  ``derivative_method_reason``.
 
 Files are written to a temporary file in the same folder and renamed into place, so a
 crash never leaves a complete-looking file behind.
@@ -87,6 +88,9 @@ def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = Fal
         for k, v in result.counters.items():
             st.attrs[k] = v
         st.attrs["wall_time_s"] = result.wall_time
+        if getattr(result, "method", ""):
+            st.attrs["derivative_method"] = result.method
+            st.attrs["derivative_method_reason"] = result.method_reason
 
 
 def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:

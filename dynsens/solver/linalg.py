@@ -25,7 +25,9 @@ class Counters:
 
     ``factorizations`` counts every factorization (diagonal ones included, see
     ``diagonal_inversions``); ``step_factorizations`` only those of the time-step iteration
-    matrix, i.e. without the initial-acceleration solve at t0.
+    matrix, i.e. without the initial-acceleration solve at t0.  The ``backward_*`` counters
+    are the adjoint sweep's transposed solves, residual evaluations of its design partials and
+    output evaluations of its seeds; ``recomputed_steps`` the steps its checkpointing re-ran.
     """
 
     steps: int = 0
@@ -40,6 +42,10 @@ class Counters:
     sensitivity_residual_evaluations: int = 0
     output_evaluations: int = 0
     step_cuts: int = 0
+    backward_solves: int = 0
+    backward_residual_evaluations: int = 0
+    backward_output_evaluations: int = 0
+    recomputed_steps: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, int]:
@@ -117,6 +123,25 @@ class Factor:
         if np.iscomplexobj(rhs) and not self._complex:
             return self._getrs(lu, piv, rhs.real)[0] + 1j * self._getrs(lu, piv, rhs.imag)[0]
         x, info = self._getrs(lu, piv, rhs)
+        return x
+
+
+    def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve Sᵀ x = rhs (transpose, not conjugate transpose) with the same factor; rhs (n,)
+        or (n, k), real or complex (the adjoint sweep's solves)."""
+        self.counters.solves += 1
+        self.counters.solve_columns += 1 if rhs.ndim == 1 else rhs.shape[1]
+        if self._kind == "diag":
+            return rhs * (self._inv if rhs.ndim == 1 else self._inv[:, None])
+        if self._kind == "sparse":
+            if np.iscomplexobj(rhs) and not np.iscomplexobj(self._lu.U.data):
+                return self._lu.solve(np.ascontiguousarray(rhs.real), trans="T") + \
+                    1j * self._lu.solve(np.ascontiguousarray(rhs.imag), trans="T")
+            return self._lu.solve(np.asarray(rhs), trans="T")
+        lu, piv = self._lu
+        if np.iscomplexobj(rhs) and not self._complex:
+            return self._getrs(lu, piv, rhs.real, trans=1)[0] + 1j * self._getrs(lu, piv, rhs.imag, trans=1)[0]
+        x, info = self._getrs(lu, piv, rhs, trans=1)
         return x
 
 

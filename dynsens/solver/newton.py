@@ -269,6 +269,16 @@ class StepSolver:
         return history[-1] > floor and history[-2] > floor and \
             _real_norm(dz) <= st.rtol * _real_norm(z) + st.atol
 
+    def snapshot(self) -> tuple[list[float], Any, bool]:
+        """What the next steps' convergence decisions depend on (block scales, the last
+        iteration matrix of the round-off test, the factor kind): a run restarted from a
+        checkpoint with it repeats the same iterations bit for bit."""
+        return list(self._scales), self._S, self._dense_general
+
+    def restore(self, snap: tuple[list[float], Any, bool]) -> None:
+        """Return to a :meth:`snapshot`."""
+        self._scales, self._S, self._dense_general = list(snap[0]), snap[1], snap[2]
+
     def solve_sensitivity(self, factor: Factor, pseudo_load: np.ndarray) -> np.ndarray:
         """∇z (n_z, m) from S ∇z = −P with the factor of the converged step."""
         return factor.solve(-pseudo_load)

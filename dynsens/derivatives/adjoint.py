@@ -1,0 +1,207 @@
+r"""The discrete adjoint (method.md §7): the direct recursion transposed, over the same records.
+
+One step of the direct mode is linear in the stacked sensitivity state X = (∇s, ∇a, ∇b):
+predict, pseudo load P = ∂_xF_R + R_q ∇q^pred + R_q̇ ∇q̇^pred + R_p ∇p^pred, S ∇z = −P with the
+record's factor, correct, advance.  The adjoint runs the transpose of exactly these maps
+backwards over the same step records (same linearization, same factor, transposed solve), one
+column per response:
+
+    z̄ = correctᵀ/advanceᵀ of the state's bar,   μ = −S⁻ᵀ z̄,
+    bar of the predicted state += (R_q, R_q̇, R_p)ᵀ μ,   x̄ += ∂_xF_Rᵀ μ,   bar of X_{i−1} = predictᵀ(…)
+
+plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  At t0 the initial solve
+and the design derivative of the initial state (the mechanism's assembly included) close the
+sweep.  So the adjoint gradient equals the direct one to round-off, whatever the step sizes,
+step cuts or reused factors.  ∂_xF_Rᵀ μ of a block of records takes one batched residual call
+(column colouring included); the r response columns share it.
+
+The records of the forward run are kept while they fit ``memory_budget``; beyond it only
+checkpoints are kept and the segments between them are recomputed, bit-identically, during
+the sweep (:mod:`.checkpoints`).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from ..integrators.newmark import Newmark
+from ..models.base import Model, Output
+from ..responses import OutputTrace
+from ..sensitivity import DesignPartials, initial_state_gradient
+from ..solver.linalg import Counters
+from ..stepping import StepRecord
+from .checkpoints import RecordStore
+from .direct import trail_length
+from .output_seeds import OutputSeeds
+
+
+# records whose output seeds are taken together (held a little longer during the sweep)
+SEED_BLOCK = 64
+
+
+class AdjointMode:
+    """Keeps the step records of the forward run and sweeps back over them at the end."""
+
+    trail_length = 1   # nothing trails: the responses take the values of every step at once
+
+    def __init__(self, model: Model, scheme: Newmark, partials: DesignPartials, counters: Counters,
+                 outputs: list[Output], store: RecordStore, grid_time: Callable[[int], float]):
+        self.model, self.scheme, self.partials, self.counters = model, scheme, partials, counters
+        tr = model.traits
+        self.n_q, self.n_lam, self.n_p = tr.n_q, tr.n_lam, tr.n_p
+        self.block = trail_length(tr, partials.m)
+        self.seeds = OutputSeeds(model, outputs, partials)
+        self.store = store             # the records (all, or checkpoints and recomputation)
+        self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
+        self._pending = 0
+
+    # ------------------------------------------------------------------ forward: keep records
+    def start(self, rec: StepRecord) -> None:
+        """The initial record (the gradient of the initial state is taken in the sweep)."""
+        self.store.add_initial(rec)
+
+    def take_step(self, records: list[StepRecord]) -> None:
+        """The records of one grid step of the forward run."""
+        self.store.add_step(records)
+        self._pending += len(records)
+
+    def catch_up(self) -> list[None]:
+        """No sensitivities go forward: the responses take values only."""
+        out: list[None] = [None] * self._pending
+        self._pending = 0
+        return out
+
+    # ------------------------------------------------------------------ backward sweep
+    def gradients(self, trace: OutputTrace, weights: dict[str, dict[int, np.ndarray]]
+                  ) -> dict[str, np.ndarray]:
+        """dJ/dx (m,) of every response from its adjoint weights over the trace's instants."""
+        names = list(weights)
+        r, m = len(names), self.partials.m
+        if r == 0:
+            return {}
+        K = len(trace.t)
+        stacked: dict[int, np.ndarray] = {}
+        for col, name in enumerate(names):
+            for oid, W in weights[name].items():
+                stacked.setdefault(oid, np.zeros(W.shape + (r,)))[:, :, col] += W
+        if self.store.n_grid != K:
+            raise RuntimeError(f"adjoint: {K} output instants for {self.store.n_grid} grid steps")
+        xbar = np.zeros((m, r))
+
+        def seeds(grid: list[tuple[int, StepRecord]]) -> dict[int, np.ndarray]:
+            """∂J/∂y (flat state) at grid instants, adding their ∂_x J to x̄."""
+            nonlocal xbar
+            ks, recs, ws = [], [], []
+            for k, rec in grid:
+                w = {oid: W[k] for oid, W in stacked.items() if np.any(W[k])}
+                if w:
+                    ks.append(k)
+                    recs.append(rec)
+                    ws.append(w)
+            if not ks:
+                return {}
+            found = self.seeds.seeds_block([self.grid_time(k) for k in ks], [rec.state for rec in recs], ws, r)
+            for _, xpart in found:
+                xbar += xpart
+            return {k: ybar for k, (ybar, _) in zip(ks, found)}
+
+        xbar += self._sweep(seeds, r)
+        self.counters.backward_output_evaluations += self.seeds.evaluations
+        # (the forward run's peak; a recomputed segment holds at most half the budget again)
+        self.counters.extra["adjoint_records_peak_bytes"] = self.store.peak
+        return {name: xbar[:, col] for col, name in enumerate(names)}
+
+    def _sweep(self, seeds: Callable[[list[tuple[int, StepRecord]]], dict[int, np.ndarray]], r: int
+               ) -> np.ndarray:
+        """Σ over the records of ∂_xF_Rᵀ μ, plus the initial state's term: x̄ (m, r).  The records
+        come in blocks (their seeds take a few batched output calls per block)."""
+        sizes = [self.n_q] * 3 + [self.n_lam] + [self.n_p] * 2
+        ends = np.cumsum(sizes).tolist()
+        fields = list(zip([0] + ends[:-1], ends))
+        bar = [np.zeros((n, r)) for n in sizes]                   # q, q̇, q̈, λ, p, ṗ
+        aux = [np.zeros((self.n_q, r)), np.zeros((self.n_p, r))]  # a, b
+        xbar = np.zeros((self.partials.m, r))
+        queue: list[tuple[float, Any, np.ndarray]] = []
+
+        def flush() -> None:
+            nonlocal xbar
+            if queue:
+                xbar += self.partials.residual_partials_transposed_steps(
+                    np.array([q[0] for q in queue]), [q[1] for q in queue], np.stack([q[2] for q in queue]))
+                self.counters.backward_residual_evaluations += self.partials.evaluations_per_call * len(queue)
+                queue.clear()
+
+        def sweep(block: list[tuple[int, StepRecord, int | None]]) -> None:
+            ybars = seeds([(k, rec) for _, rec, k in block if k is not None])
+            for idx, rec, grid_k in block:
+                ybar = ybars.get(grid_k) if grid_k is not None else None
+                if ybar is not None:
+                    for f, (a, b) in enumerate(fields):
+                        bar[f] += ybar[a:b]
+                mu = self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux)
+                queue.append((rec.t, rec.state, mu))
+                if len(queue) >= self.block:
+                    flush()
+
+        block: list[tuple[int, StepRecord, int | None]] = []
+        for item in self.store.backward():
+            block.append(item)
+            if len(block) >= SEED_BLOCK or item[0] == 0:
+                sweep(block)
+                block = []
+        flush()
+        dq0, dqd0, dp0 = initial_state_gradient(self.model, self.partials)
+        return xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]
+
+    def _solve(self, rec: StepRecord, zbar: np.ndarray) -> np.ndarray:
+        """μ = −S⁻ᵀ z̄ with the record's factor."""
+        self.counters.backward_solves += 1
+        return rec.factor.solve_transposed(-zbar)
+
+    def _state_transpose(self, lin: Any, mu: np.ndarray, pq: np.ndarray, pqd: np.ndarray,
+                         pp: np.ndarray) -> None:
+        """Bars of (q, q̇, p) += (R_q, R_q̇, R_p)ᵀ μ, in place (the pseudo load's state part)."""
+        for block, target in ((lin.R_q, pq), (lin.R_qd, pqd), (lin.R_p, pp)):
+            if block is not None and target.shape[0]:
+                target += block.T @ mu
+
+    def _initial_step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
+        """Transpose of the initial solve S0 ∇z0 = −(∂_xF_R + R_q ∇q0 + R_q̇ ∇q̇0 + R_p ∇p0) and
+        of the start of the scheme's a0 = q̈0, b0 = ṗ0; leaves the bars of ∇q0, ∇q̇0, ∇p0."""
+        bar[2] += aux[0]
+        bar[5] += aux[1]
+        mu = self._solve(rec, np.concatenate([bar[2], bar[3], bar[5]]))
+        self._state_transpose(rec.lin, mu, bar[0], bar[1], bar[4])
+        return mu
+
+    def _step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
+        """Transpose of one direct step (predict, pseudo load, solve, correct, advance): the
+        bars of step i become those of step i − 1, in place; returns μ of the step."""
+        sc, h = self.scheme, rec.h
+        am, af, beta, gamma = sc.alpha_m, sc.alpha_f, sc.beta, sc.gamma
+        c = (1.0 - af) / (1.0 - am)
+        c_q, c_qd, c_p = sc.coefficients(h)
+        q_b, qd_b, qdd_b, lam_b, p_b, pd_b = bar
+        a_b, b_b = aux
+        # advance: a_i = a_rest + c q̈_i, b_i = b_rest + c ṗ_i
+        qdd_z = qdd_b + c * a_b
+        pd_z = pd_b + c * b_b
+        # correct: q_i = q^pred + c_q q̈_i, q̇_i = q̇^pred + c_q̇ q̈_i, p_i = p^pred + c_p ṗ_i
+        qdd_z = qdd_z + c_q * q_b + c_qd * qd_b
+        pd_z = pd_z + c_p * p_b
+        mu = self._solve(rec, np.concatenate([qdd_z, lam_b, pd_z]))
+        pq, pqd, pp = q_b.copy(), qd_b.copy(), p_b.copy()
+        self._state_transpose(rec.lin, mu, pq, pqd, pp)
+        # predict: a_rest = (α_f q̈ − α_m a)/(1 − α_m), b_rest likewise
+        a_rest = a_b + (h * h * beta) * pq + (h * gamma) * pqd
+        b_rest = b_b + (h * gamma) * pp
+        bar[0] = pq
+        bar[1] = h * pq + pqd
+        bar[2] = (af / (1.0 - am)) * a_rest
+        bar[3] = np.zeros_like(lam_b)
+        bar[4] = pp
+        bar[5] = (af / (1.0 - am)) * b_rest
+        aux[0] = (h * h * (0.5 - beta)) * pq + (h * (1.0 - gamma)) * pqd - (am / (1.0 - am)) * a_rest
+        aux[1] = (h * (1.0 - gamma)) * pp - (am / (1.0 - am)) * b_rest
+        return mu

@@ -1,0 +1,134 @@
+"""Direct differentiation (method.md §4): the sensitivities follow the steps forward.
+
+Per step record: predict the sensitivity matrices with the scheme, form the pseudo load P at
+the converged state (explicit design partials plus ``lin.state_product`` of the predicted
+sensitivities), solve S ∇z = −P with the record's factor, correct.  The sensitivities trail
+the state by a block of records, so that the explicit design partials of a whole block take one
+batched residual call (``Model.residual_batch_steps``); the arithmetic per step is the same.
+Small constant-matrix models advance the block by the transition matrix of that very step:
+X' = T X + U ∂_xF_R on the stacked sensitivity state X, T and U being the step applied to unit
+columns, so a step costs one small product instead of a solve.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..integrators.newmark import Aux, Newmark
+from ..models.base import Model, StepState
+from ..sensitivity import DesignPartials, initial_state_gradient, pseudo_load, pseudo_load_with
+from ..solver.linalg import Counters
+from ..solver.newton import StepSolver
+from ..stepping import StepRecord, split_unknowns
+
+TRAIL_STEPS = 128
+TRAIL_BYTES = 32 * 2**20
+# Largest sensitivity state (∇q, ∇q̇, ∇q̈, ∇λ, ∇p, ∇ṗ and the scheme's ∇a, ∇b stacked) for
+# which constant-matrix steps advance by a transition matrix (its product costs n_x² m; above
+# this size the step's own solve is cheaper)
+TRANSITION_MAX = 32
+
+
+def trail_length(traits: Any, m: int) -> int:
+    """Steps the sensitivities may trail the state: up to TRAIL_STEPS, while the held dense
+    linearizations and factors (≈ 4 n_z² + 6 m n_z numbers per step) stay within TRAIL_BYTES;
+    one step (no trail) for sparse models, whose factors are large."""
+    if traits.sparse:
+        return 1
+    per_step = 8 * (4 * traits.n_z * traits.n_z + 6 * m * traits.n_z)
+    return max(1, min(TRAIL_STEPS, TRAIL_BYTES // per_step))
+
+
+class DirectMode:
+    """The sensitivity state ∇s (n, m per leaf) carried forward over the step records."""
+
+    def __init__(self, model: Model, scheme: Newmark, solver: StepSolver, partials: DesignPartials,
+                 counters: Counters):
+        self.model, self.scheme, self.solver, self.partials = model, scheme, solver, partials
+        self.counters = counters
+        tr = model.traits
+        self.n_q, self.n_lam, self.n_z = tr.n_q, tr.n_lam, tr.n_z
+        self.trail_length = trail_length(tr, partials.m)
+        self.trail: list[StepRecord] = []
+        sizes = [tr.n_q, tr.n_q, tr.n_q, tr.n_lam, tr.n_p, tr.n_p, tr.n_q, tr.n_p]
+        ends = np.cumsum(sizes).tolist()
+        self._pieces = [slice(a, b) for a, b in zip([0] + ends[:-1], ends)]
+        self._n_x = sum(sizes)
+        self._use_transitions = tr.constant_matrices and self._n_x <= TRANSITION_MAX
+        self._transitions: dict[tuple[int, int, float], tuple[Any, Any, np.ndarray, np.ndarray]] = {}
+        self.ds: StepState | None = None
+        self.daux: Aux | None = None
+
+    def start(self, rec: StepRecord) -> StepState:
+        """∇s at t0: the design derivative of the initial state, and ∇z0 from the initial solve."""
+        model, partials = self.model, self.partials
+        dq0, dqd0, dp0 = initial_state_gradient(model, partials)
+        P = pseudo_load(model, rec.t, rec.state, rec.lin, dq0, dqd0, dp0, partials)
+        self.counters.sensitivity_residual_evaluations += partials.evaluations_per_call
+        assert rec.factor is not None
+        dqdd, dlam, dpd = split_unknowns(self.solver.solve_sensitivity(rec.factor, P), self.n_q, self.n_lam)
+        self.ds = StepState(dq0, dqd0, dqdd, dlam, dp0, dpd)
+        self.daux = self.scheme.start(self.ds)
+        return self.ds
+
+    def take_step(self, records: list[StepRecord]) -> None:
+        """Add the records of a grid step to the trail (their sensitivities follow at
+        :meth:`catch_up`)."""
+        self.trail.extend(records)
+
+    def catch_up(self) -> list[StepState | None]:
+        """Sensitivities of the trailing records, in order (the trail is emptied)."""
+        trail, self.trail = self.trail, []
+        ds_of: list[StepState | None] = [None] * len(trail)
+        if not trail or self.ds is None or self.daux is None:
+            return ds_of
+        design_part = self.partials.residual_partials_steps(np.array([r.t for r in trail]),
+                                                            [r.state for r in trail])
+        self.counters.sensitivity_residual_evaluations += self.partials.evaluations_per_call * len(trail)
+        ds, daux = self.ds, self.daux
+        k = 0
+        while k < len(trail):
+            rec = trail[k]
+            end = k + 1
+            while self._use_transitions and end < len(trail) and trail[end].lin is rec.lin and \
+                    trail[end].factor is rec.factor and trail[end].h == rec.h:
+                end += 1
+            if end - k == 1:
+                ds, daux = self._step(ds, daux, design_part[k], rec.lin, rec.factor, rec.h)
+                ds_of[k] = ds
+            else:
+                T, U = self._transition(rec.lin, rec.factor, rec.h)
+                W = U @ design_part[k:end]
+                X = np.concatenate([*ds, *daux])
+                for j in range(end - k):
+                    X = T @ X + W[j]
+                    ds_of[k + j] = self._unpack(X)[0]
+                ds, daux = self._unpack(X)
+            k = end
+        self.ds, self.daux = ds, daux
+        return ds_of
+
+    def _step(self, ds: StepState, daux: Aux, design_part: np.ndarray, lin: Any, factor: Any,
+              h: float) -> tuple[StepState, Aux]:
+        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct."""
+        scheme = self.scheme
+        dpred = scheme.predict(ds, daux, h)
+        P = pseudo_load_with(design_part, lin, dpred.q, dpred.qd, dpred.p)
+        dz = self.solver.solve_sensitivity(factor, P)
+        ds = scheme.correct(dpred, *split_unknowns(dz, self.n_q, self.n_lam), h)
+        return ds, scheme.advance(dpred, ds)
+
+    def _unpack(self, X: np.ndarray) -> tuple[StepState, Aux]:
+        parts = [X[sl] for sl in self._pieces]
+        return StepState(*parts[:6]), Aux(*parts[6:])
+
+    def _transition(self, lin: Any, factor: Any, h: float) -> tuple[np.ndarray, np.ndarray]:
+        key = (id(lin), id(factor), h)
+        if key not in self._transitions:    # (the entry holds lin and factor: their ids stay theirs)
+            n_x, n_z = self._n_x, self.n_z
+            ds_T, daux_T = self._step(*self._unpack(np.eye(n_x)), np.zeros((n_z, n_x)), lin, factor, h)
+            ds_U, daux_U = self._step(*self._unpack(np.zeros((n_x, n_z))), np.eye(n_z), lin, factor, h)
+            self._transitions[key] = (lin, factor, np.concatenate([*ds_T, *daux_T]),
+                                      np.concatenate([*ds_U, *daux_U]))
+        return self._transitions[key][2], self._transitions[key][3]

@@ -1,0 +1,311 @@
+"""The discrete adjoint equals the direct gradient to round-off (same discrete procedure, same
+records, same partials) and the complex-step derivative of the whole run.
+
+Tolerances: adjoint vs direct ≤ 1e-10 relative with complex partials (both exact to round-off;
+observed ≤ 1e-12), ≤ 1e-7 with forward partials (the output partials are then taken by complex
+step in the adjoint and by forward differences in the direct mode: their error, ~1e-8);
+against complex step of the whole run ≤ 1e-9 (the tolerance the direct mode is held to).
+The weir's stroke is the one exception to 1e-10: its gradient (~1e-2 mm per unit) is the sum of
+terms ~1e5 times larger (∂stroke/∂q ≈ 600 mm per unit of Euler parameter times ∇q), so any order
+of summation carries ~1e5 ε; the direct mode itself is 2e-11 from the complex step of the whole
+run there and the adjoint 2e-10 (measured; every other weir response agrees to 5e-14).
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import dynsens
+from conftest import CASES
+from dynsens.errors import CaseError
+from dynsens.responses import Response, ResponseValue
+from helpers import complex_step_gradients, rel_err
+from scripts_path import hard_step_case  # (puts scripts/ on the path)
+from bench_peers import chain_case
+
+# event-free variants of the cases with events (short runs for every scheme; the events have
+# tests of their own below)
+NO_EVENTS = {
+    "hydraulic_lever": ["events=[]", "integrator.t_end=0.15", "responses=["
+                        "{name: pivot_ks, type: ks, quantity: {joint: pivot, kind: reaction_force_norm}, rho: 0.01},"
+                        "{name: p1_end, type: value, quantity: {element: cyl, kind: pressure_1}},"
+                        "{name: stroke_int, type: integral, quantity: {element: cyl, kind: stroke}},"
+                        "{name: angle_mid, type: value, quantity: {body: lever, kind: angle_z}, time: 0.0712}]"],
+    "tyrolean_weir": ["events=[]", "integrator.t_end=0.4", "optimization=null", "responses=["
+                      "{name: ks_force, type: ks, rho: 200.0, quantities: [{joint: Z, kind: reaction_force_norm},"
+                      " {joint: A, kind: reaction_force_norm}, {joint: P, kind: reaction_force_norm}]},"
+                      "{name: stroke, type: value, quantity: {element: cylinder, kind: stroke}},"
+                      "{name: theta_0, type: value, quantity: {body: rack, kind: angle_z}, time: 0.0},"
+                      "{name: f, type: expression, expression: 'ks_force + 0.01*stroke/theta_0'}]"],
+    "pendulum_3d": ["events=[]", "integrator.t_end=0.3", "responses=["
+                    "{name: pivot_force, type: ks, quantity: {joint: pivot, kind: reaction_force_norm}, rho: 50.0},"
+                    "{name: x_end, type: value, quantity: {body: bob, kind: position}, component: bob.x}]"],
+}
+SHORT = {"duffing_chain": ["integrator.t_end=0.3"], "four_bar": ["integrator.t_end=0.3"],
+         "slider_crank": ["integrator.t_end=0.3"], "sdof_step": ["integrator.t_end=0.5"],
+         "truss_impact": [], "truss_lightweight": [], **NO_EVENTS}
+SCHEMES = {"newmark": [], "hht": ["integrator.scheme=hht", "integrator.alpha=0.1"],
+           "generalized_alpha": ["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.6"]}
+
+
+def _with_method(case, method, **plan):
+    c = copy.copy(case)
+    c.plan = replace(case.plan, method=method, **plan)
+    return c
+
+
+def _both(name, extra=()):
+    case = dynsens.load_case(CASES / f"{name}.yaml", [*SHORT[name], *extra])
+    return (dynsens.run_case(_with_method(case, "direct")), dynsens.run_case(_with_method(case, "adjoint")),
+            case)
+
+
+def _compare(direct, adjoint, tol):
+    assert adjoint.method == "adjoint" and direct.method == "direct"
+    checked = 0
+    for name, rv in direct.responses.items():
+        ra = adjoint.responses[name]
+        assert ra.value == pytest.approx(rv.value, rel=1e-12, abs=1e-300), name
+        if rv.gradient is None:
+            assert ra.gradient is None, name
+            continue
+        if np.linalg.norm(rv.gradient) == 0.0:
+            assert np.all(ra.gradient == 0.0), name
+            continue
+        assert rel_err(ra.gradient, rv.gradient) <= tol, (name, rel_err(ra.gradient, rv.gradient))
+        checked += 1
+    assert checked
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+@pytest.mark.parametrize("name", list(SHORT))
+def test_adjoint_equals_direct_with_complex_partials(name, scheme):
+    direct, adjoint, _ = _both(name, ["sensitivity.partials=complex", *SCHEMES[scheme]])
+    _compare(direct, adjoint, 1e-9 if name == "tyrolean_weir" else 1e-10)
+    assert adjoint.counters["backward_solves"] == adjoint.counters["steps"] + 1
+    assert adjoint.counters["sensitivity_residual_evaluations"] == 0
+
+
+@pytest.mark.parametrize("name", ["duffing_chain", "truss_impact", "slider_crank", "four_bar"])
+def test_adjoint_equals_direct_with_forward_partials(name):
+    """(Not the hydraulic lever's stroke integral: there the forward partials themselves are
+    1.5e-4 from the complex step of the whole run, in both modes.)"""
+    direct, adjoint, _ = _both(name, ["sensitivity.partials=forward"])
+    _compare(direct, adjoint, 1e-7)
+
+
+def test_adjoint_equals_direct_with_central_partials_and_converged_matrix():
+    direct, adjoint, _ = _both("four_bar", ["sensitivity.partials=central", "sensitivity.matrix=converged"])
+    _compare(direct, adjoint, 1e-9)
+
+
+@pytest.mark.parametrize("name, extra", [
+    ("sdof_step", ["integrator.t_end=0.2"]),
+    ("slider_crank", ["integrator.t_end=0.1"]),                            # assembly, constraints
+    ("hydraulic_lever", ["integrator.t_end=0.08"]),                        # hydraulic states
+    ("duffing_chain", ["integrator.t_end=0.1", "integrator.scheme=generalized_alpha"]),
+])
+def test_adjoint_matches_complex_step_of_the_whole_run(name, extra):
+    case = dynsens.load_case(CASES / f"{name}.yaml", [*SHORT[name], *extra, "sensitivity.partials=complex"])
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    ref = complex_step_gradients(case)
+    for r, rv in adjoint.responses.items():
+        if rv.gradient is not None and np.linalg.norm(ref[r]) > 0:
+            assert rel_err(rv.gradient, ref[r]) < 1e-9, r
+
+
+def test_adjoint_through_step_cuts():
+    """Sub-steps of cut steps are records of their own: the sweep goes through them."""
+    case = hard_step_case(8)
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.counters["step_cuts"] > 0
+    assert adjoint.counters["backward_solves"] > adjoint.counters["steps"] + 1
+    _compare(direct, adjoint, 1e-10)
+    assert rel_err(adjoint.responses["q_ks"].gradient, complex_step_gradients(case)["q_ks"]) < 1e-9
+
+
+@pytest.mark.parametrize("name, budget", [("duffing_chain", 3e5), ("four_bar", 2e5)])
+def test_checkpointing_recomputes_segments_bit_identically(name, budget):
+    case = dynsens.load_case(CASES / f"{name}.yaml", SHORT[name])
+    kept = dynsens.run_case(_with_method(case, "adjoint"))
+    tight = dynsens.run_case(_with_method(case, "adjoint", memory_budget=budget))
+    assert kept.counters["recomputed_steps"] == 0
+    assert tight.counters["recomputed_steps"] > 0
+    for r, rv in kept.responses.items():
+        if rv.gradient is not None:
+            assert np.array_equal(tight.responses[r].gradient, rv.gradient), r
+
+
+def test_checkpointing_through_step_cuts_is_bit_identical():
+    case = hard_step_case(8)
+    kept = dynsens.run_case(_with_method(case, "adjoint"))
+    tight = dynsens.run_case(_with_method(case, "adjoint", memory_budget=1.0))
+    assert tight.counters["recomputed_steps"] > 0 and kept.counters["step_cuts"] > 0
+    assert np.array_equal(tight.responses["q_ks"].gradient, kept.responses["q_ks"].gradient)
+
+
+@pytest.mark.parametrize("location", ["interpolate", "step"])
+@pytest.mark.parametrize("name", ["hydraulic_lever", "pendulum_3d"])
+def test_event_time_responses_in_both_location_modes(name, location):
+    """Event times, values at the event (total and fixed-time), KS and integrals up to it."""
+    case = dynsens.load_case(CASES / f"{name}.yaml", ["sensitivity.partials=complex",
+                                                       f"integrator.event_location={location}"])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
+
+
+def test_event_instant_weights_against_complex_step():
+    """Integral up to an event (the end of its last interval moves) and the end time, against the
+    complex step of the whole run (interpolate mode: the exact derivative of the procedure)."""
+    case = dynsens.load_case(CASES / "hydraulic_lever.yaml", [
+        "sensitivity.partials=complex", "responses=["
+        "{name: t_end, type: end_time},"
+        "{name: stroke_int, type: integral, quantity: {element: cyl, kind: stroke}},"
+        "{name: p1_fixed, type: value, quantity: {element: cyl, kind: pressure_1}, event: lifted,"
+        " derivative: fixed_time}]"])
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    ref = complex_step_gradients(case)
+    for r in ("t_end", "stroke_int"):
+        assert rel_err(adjoint.responses[r].gradient, ref[r]) < 1e-8, r
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    _compare(direct, adjoint, 1e-10)
+
+
+@pytest.mark.slow
+def test_weir_with_both_methods():
+    """The whole weir (both events, the cleaning-time constraint g3, fixed-time stroke)."""
+    case = dynsens.load_case(CASES / "tyrolean_weir.yaml", ["sensitivity.partials=complex"])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
+
+
+def test_auto_falls_back_to_direct_for_a_response_it_cannot_seed():
+    class Peak(Response):
+        def __init__(self):
+            self.name, self.output_ids = "peak", (0,)
+
+        def finish(self, ctx):
+            return ResponseValue(0.0, None)
+
+    case = dynsens.load_case(CASES / "duffing_chain.yaml", [
+        "integrator.t_end=0.01", "sensitivity.method=auto",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u20, kind: displacement}}]"])
+    base = case.new_response_set
+
+    def with_peak():
+        rs = base()
+        rs.responses.append(Peak())
+        return rs
+    case.new_response_set = with_peak
+    res = dynsens.run_case(case)
+    assert res.method == "direct" and "response 'peak': response type Peak has no adjoint seeds" \
+        in res.method_reason
+    with pytest.raises(CaseError, match="sensitivity.method: adjoint does not cover this case yet"):
+        dynsens.run_case(_with_method(case, "adjoint"))
+
+
+def test_a_response_type_without_adjoint_hooks_is_refused():
+    class Peak(Response):
+        def __init__(self):
+            self.name, self.output_ids = "peak", (0,)
+
+        def finish(self, ctx):
+            return ResponseValue(0.0, None)
+
+    case = dynsens.load_case(CASES / "sdof_step.yaml", ["integrator.t_end=0.05"])
+    rs = case.new_response_set()
+    rs.responses.append(Peak())
+    assert rs.adjoint_unsupported() == ["response 'peak': response type Peak has no adjoint seeds"]
+
+
+def test_auto_picks_by_the_count_of_functions_and_design_variables():
+    case = dynsens.load_case(CASES / "duffing_chain.yaml", ["integrator.t_end=0.05", "sensitivity.method=auto"])
+    res = dynsens.run_case(case)
+    assert res.method == "direct" and "4 functions against 4 design variables" in res.method_reason
+    one = dynsens.load_case(CASES / "duffing_chain.yaml", [
+        "integrator.t_end=0.05", "sensitivity.method=auto",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u20, kind: displacement}}]"])
+    res = dynsens.run_case(one)
+    assert res.method == "direct" and "1 functions against 4 design variables (m < 4(r + 1))" in res.method_reason
+    per_element = dynsens.load_case_dict(chain_case(10, 0.05, True), overrides=[
+        "sensitivity.method=auto",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u10, kind: displacement}}]"])
+    res = dynsens.run_case(per_element)
+    assert res.method == "adjoint" and "1 functions against 10 design variables (m >= 4(r + 1))" in res.method_reason
+
+
+def test_case_keys_are_validated():
+    with pytest.raises(CaseError, match=r"sensitivity.memory_budget: expected a positive size"):
+        dynsens.load_case(CASES / "sdof_step.yaml", ["sensitivity.memory_budget=-3"])
+    with pytest.raises(CaseError, match=r"sensitivity.method: expected one of direct, adjoint, auto"):
+        dynsens.load_case(CASES / "sdof_step.yaml", ["sensitivity.method=backward"])
+    assert dynsens.load_case(CASES / "sdof_step.yaml", ["sensitivity.memory_budget=1.5 GiB"]).plan.memory_budget \
+        == 1.5 * 2**30
+
+
+def test_optimize_a_per_element_chain_with_the_adjoint(tmp_path):
+    """``dynsens optimize`` on the chain with one stiffness per element (m = 8 > 4(r + 1) for
+    r = 1: ``auto`` picks the adjoint): tip KS minimized under a total-stiffness budget."""
+    import yaml
+    from click.testing import CliRunner
+
+    import dynsens.cli.optimize  # noqa: F401  (registers the command)
+    from dynsens.cli.main import cli
+    n = 8
+    d = chain_case(n, 0.3, True)
+    d["sensitivity"] = {"method": "auto", "partials": "complex"}
+    d["responses"] = [
+        {"name": "tip_ks", "type": "ks", "quantity": {"dof": f"u{n}", "kind": "displacement"}, "rho": 200.0},
+        {"name": "stiffness", "type": "expression", "expression": " + ".join(f"k_{i + 1}" for i in range(n))}]
+    k0 = d["design"]["variables"][0]["value"]
+    d["optimization"] = {"objective": "tip_ks", "constraints": [{"response": "stiffness", "upper": n * k0}],
+                         "maxiter": 30}
+    path = tmp_path / "chain.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    assert dynsens.run_case(dynsens.load_case(path)).method == "adjoint"
+    out = CliRunner().invoke(cli, ["optimize", str(path), "-o", str(tmp_path / "opt.h5")])
+    assert out.exit_code == 0, out.output
+    assert "converged" in out.output and "feasible" in out.output
+
+
+def test_check_gradients_uses_the_adjoint(tmp_path):
+    """``dynsens check-gradients`` with ``--set sensitivity.method=adjoint``: the adjoint gradient
+    against complex step of the whole run."""
+    import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
+    from click.testing import CliRunner
+
+    from dynsens.cli.main import cli
+    out = CliRunner().invoke(cli, ["check-gradients", str(CASES / "slider_crank.yaml"), "--scheme", "complex",
+                                   "--steps", "1e-20", "--rtol", "1e-9", "--workers", "1",
+                                   "--set", "integrator.t_end=0.1", "--set", "sensitivity.partials=complex",
+                                   "--set", "sensitivity.method=adjoint"])
+    assert out.exit_code == 0, out.output
+
+
+def test_adjoint_with_sensitivity_history_is_refused():
+    """The adjoint computes no sensitivity states: asking for their history is one clear error
+    (``auto`` runs the direct mode instead)."""
+    with pytest.raises(CaseError, match=r"sensitivity.method: .*output.sensitivity_history"):
+        dynsens.load_case(CASES / "sdof_step.yaml", ["sensitivity.method=adjoint", "output.sensitivity_history=true"])
+    one = dynsens.load_case_dict(chain_case(10, 0.02, True), overrides=[
+        "sensitivity.method=auto", "output.sensitivity_history=true",
+        "responses=[{name: tip_end, type: value, quantity: {dof: u10, kind: displacement}}]"])
+    res = dynsens.run_case(one)
+    assert res.method == "direct" and res.sensitivity_history["q"].shape[-1] == 10
+
+
+@pytest.mark.parametrize("scheme", ["hht", "generalized_alpha"])
+def test_event_time_responses_with_the_dissipative_schemes(scheme):
+    case = dynsens.load_case(CASES / "hydraulic_lever.yaml", ["sensitivity.partials=complex", *SCHEMES[scheme]])
+    direct = dynsens.run_case(_with_method(case, "direct"))
+    adjoint = dynsens.run_case(_with_method(case, "adjoint"))
+    assert adjoint.status == "terminated"
+    _compare(direct, adjoint, 1e-10)
