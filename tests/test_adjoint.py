@@ -200,8 +200,8 @@ def test_auto_falls_back_to_direct_for_a_response_it_cannot_seed():
         "responses=[{name: tip_end, type: value, quantity: {dof: u20, kind: displacement}}]"])
     base = case.new_response_set
 
-    def with_peak():
-        rs = base()
+    def with_peak(record: bool = True):
+        rs = base(record=record)
         rs.responses.append(Peak())
         return rs
     case.new_response_set = with_peak
