@@ -309,3 +309,22 @@ def test_event_time_responses_with_the_dissipative_schemes(scheme):
     adjoint = dynsens.run_case(_with_method(case, "adjoint"))
     assert adjoint.status == "terminated"
     _compare(direct, adjoint, 1e-10)
+
+
+# mechanisms with redundant joints (Bricard), drivers given as expressions (rheonomic), rotational
+# spring-dampers (torsional pair) and point masses with distance joints (point pendulum): whole
+# runs, their events included
+MECHANISMS = ["bricard", "rheonomic", "torsional_pair", "point_pendulum"]
+
+
+@pytest.mark.parametrize("name", MECHANISMS)
+def test_adjoint_equals_direct_on_the_newer_mechanisms(name):
+    case = dynsens.load_case(CASES / f"{name}.yaml", ["sensitivity.partials=complex"])
+    _compare(dynsens.run_case(_with_method(case, "direct")), dynsens.run_case(_with_method(case, "adjoint")),
+             1e-10)
+
+
+def test_every_shipped_case_has_an_adjoint_test():
+    shipped = {p.stem for p in CASES.glob("*.yaml")}
+    covered = set(SHORT) | set(MECHANISMS)
+    assert shipped <= covered, sorted(shipped - covered)
