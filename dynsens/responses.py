@@ -377,6 +377,24 @@ class ExpressionIntegral(TimeIntegral):
             g = g + (np.imag(self.expr.evaluate(shifted)) / h)[:, None] * gj[:, c]
         return f, g
 
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        # trapezoid weights times ∂f/∂v_j at each instant (complex step of the expression)
+        vals = {n: np.real(trace.value[o][:, c]) for n, o, c in self.symbols}
+        tw = np.zeros(len(trace.t))
+        half = 0.5 * np.real(np.diff(trace.t))
+        tw[:-1] += half
+        tw[1:] += half
+        out: dict[Any, Any] = {o: np.zeros(np.shape(trace.value[o])) for o in self.output_ids}
+        h = 1e-30
+        for n, o, c in self.symbols:
+            shifted: dict[str, Any] = dict(vals)
+            shifted[n] = vals[n] + 1j * h
+            out[o][:, c] += tw * (np.imag(self.expr.evaluate(shifted)) / h)
+        if trace.event is not None and len(trace.t) >= 2:     # the last interval ends at the event
+            f = np.real(self.expr.evaluate(vals) + 0.0 * next(iter(vals.values())))
+            out["dt_dx"] = 0.5 * (f[-2] + f[-1])
+        return out
+
 
 class EventTime(Response):
     """Time of a named event (s), or of the end of the run for ``event = None``."""

@@ -64,3 +64,13 @@ def test_expression_integral_input_errors(resp, path, words):
         _case([resp])
     msg = str(exc.value)
     assert "sdof.yaml" in msg and path in msg and words in msg, msg
+
+
+def test_quadratic_index_adjoint_equals_direct():
+    # the integrand's weights in the adjoint sweep: ∂f/∂v_j times the trapezoid weights
+    resp = [{"name": "J", "type": "integral", "expression": "x**2 + 0.01*v**2 + 0.3*sin(x)*v",
+             "symbols": {"x": {"quantity": DISP}, "v": {"quantity": {"dof": "u", "kind": "velocity"}}}}]
+    direct = dynsens.run_case(_case(resp, over=["sensitivity.method=direct"]))
+    adjoint = dynsens.run_case(_case(resp, over=["sensitivity.method=adjoint"]))
+    assert adjoint.method == "adjoint"
+    assert rel_err(adjoint.responses["J"].gradient, direct.responses["J"].gradient) < 1e-10
