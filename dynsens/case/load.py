@@ -23,16 +23,17 @@ from ..march import HISTORY_FIELDS, RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
-from ..responses import (Combination, EventSpec, EventTime, KSAggregate, Response, ResponseSet,
-                         StructuralMass, TimeIntegral, ValueAt)
+from ..responses import (Combination, EventSpec, EventTime, Response, ResponseSet, StructuralMass,
+                         TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
+from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 
 TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity", "output",
             "events", "responses", "optimization")
-RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
+RESPONSE_TYPES = ("value", "integral", "event_time", "end_time", "mass", "expression") + AGGREGATE_TYPES
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -412,19 +413,10 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             u = unit or outputs[oid].unit
             makers.append(lambda n=name, o=oid, c=comp, u=u, tm=time, e=event, f=(deriv == "fixed_time"):
                           ValueAt(n, o, c, u, time=tm, event=e, fixed_time=f))
-        elif kind == "ks":
-            check_keys(r, p, common + ("quantity", "quantities", "rho", "components"), pc, required=("rho",))
-            qs = r.get("quantities", [r["quantity"]] if "quantity" in r else None)
-            if not isinstance(qs, list) or not qs:
-                pc.add(p, "a KS response needs 'quantity' or a list 'quantities'")
-                continue
-            rho = _number(r.get("rho"), f"{p}.rho", pc, positive=True)
-            oids = [output_id(q, f"{p}.quantities[{k}]") for k, q in enumerate(qs)]
-            if rho is None or any(o is None for o in oids):
-                continue
-            comps = tuple(slice(None) for _ in oids)
-            u = unit or outputs[oids[0]].unit
-            makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
+        elif kind in AGGREGATE_TYPES:
+            maker = aggregate_maker(name, kind, r, p, output_id, outputs, pc)
+            if maker is not None:
+                makers.append(maker)
         elif kind == "integral":
             check_keys(r, p, common + ("quantity", "component"), pc, required=("quantity",))
             oid = output_id(r.get("quantity"), f"{p}.quantity")

@@ -10,7 +10,9 @@ Layout (a contract; see the README):
 * ``/monitors/<name>`` (N,) — per-step diagnostics such as constraint drift;
 * ``/design/names``, ``/design/values`` (m,), ``/design/lower``, ``/design/upper``;
 * ``/responses/<name>/value`` () and ``/responses/<name>/gradient`` (m,), attributes
-  ``unit`` and ``missing`` (empty when present);
+  ``unit`` and ``missing`` (empty when present); a KS response also carries ``sampled_max``
+  (or ``sampled_min``), ``samples``, ``ks_gap_bound`` = ln(N)/rho and, when that bound is
+  more than a few percent of the value, ``warning``;
 * ``/stats`` attributes: steps, newton_iterations, factorizations, residual_evaluations,
   ..., wall_time_s.
 
@@ -118,6 +120,8 @@ def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:
             rg.create_dataset("gradient", data=np.real(r.gradient))
         rg.attrs["unit"] = r.unit
         rg.attrs["missing"] = r.missing or ""
+        for key, v in r.extra.items():   # e.g. a KS value's sampled maximum and warning
+            rg.attrs[key] = v
 
 
 def read_result(path: str | Path) -> dict[str, Any]:

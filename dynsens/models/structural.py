@@ -77,6 +77,8 @@ class StructuralModel(Model):
         self.bar_dofs, bar_par = bars.freeze(2 * dim)
         self.bar_names = bars.names
         self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))
+        # second moment of area and effective-length factor (buckling); -1: not given
+        self.bar_I, self.bar_K = (bar_par.get(k, np.zeros(0, int)) for k in ("I", "K"))
         # undeformed bar vectors from nodal coordinates (parameter indices, may be design-dependent)
         self.bar_X = np.array([[node_coords[b] + [] for b in pair] for pair in bar_nodes], dtype=int) \
             .reshape(-1, 2, dim) if bar_nodes else np.zeros((0, 2, dim), int)
@@ -127,6 +129,11 @@ class StructuralModel(Model):
             lumped = np.repeat(half[:, None], 2 * self.dim, axis=1)
             np.add.at(mass, self.bar_dofs, lumped)
             out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
+            # Euler load π²EI/(KL)² (force unit); infinite for a bar without 'inertia' (the
+            # buckling output refuses such bars)
+            KL = pv[self.bar_K] * L0
+            inertia = np.where(self.bar_I >= 0, pv[np.maximum(self.bar_I, 0)], np.inf)
+            out["P_euler"] = np.pi ** 2 * E * inertia / (KL * KL)
         out["mass"] = mass[:self.n]
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
@@ -285,7 +292,8 @@ class StructuralModel(Model):
         """Parameter arrays stacked along a leading batch axis, without the damping matrix: the
         outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
         set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
-        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
+        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3", "P_euler")
+                if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -333,6 +341,7 @@ class StructuralModel(Model):
         for e, dofs in enumerate(self.damper_dofs):
             touch(self.c[e], dofs)
         for e, dofs in enumerate(self.bar_dofs):
+            # (inertia and effective length enter outputs only, not F_R)
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)
@@ -369,7 +378,9 @@ class StructuralModel(Model):
     # ------------------------------------------------------------------ outputs
     def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
         """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
-        ``{element: NAME|[NAMES]|all, kind: force|stress|strain}``."""
+        ``{element: NAME|[NAMES]|all, kind: force|stress|strain|buckling}``; ``buckling`` is the
+        ratio −N/P_E of the compressive axial force to the Euler load π²EI/(KL)² (bars with
+        ``inertia``; positive in compression, > 1 means buckled)."""
         if not check_keys(spec, path, ("dof", "element", "kind"), problems):
             return None
         kind = spec.get("kind", "displacement" if "dof" in spec else "force")
@@ -401,7 +412,7 @@ class StructuralModel(Model):
         if names == "all":
             names = list(self.bar_names) if self.bar_names else list(self.spring_names)
         names = names if isinstance(names, list) else [names]
-        kinds = ("force", "stress", "strain")
+        kinds = ("force", "stress", "strain", "buckling")
         if kind not in kinds:
             problems.add(f"{path}.kind", f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
             return None
@@ -416,6 +427,11 @@ class StructuralModel(Model):
             else:
                 problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
         if len(bars) + len(springs) != len(names):
+            return None
+        lacking = [self.bar_names[b] for b in bars if self.bar_I[b] < 0]
+        if kind == "buckling" and lacking:
+            problems.add(f"{path}.element", f"buckling needs the bar's 'inertia' (second moment of area); "
+                                            f"missing for {', '.join(lacking[:5])}{' ...' if len(lacking) > 5 else ''}")
             return None
         if springs and bars:
             problems.add(f"{path}.element", "mix springs and bars in separate quantities")
@@ -432,9 +448,11 @@ class StructuralModel(Model):
                 return bs["strain"][..., _i]
             if _k == "force":
                 return bs["N"][..., _i]
+            if _k == "buckling":
+                return (-bs["N"] / prm["P_euler"])[..., _i]
             return (prm["E"] * bs["strain"])[..., _i]
 
-        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "",
+        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind in ("strain", "buckling") else "",
                       batched=True, autonomous=True)
 
 
@@ -547,8 +565,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             else:
                 dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
         elif kind == "bar":
-            check_keys(el, ep, ("type", "name", "nodes", "area", "E", "density"), problems,
-                       required=("nodes", "area", "E"))
+            check_keys(el, ep, ("type", "name", "nodes", "area", "E", "density", "inertia",
+                                "effective_length_factor"), problems, required=("nodes", "area", "E"))
             pair = el.get("nodes", [])
             if not isinstance(pair, list) or len(pair) != 2:
                 problems.add(f"{ep}.nodes", f"expected [node_a, node_b], found {pair!r}")
@@ -556,7 +574,10 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             ids = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
             bars.add(name, ids, A=table.add(el.get("area"), f"{ep}.area", problems, positive=True),
                      E=table.add(el.get("E"), f"{ep}.E", problems, positive=True),
-                     rho=table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
+                     rho=table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True),
+                     I=table.add(el["inertia"], f"{ep}.inertia", problems, positive=True) if "inertia" in el else -1,
+                     K=table.add(el.get("effective_length_factor", 1.0), f"{ep}.effective_length_factor",
+                                 problems, positive=True))
             bar_nodes.append((pair[0], pair[1]))
         else:
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
