@@ -207,3 +207,22 @@ def test_buckling_needs_the_second_moment_of_area() -> None:
     del raw["model"]["elements"][0]["inertia"]
     with pytest.raises(CaseError, match="inertia.*missing for left"):
         load_case_dict(raw)
+
+
+def test_post_check_lists_every_members_largest_ratios(run) -> None:
+    """check_members evaluates each bar at each stored step; the limits come from the case."""
+    from dynsens.postcheck import check_members, stress_limits
+    case, res = run
+    # the strictest limit of each side among the stress_ratio responses (|σ| <= σ_c is one of them)
+    assert stress_limits(case) == (SIGMA_C, SIGMA_C)
+    chk = check_members(case)
+    sigma, force, p_euler = hand_bar_history(case, res)
+    assert chk.names == ("left", "right") and chk.steps == len(sigma)
+    np.testing.assert_allclose(chk.tension, sigma.max(axis=0) / SIGMA_C, rtol=1e-12)
+    np.testing.assert_allclose(chk.compression, -sigma.min(axis=0) / SIGMA_C, rtol=1e-12)
+    np.testing.assert_allclose(chk.buckling, (-force / p_euler).max(axis=0), rtol=1e-12)
+    r = res.responses
+    assert chk.largest == pytest.approx(max(float(np.real(r[k].value))
+                                            for k in ("abs_stress_max", "buckling_max")))
+    assert check_members(case, tension_limit=SIGMA_T).tension == pytest.approx(sigma.max(axis=0) / SIGMA_T)
+    assert chk.passes() == (chk.largest <= 1.001)
