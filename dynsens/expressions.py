@@ -1,7 +1,8 @@
 """Restricted, complex-step-safe arithmetic expressions for case files.
 
 Any numeric entry of a case may be a number or a string such as ``"2*l_AZ*cos(theta)"``.
-The string is parsed with :mod:`ast` and only numbers, names, ``+ - * / **``, unary
+The string is parsed with :mod:`ast` and only numbers, names (``A[diag7]``: the member
+diag7 of a design-variable family A), ``+ - * / **``, unary
 signs, parentheses and calls of the whitelisted math functions are accepted; the tree
 is turned into nested closures.  Nothing is ever passed to ``eval``.
 
@@ -85,6 +86,17 @@ class Expression:
         return not self.symbols
 
 
+def _member_symbol(node: ast.AST) -> str | None:
+    """``A[diag7]`` (a member of the design-variable family A) as the symbol 'A[diag7]'."""
+    if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
+        key = node.slice
+        if isinstance(key, ast.Name):
+            return f"{node.value.id}[{key.id}]"
+        if isinstance(key, ast.Constant) and isinstance(key.value, int) and not isinstance(key.value, bool):
+            return f"{node.value.id}[{key.value}]"
+    return None
+
+
 def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
                   text: str) -> Callable[[Mapping[str, Number]], Number]:
     if isinstance(node, ast.Expression):
@@ -93,8 +105,9 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
             and not isinstance(node.value, bool):
         value = float(node.value)
         return lambda env: value
-    if isinstance(node, ast.Name):
-        name = node.id
+    member = _member_symbol(node)
+    if isinstance(node, ast.Name) or member is not None:
+        name = member or node.id
         if name in CONSTANTS:
             c = CONSTANTS[name]
             return lambda env: c

@@ -28,6 +28,7 @@ from ..responses import (Combination, EventSpec, EventTime, Response, ResponseSe
 from ..sensitivity import METHODS
 from ..solver.newton import NewtonSettings
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
+from .families import design_with_families
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 
@@ -35,6 +36,7 @@ TOP_KEYS = ("name", "description", "design", "model", "integrator", "sensitivity
             "events", "responses", "optimization")
 RESPONSE_TYPES = ("value", "integral", "event_time", "end_time", "mass", "expression") + AGGREGATE_TYPES
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_DESIGN_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_]+\])?$")   # A or a family member A[diag7]
 
 
 @dataclass(frozen=True)
@@ -137,7 +139,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
-    design, declared = _design(raw.get("design", {"variables": []}), pc)
+    design, declared = design_with_families(raw, pc, _design)
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
@@ -218,7 +220,7 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
         if not check_keys(v, p, ("name", "value", "lower", "upper", "scale"), pc, required=("name", "value")):
             continue
         name = v.get("name")
-        if not isinstance(name, str) or not _IDENT.match(name):
+        if not isinstance(name, str) or not _DESIGN_NAME.match(name):
             pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {name!r}")
             continue
         if name in declared:
