@@ -16,7 +16,7 @@ B the rows [r; e₃ − z/ℓ; e₆ − z/ℓ], D = [[EA/L, 0, 0], [0, 4EI/L, 2E
 Rotations of any size are allowed: α is taken on the branch nearest the nodal rotations, so
 local rotations stay small while the element turns through several revolutions.
 
-Mass: ``lumped`` (ρAL/2 per node and direction, ρAL³/24 per rotation) or ``consistent`` (the
+Mass: ``lumped`` (ρAL/2 per node and direction, ρAL³/78 per rotation: HRZ lumping) or ``consistent`` (the
 cubic-Hermite mass of the undeformed element; it does not turn with the element, so it is the
 exact consistent mass only for small rotations).
 
@@ -111,10 +111,11 @@ class BeamSet:
     STACK_KEYS = ("beam_D0", "beam_L", "beam_EA", "beam_EI", "beam_A", "beam_I", "beam_c")
 
     def lumped_mass(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-        """(DOF indices, masses) of the lumped beams: ρAL/2 per translation, ρAL³/24 per rotation."""
+        """(DOF indices, masses) of the lumped beams: ρAL/2 per translation and ρAL³/78 per
+        rotation (the consistent mass's diagonal scaled to the element mass, HRZ lumping)."""
         lump = ~self.is_consistent
         m, L = params["beam_rhoA"][lump] * params["beam_L"][lump], params["beam_L"][lump]
-        half, rot = m / 2, m * L * L / 24
+        half, rot = m / 2, m * L * L / 78
         vals = np.stack([half, half, rot, half, half, rot], axis=1)
         return self.idx[lump], vals
 

@@ -26,6 +26,7 @@ import scipy.sparse as sp
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
+from .beams import BeamSet
 from .timefunctions import TimeFunction
 
 GROUND = "ground"
@@ -59,7 +60,8 @@ class StructuralModel(Model):
                  springs: _Group, dampers: _Group, bars: _Group, dim: int, node_coords: dict[str, list[int]],
                  bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
-                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool):
+                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
+                 beams: BeamSet | None = None):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -84,7 +86,11 @@ class StructuralModel(Model):
         self.loads = loads
         self.init_q, self.init_qd = initial
         self.rayleigh = rayleigh
-        nonlinear = bool(len(self.bar_names)) or spring_nonlinear
+        self.beams = beams if beams is not None else BeamSet()
+        self.beams.freeze()
+        # consistent-mass beams make M a full (banded) matrix instead of a diagonal
+        self.full_mass = bool(self.beams.is_consistent.any())
+        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams))
         has_damping = bool(len(self.damper_names)) or rayleigh is not None
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
@@ -93,6 +99,7 @@ class StructuralModel(Model):
         self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
+        self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
@@ -131,9 +138,16 @@ class StructuralModel(Model):
             # Euler load π²EI/(KL)² (force unit); infinite for a bar without 'inertia' (the
             # buckling output refuses such bars)
             KL = pv[self.bar_K] * L0
-            inertia = np.where(self.bar_I >= 0, pv[np.maximum(self.bar_I, 0)], np.inf)
-            out["P_euler"] = np.pi ** 2 * E * inertia / (KL * KL)
+            has = self.bar_I >= 0
+            inertia = np.where(has, pv[np.maximum(self.bar_I, 0)], 1.0)
+            out["P_euler"] = np.where(has, np.pi ** 2 * E * inertia / (KL * KL), np.inf)
+        if len(self.beams):
+            self.beams.parameters(pv, out)
+            idx, vals = self.beams.lumped_mass(out)
+            np.add.at(mass, idx, vals)
         out["mass"] = mass[:self.n]
+        if self.full_mass:
+            out["M"] = self._mass_matrix(out, pv.dtype)
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
@@ -142,6 +156,26 @@ class StructuralModel(Model):
             # viscous and Rayleigh damping depend on the design only: assemble once per design
             out["D"] = self._damping(out, pv.dtype)
         return out
+
+    def _mass_matrix(self, params: dict[str, Any], dtype: Any) -> Any:
+        """M: the diagonal (point, bar and lumped beam masses) plus the consistent beam masses."""
+        diag = np.arange(self.n)
+        rows, cols, vals = [diag], [diag], [params["mass"]]
+        extra = self.beams.consistent_mass(params)
+        if extra is not None:
+            rows.append(extra[0])
+            cols.append(extra[1])
+            vals.append(extra[2])
+        return self._assemble("mass", rows, cols, vals, dtype)
+
+    def _inertia(self, params: dict[str, Any], qdd: np.ndarray) -> np.ndarray:
+        """M q̈ for one parameter set or stacked sets (leading batch axes of qdd)."""
+        if not self.full_mass:
+            return params["mass"] * qdd
+        M = params["M"]
+        if qdd.ndim == 1:
+            return M @ qdd
+        return (M @ qdd[..., None])[..., 0]
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pv = params["pv"]
@@ -216,6 +250,11 @@ class StructuralModel(Model):
             rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
             cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
             vals.append(ke.reshape(len(idx), -1).ravel())
+        if len(self.beams):
+            r, c, v = self.beams.tangent(self._ext(q), params)
+            rows.append(r)
+            cols.append(c)
+            vals.append(v)
         return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
@@ -231,7 +270,8 @@ class StructuralModel(Model):
             pv = params["pv"]
             alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
             Mdiag = params["mass"]
-            D = D + alpha * (sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)) + beta * params["K0"]
+            M = params["M"] if self.full_mass else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
+            D = D + alpha * M + beta * params["K0"]
         return D
 
     def _assemble(self, site: str, rows: list, cols: list, vals: list, dtype: Any) -> Any:
@@ -268,7 +308,7 @@ class StructuralModel(Model):
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
         f_int = self._internal_force(s.q, params)
-        R = params["mass"] * s.qdd + f_int - self.external_force(t, params)
+        R = self._inertia(params, s.qdd) + f_int - self.external_force(t, params)
         if self.traits.has_damping:
             R = R + params["D"] @ s.qd
         return R
@@ -285,6 +325,9 @@ class StructuralModel(Model):
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
             flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
             f = f + flat @ self._bar_scatter
+        if len(self.beams):
+            fb = self.beams.forces(self._ext(q), params)
+            f = f + fb.reshape(fb.shape[:-2] + (-1,)) @ self._beam_scatter
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -292,7 +335,7 @@ class StructuralModel(Model):
         outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
         set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
         keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3", "P_euler")
-                if k in params_list[0]]
+                + BeamSet.STACK_KEYS if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -311,11 +354,13 @@ class StructuralModel(Model):
             st = self.stack_parameters(params_list)
             if self.traits.has_damping:
                 st["D"] = np.stack([p["D"] for p in params_list])
+            if self.full_mass:
+                st["M"] = np.stack([p["M"] for p in params_list])
             self._stacked = (params_list, st)
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
-        R = st["mass"] * qdd + self._internal_force(q, st)
+        R = self._inertia(st, qdd) + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
         if self.traits.has_damping:
             R = R + (st["D"] @ qd[..., None])[..., 0]
@@ -342,6 +387,8 @@ class StructuralModel(Model):
         for e, dofs in enumerate(self.bar_dofs):
             # (inertia and effective length enter outputs only, not F_R)
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
+        for params, dofs in self.beams.design_touch():
+            touch(params, dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)
         if self.rayleigh is not None:
@@ -360,15 +407,19 @@ class StructuralModel(Model):
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
-        M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+        M = params["M"] if self.full_mass else \
+            sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
         D = params["D"] if self.traits.has_damping else None
         return Linearization(R_z=M, R_q=K, R_qd=D)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
-        """Sum of point masses and bar masses ρAL (mass unit of the case)."""
-        total = np.sum(params["pv"][self.mass_idx]) if len(self.mass_idx) else 0.0
+        """Sum of point masses, bar and beam masses ρAL (mass unit of the case); a mass on a
+        node counts once, not once per direction."""
+        total = np.sum(params["pv"][np.unique(self.mass_idx)]) if len(self.mass_idx) else 0.0
         if len(self.bar_names):
             total = total + np.sum(params["bar_mass"])
+        if len(self.beams):
+            total = total + np.sum(params["beam_mass"])
         return total
 
     def dof_labels(self) -> list[str]:
@@ -407,33 +458,39 @@ class StructuralModel(Model):
             problems.add(path, "expected 'dof' or 'element'")
             return None
         names = spec["element"]
-        all_names = self.spring_names + self.damper_names + self.bar_names
+        all_names = self.spring_names + self.damper_names + self.bar_names + self.beams.names
         if names == "all":
-            names = list(self.bar_names) if self.bar_names else list(self.spring_names)
+            names = list(self.bar_names) + list(self.beams.names) if self.bar_names or len(self.beams) \
+                else list(self.spring_names)
         names = names if isinstance(names, list) else [names]
         kinds = ("force", "stress", "strain", "buckling")
         if kind not in kinds:
             problems.add(f"{path}.kind", f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
             return None
-        bars, springs = [], []
+        bars, springs, beams = [], [], []
         for nm in names:
             if nm in self.bar_names:
                 bars.append(self.bar_names.index(nm))
+            elif nm in self.beams.names and kind in ("force", "stress"):
+                beams.append(self.beams.names.index(nm))
+            elif nm in self.beams.names:
+                problems.add(f"{path}.kind", f"beams report 'force' (N, M1, M2) and 'stress' (extreme fibres), "
+                                             f"not {kind!r}")
             elif nm in self.spring_names and kind == "force":
                 springs.append(self.spring_names.index(nm))
             elif nm in self.spring_names:
                 problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
             else:
                 problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
-        if len(bars) + len(springs) != len(names):
+        if len(bars) + len(springs) + len(beams) != len(names):
             return None
         lacking = [self.bar_names[b] for b in bars if self.bar_I[b] < 0]
         if kind == "buckling" and lacking:
             problems.add(f"{path}.element", f"buckling needs the bar's 'inertia' (second moment of area); "
                                             f"missing for {', '.join(lacking[:5])}{' ...' if len(lacking) > 5 else ''}")
             return None
-        if springs and bars:
-            problems.add(f"{path}.element", "mix springs and bars in separate quantities")
+        if springs and (bars or beams):
+            problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
             return None
         if springs:
             si = np.array(springs)
@@ -451,5 +508,33 @@ class StructuralModel(Model):
                 return (-bs["N"] / prm["P_euler"])[..., _i]
             return (prm["E"] * bs["strain"])[..., _i]
 
-        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind in ("strain", "buckling") else "",
-                      batched=True, autonomous=True)
+        unit = "-" if kind in ("strain", "buckling") else ""
+        if not beams:
+            return Output(bar_out, tuple(f"{n}.{kind}" for n in names), unit, batched=True, autonomous=True)
+        beam_fn, beam_labels = self._beam_output(np.array(beams), kind)
+        if not bars:
+            return Output(beam_fn, beam_labels, unit, batched=True, autonomous=True)
+
+        def both(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            return np.concatenate([bar_out(t, s, prm), beam_fn(t, s, prm)], axis=-1)
+        bar_labels = tuple(f"{self.bar_names[b]}.{kind}" for b in bars)
+        return Output(both, bar_labels + beam_labels, unit, batched=True, autonomous=True)
+
+    def _beam_output(self, bi: np.ndarray, kind: str) -> tuple[Any, tuple[str, ...]]:
+        """Beams ``bi``: extreme-fibre stresses (4 per beam: end 1 ±, end 2 ±) or end forces
+        (N, M1, M2 per beam); the function and the component labels."""
+        names = [self.beams.names[b] for b in bi]
+        if kind == "stress":
+            labels = tuple(f"{n}.stress.{e}" for n in names for e in ("1+", "1-", "2+", "2-"))
+
+            def fn(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+                sig = self.beams.fibre_stress(self._ext(s.q), prm)[..., bi, :]
+                return sig.reshape(sig.shape[:-2] + (-1,))
+            return fn, labels
+        labels = tuple(f"{n}.{c}" for n in names for c in ("N", "M1", "M2"))
+
+        def forces(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            st = self.beams.state(self._ext(s.q), prm)
+            f = np.stack([st["N"], st["M1"], st["M2"]], axis=-1)[..., bi, :]
+            return f.reshape(f.shape[:-2] + (-1,))
+        return forces, labels

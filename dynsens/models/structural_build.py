@@ -8,6 +8,7 @@ from typing import Any
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
+from .beams import BeamSet, parse_beam
 from .registry import register
 from .structural import AXES, GROUND, StructuralModel, _Group
 from .timefunctions import build_time_function
@@ -34,6 +35,10 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         scalar = []
     dof_names += scalar
     node_coords: dict[str, list[int]] = {}
+    rotating = _beam_nodes(spec.get("elements"))   # nodes that carry a rotation θz (beams)
+    if rotating and dim != 2:
+        problems.add(f"{path}.elements", "beams are available in plane models (dim: 2) only, so far")
+        rotating = set()
     nodes = spec.get("nodes", {}) or {}
     if not isinstance(nodes, dict):
         problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
@@ -44,12 +49,13 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             continue
         node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
         fx = nd.get("fixed", [])
+        axes = list(AXES[:dim]) + (["rz"] if name in rotating else [])
         if fx is True or fx == "all":
-            fx = list(AXES[:dim])
-        if not isinstance(fx, list) or any(a not in AXES[:dim] for a in fx):
-            problems.add(f"{npath}.fixed", f"expected a list of axes from {list(AXES[:dim])} or 'all', found {fx!r}")
+            fx = axes
+        if not isinstance(fx, list) or any(a not in axes for a in fx):
+            problems.add(f"{npath}.fixed", f"expected a list of axes from {axes} or 'all', found {fx!r}")
             fx = []
-        for a in AXES[:dim]:
+        for a in axes:
             (fixed.add if a in fx else dof_names.append)(f"{name}.{a}")
     if len(set(dof_names)) != len(dof_names):
         problems.add(f"{path}.dofs", "DOF names must be unique")
@@ -70,8 +76,12 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             return [n] * dim
         return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
 
+    def beam_dofs(name: Any, p: str) -> list[int]:
+        return node_dofs(name, p) + ([dof(f"{name}.rz", p)] if name in node_coords else [n])
+
     mass_terms: list[tuple[int, int]] = []
     springs, dampers, bars = _Group(), _Group(), _Group()
+    beams = BeamSet()
     bar_nodes: list[tuple[str, str]] = []
     names_seen: set[str] = set()
     spring_nonlinear = False
@@ -80,7 +90,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     if not isinstance(elements, list):
         problems.add(f"{path}.elements", "expected a list")
         elements = []
-    kinds = ("mass", "spring", "damper", "bar")
+    kinds = ("mass", "spring", "damper", "bar", "beam")
     for k, el in enumerate(elements):
         ep = f"{path}.elements[{k}]"
         if not isinstance(el, dict):
@@ -135,6 +145,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                      K=table.add(el.get("effective_length_factor", 1.0), f"{ep}.effective_length_factor",
                                  problems, positive=True))
             bar_nodes.append((pair[0], pair[1]))
+        elif kind == "beam":
+            parse_beam(el, ep, name, beams, table, beam_dofs, node_coords, problems)
         else:
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
                                        f"(known: {', '.join(kinds)})")
@@ -147,10 +159,12 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             target = dof(ld["dof"], f"{lp}.dof")
         elif "node" in ld:
             direction = ld.get("direction")
-            if direction not in AXES[:dim]:
-                problems.add(f"{lp}.direction", f"expected one of {list(AXES[:dim])}, found {direction!r}")
+            directions = list(AXES[:dim]) + (["rz"] if ld["node"] in rotating else [])
+            if direction not in directions:
+                problems.add(f"{lp}.direction", f"expected one of {directions}, found {direction!r}")
                 continue
-            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)]
+            target = beam_dofs(ld["node"], f"{lp}.node")[2] if direction == "rz" else \
+                node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)]
         else:
             problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
             continue
@@ -182,7 +196,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
     if n == 0:
         problems.add(path, "the model has no free degrees of freedom")
-    massed = {d for d, _ in mass_terms} | ({d for row in bars.dofs for d in row} if bars.names else set())
+    massed = {d for d, _ in mass_terms} | {d for row in bars.dofs + beams.dofs for d in row}
     for i, d in enumerate(dof_names):
         if i not in massed:
             problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
@@ -191,7 +205,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
-                                spring_nonlinear=spring_nonlinear)
+                                spring_nonlinear=spring_nonlinear, beams=beams)
     except (ValueError, IndexError, TypeError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled
@@ -199,3 +213,11 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     # with problems listed, the model is still returned so that the responses can be checked
     # against its DOFs and elements; the loader raises before anything runs
     return model
+
+
+def _beam_nodes(elements: Any) -> set[str]:
+    """Names of the nodes that beams connect (they carry a rotation DOF)."""
+    if not isinstance(elements, list):
+        return set()
+    return {str(nd) for el in elements if isinstance(el, dict) and el.get("type") == "beam"
+            and isinstance(el.get("nodes"), list) for nd in el["nodes"]}
