@@ -91,7 +91,7 @@ def test_truss_converges_feasible_with_active_stress_constraint(tmp_path: Path) 
     assert nit >= 2 and all(v.shape[0] == nit + 1 for v in h.values())
     np.testing.assert_array_equal(h["iteration"], np.arange(nit + 1))
     assert h["grad_f"].shape == (nit + 1, 3) and h["grad_g"].shape == (nit + 1, 2, 3)
-    assert h["f"][-1] < 0.95 * h["f"][0]                        # lighter than x0 (0.122 t)
+    assert h["f"][-1] < 0.92 * h["f"][0]                        # lighter than x0 (0.0720 t -> 0.0646 t)
     # both the stress (tension and compression) and the buckling constraint are active
     assert resp["stress_ks"] == pytest.approx(1.0, rel=1e-4) and resp["buckling_ks"] == pytest.approx(1.0, rel=1e-4)
     assert resp["stress_max"] <= resp["stress_ks"]              # KS bounds the sampled maximum

@@ -27,6 +27,7 @@ from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .beams import BeamSet
+from .dampers import NonlinearDampers
 from .timefunctions import TimeFunction
 
 GROUND = "ground"
@@ -61,7 +62,7 @@ class StructuralModel(Model):
                  bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
                  rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
-                 beams: BeamSet | None = None):
+                 beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -90,8 +91,10 @@ class StructuralModel(Model):
         self.beams.freeze()
         # consistent-mass beams make M a full (banded) matrix instead of a diagonal
         self.full_mass = bool(self.beams.is_consistent.any())
-        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams))
-        has_damping = bool(len(self.damper_names)) or rayleigh is not None
+        self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
+        self.nl_dampers.freeze()
+        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) or bool(len(self.nl_dampers))
+        has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers))
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
                              has_damping=has_damping, sparse=use_sparse)
@@ -100,6 +103,7 @@ class StructuralModel(Model):
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
+        self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
@@ -310,8 +314,15 @@ class StructuralModel(Model):
         f_int = self._internal_force(s.q, params)
         R = self._inertia(params, s.qdd) + f_int - self.external_force(t, params)
         if self.traits.has_damping:
-            R = R + params["D"] @ s.qd
+            R = R + params["D"] @ s.qd + self._nl_damper_force(s.qd, params)
         return R
+
+    def _nl_damper_force(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
+        """Nodal forces (..., n) of the nonlinear viscous dampers (0 without any)."""
+        if not len(self.nl_dampers):
+            return 0.0
+        F, _ = self.nl_dampers.force(self.nl_dampers.velocity(self._ext(qd)), params["pv"])
+        return F @ self._nl_damper_scatter
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
@@ -363,7 +374,7 @@ class StructuralModel(Model):
         R = self._inertia(st, qdd) + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
         if self.traits.has_damping:
-            R = R + (st["D"] @ qd[..., None])[..., 0]
+            R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
         return R.transpose(0, 2, 1)
 
     def design_pattern(self) -> list[np.ndarray]:
@@ -387,7 +398,7 @@ class StructuralModel(Model):
         for e, dofs in enumerate(self.bar_dofs):
             # (inertia and effective length enter outputs only, not F_R)
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
-        for params, dofs in self.beams.design_touch():
+        for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch():
             touch(params, dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)
@@ -410,6 +421,9 @@ class StructuralModel(Model):
         M = params["M"] if self.full_mass else \
             sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
         D = params["D"] if self.traits.has_damping else None
+        if len(self.nl_dampers):
+            D = D + self._assemble("nl_damping", *self.nl_dampers.tangent(self._ext(s.qd), params["pv"]),
+                                   np.result_type(s.qd, params["pv"]))
         return Linearization(R_z=M, R_q=K, R_qd=D)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:

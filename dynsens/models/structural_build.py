@@ -9,6 +9,7 @@ from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
 from .beams import BeamSet, parse_beam
+from .dampers import NonlinearDampers
 from .registry import register
 from .structural import AXES, GROUND, StructuralModel, _Group
 from .timefunctions import build_time_function
@@ -82,6 +83,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     mass_terms: list[tuple[int, int]] = []
     springs, dampers, bars = _Group(), _Group(), _Group()
     beams = BeamSet()
+    nl_dampers = NonlinearDampers()
     bar_nodes: list[tuple[str, str]] = []
     names_seen: set[str] = set()
     spring_nonlinear = False
@@ -110,7 +112,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                 problems.add(ep, "a mass needs 'dof' or 'node'")
             mass_terms += [(d, pi) for d in targets]
         elif kind in ("spring", "damper"):
-            keys = ("type", "name", "dofs", "k", "k2", "k3") if kind == "spring" else ("type", "name", "dofs", "c")
+            keys = ("type", "name", "dofs", "k", "k2", "k3") if kind == "spring" else \
+                ("type", "name", "dofs", "c", "exponent", "regularization")
             check_keys(el, ep, keys, problems, required=("dofs", "k" if kind == "spring" else "c"))
             pair = el.get("dofs", [])
             if not isinstance(pair, list) or len(pair) not in (1, 2):
@@ -128,6 +131,15 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                             zero_index = table.add(0.0, "", problems)
                         higher[key] = zero_index
                 springs.add(name, ids, k1=table.add(el.get("k"), f"{ep}.k", problems), **higher)
+            elif "exponent" in el or "regularization" in el:
+                if "exponent" not in el or "regularization" not in el:
+                    problems.add(ep, "a nonlinear damper needs 'exponent' (α) and 'regularization' (velocity ε > 0)")
+                    continue
+                nl_dampers.names.append(name)
+                nl_dampers.dofs.append(ids)
+                nl_dampers.c.append(table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
+                nl_dampers.alpha.append(table.add(el["exponent"], f"{ep}.exponent", problems, positive=True))
+                nl_dampers.eps.append(table.add(el["regularization"], f"{ep}.regularization", problems, positive=True))
             else:
                 dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
         elif kind == "bar":
@@ -205,7 +217,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
-                                spring_nonlinear=spring_nonlinear, beams=beams)
+                                spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers)
     except (ValueError, IndexError, TypeError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled

@@ -1,0 +1,111 @@
+"""State-dependent structural terms: nonlinear viscous dampers F = c|v|^α sign v (regularized).
+
+Contract (issue 14): a mass coasting against a damper alone follows the closed form
+v^(1−α) = v0^(1−α) − (1−α)ct/m; α = 1 is the linear damper exactly; the Newton matrix's
+∂F_R/∂q̇ equals complex step of the residual; the design sensitivities (c, α, ε, k, m) equal
+complex step of the whole run; a damper with only one of exponent/regularization is rejected.
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import dynsens
+from dynsens import CaseError
+from dynsens.case.load import load_case_dict
+from dynsens.models.base import StepState, as_dense
+from helpers import complex_step_gradients
+
+COAST = {
+    "name": "coast",
+    "model": {"type": "structural", "dofs": ["u"],
+              "elements": [{"type": "mass", "name": "body", "dof": "u", "mass": 2.0},
+                           {"type": "damper", "name": "fluid", "dofs": ["u", "ground"], "c": 3.0,
+                            "exponent": 0.4, "regularization": 1e-7}],
+              "initial": {"velocity": {"u": 1.5}}},
+    "integrator": {"dt": 2e-4, "t_end": 0.6},
+    "sensitivity": {"enabled": False},
+    "responses": [{"name": "v_half", "type": "value", "quantity": {"dof": "u", "kind": "velocity"}, "time": 0.5},
+                  {"name": "u_half", "type": "value", "quantity": {"dof": "u"}, "time": 0.5}],
+}
+
+
+def test_coasting_mass_follows_the_closed_form() -> None:
+    m, c, a, v0, t = 2.0, 3.0, 0.4, 1.5, 0.5
+    res = dynsens.run_case(load_case_dict(COAST))
+    v = (v0 ** (1 - a) - (1 - a) * c * t / m) ** (1 / (1 - a))
+    # u(t) = ∫ v dt = m/(c(2−α)) (v0^(2−α) − v^(2−α))
+    u = m / (c * (2 - a)) * (v0 ** (2 - a) - v ** (2 - a))
+    assert 0.1 < v < 1.0                                       # well before the mass stops (t ≈ 0.85 s)
+    assert float(res.responses["v_half"].value) == pytest.approx(v, rel=1e-6)
+    assert float(res.responses["u_half"].value) == pytest.approx(u, rel=1e-6)
+
+
+def two_dof(exponent: float | str = "alpha", linear: bool = False) -> dict:
+    damper = {"type": "damper", "name": "fluid", "dofs": ["top", "base"], "c": "c"}
+    if not linear:
+        damper.update(exponent=exponent, regularization="eps")
+    return {
+        "name": "two_dof_damper",
+        "design": {"variables": [{"name": "c", "value": 40.0}, {"name": "alpha", "value": 0.35},
+                                 {"name": "eps", "value": 0.02}, {"name": "k", "value": 5000.0},
+                                 {"name": "m", "value": 1.5}]},
+        "model": {"type": "structural", "dofs": ["base", "top"],
+                  "elements": [{"type": "mass", "name": "mb", "dof": "base", "mass": 3.0},
+                               {"type": "mass", "name": "mt", "dof": "top", "mass": "m"},
+                               {"type": "spring", "name": "ground_spring", "dofs": ["base", "ground"], "k": 2.0e4},
+                               {"type": "spring", "name": "link", "dofs": ["top", "base"], "k": "k"},
+                               damper],
+                  "loads": [{"dof": "base", "value": 300.0, "function": {"type": "harmonic", "frequency": 9.0}}]},
+        "integrator": {"dt": 2e-3, "t_end": 0.6},
+        "sensitivity": {"partials": "complex"},
+        "responses": [{"name": "top_max", "type": "max", "quantity": {"dof": "top"}, "absolute": True},
+                      {"name": "top_ks", "type": "ks", "quantity": {"dof": "top"}, "rho": 200.0},
+                      {"name": "top_end", "type": "value", "quantity": {"dof": "top", "kind": "velocity"}}],
+    }
+
+
+def test_exponent_one_is_the_linear_damper() -> None:
+    nl = dynsens.run_case(load_case_dict(two_dof(exponent=1.0)))
+    lin = dynsens.run_case(load_case_dict(two_dof(linear=True)))
+    for name in ("top_max", "top_ks", "top_end"):
+        assert float(nl.responses[name].value) == pytest.approx(float(lin.responses[name].value), rel=1e-12)
+        np.testing.assert_allclose(np.delete(nl.responses[name].gradient, [1, 2]),
+                                   np.delete(lin.responses[name].gradient, [1, 2]), rtol=1e-10, atol=1e-14)
+
+
+def test_velocity_jacobian_equals_complex_step_of_the_residual() -> None:
+    case = load_case_dict(two_dof())
+    model = case.model
+    params = model.parameters(case.x0)
+    rng = np.random.default_rng(0)
+    empty = np.zeros(0)
+    for scale in (1e-3, 0.05, 2.0):                            # below, near and above ε
+        q, qd, qdd = rng.normal(size=(3, 2)) * [[1.0], [scale], [1.0]]
+        lin = model.linearize(0.0, StepState(q, qd, qdd, empty, empty, empty), params)
+        cs = np.zeros((2, 2))
+        for j in range(2):
+            d = qd.astype(complex)
+            d[j] += 1e-30j
+            cs[:, j] = np.imag(model.residual(0.0, StepState(q, d, qdd, empty, empty, empty), params)) / 1e-30
+        np.testing.assert_allclose(as_dense(lin.R_qd), cs, rtol=1e-13, atol=1e-13 * np.abs(cs).max())
+
+
+def test_damper_sensitivities_equal_complex_step_of_the_whole_run() -> None:
+    case = load_case_dict(two_dof())
+    res = dynsens.run_case(case)
+    cs = complex_step_gradients(case)
+    for name, rv in res.responses.items():
+        assert np.abs(cs[name][:3]).min() > 0                 # c, α and ε all matter
+        np.testing.assert_allclose(np.real(rv.gradient), cs[name], rtol=1e-8,
+                                   atol=1e-10 * np.abs(cs[name]).max(), err_msg=name)
+
+
+@pytest.mark.parametrize("drop", ["exponent", "regularization"])
+def test_nonlinear_damper_needs_exponent_and_regularization(drop: str) -> None:
+    raw = copy.deepcopy(COAST)
+    del raw["model"]["elements"][1][drop]
+    with pytest.raises(CaseError, match="needs 'exponent'"):
+        load_case_dict(raw)
