@@ -396,8 +396,9 @@ class StructuralModel(Model):
         for e, dofs in enumerate(self.damper_dofs):
             touch(self.c[e], dofs)
         for e, dofs in enumerate(self.bar_dofs):
-            # (inertia and effective length enter outputs only, not F_R)
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
+            # inertia and effective length enter outputs only (buckling), not F_R: no rows
+            touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
         for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch():
             touch(params, dofs)
         for dof, amp, fn in self.loads:
