@@ -99,13 +99,36 @@ def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
             side_rows.append(-1.0 / given["compression_limit"])
     if len(pc.problems) > n0:
         return None
-    oid = output_id({"element": elements, "kind": quantity_kind}, f"{path}.elements")
-    if oid is None:
+    picked = _shared_output(elements, quantity_kind, f"{path}.elements", output_id, outputs, pc)
+    if picked is None:
         return None
-    k = len(outputs[oid].labels)
-    term = Term(oid, np.arange(k), np.array([[c] * k for c in side_rows]))
+    oid, comps = picked
+    k = len(comps)
+    term = Term(oid, comps, np.array([[c] * k for c in side_rows]))
     u = str(r.get("unit", "-"))
     return lambda: Aggregate(name, (term,), str(how), u, rho=rho)
+
+
+def _shared_output(elements: Any, kind: str, path: str, output_id: OutputId, outputs: list[Output],
+                   pc: ProblemCollector) -> tuple[int, np.ndarray] | None:
+    """The output of ``kind`` over all elements and the components of ``elements``: every ratio
+    response of a case then reads one output (evaluated once per block) instead of one each.
+    Falls back to the elements' own output, which reports any problem with them."""
+    n0 = len(pc.problems)
+    oid = output_id({"element": "all", "kind": kind}, path)
+    if oid is not None and elements != "all" and isinstance(elements, (list, str)):
+        wanted = elements if isinstance(elements, list) else [elements]
+        labels = outputs[oid].labels
+        owner = [lab.split(".", 1)[0] for lab in labels]
+        if all(isinstance(w, str) for w in wanted) and set(wanted) <= set(owner):
+            chosen = set(wanted)
+            return oid, np.array([i for i, o in enumerate(owner) if o in chosen], dtype=int)
+        oid = None
+    if oid is not None and elements == "all":
+        return oid, np.arange(len(outputs[oid].labels))
+    del pc.problems[n0:]          # the elements' own output says what is wrong, if anything
+    oid = output_id({"element": elements, "kind": kind}, path)
+    return None if oid is None else (oid, np.arange(len(outputs[oid].labels)))
 
 
 def _positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
