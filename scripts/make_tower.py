@@ -76,8 +76,8 @@ def tower(levels: int = 12, height: float = 1000.0, base: float = 2400.0, top: f
                        "mass subject to tension, compression, buckling and sway limits over the transient. "
                        "Units: mm, s, t, N, MPa.",
         "design": {"families": [{
-            "name": "A", "type": "bar", "elements": "all", "value": 400.0, "lower": 50.0, "upper": 4000.0,
-            "scale": 400.0, "assign": {"area": "A", "inertia": TUBE_I}}]},
+            "name": "A", "type": "bar", "elements": "all", "value": 300.0, "lower": 120.0, "upper": 4000.0,
+            "scale": 300.0, "assign": {"area": "A", "inertia": TUBE_I}}]},
         "model": {"type": "structural", "dim": 3, "nodes": nodes, "elements": elements,
                   "damping": {"rayleigh": {"alpha": 2.0, "beta": 2.0e-5}}, "loads": loads},
         "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 2.0e-3, "t_end": 0.1},

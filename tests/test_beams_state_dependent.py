@@ -109,3 +109,101 @@ def test_nonlinear_damper_needs_exponent_and_regularization(drop: str) -> None:
     del raw["model"]["elements"][1][drop]
     with pytest.raises(CaseError, match="needs 'exponent'"):
         load_case_dict(raw)
+
+
+# ---------------------------------------------------------------------- follower loads
+E_STIFF, RHO, LEN = 2.1e7, 7.85e-9, 1000.0          # a stiff tube rod: it turns as a rigid body
+
+
+def rod(follower: bool = True, n_el: int = 4, design: list | None = None, value: float | str = 1000.0) -> dict:
+    """A rod along x pinned at n0 (free to turn), pushed at its tip by a force along the tip's
+    local y axis (perpendicular to the rod as it turns when ``follower``)."""
+    nodes = {f"n{i}": {"coords": [f"L*{i}/{n_el}" if design else LEN * i / n_el, 0.0]} for i in range(n_el + 1)}
+    nodes["n0"]["fixed"] = ["x", "y"]
+    section = {"shape": "tube", "D": "D" if design else 40.0, "t": 3.0}
+    elements = [{"type": "beam", "name": f"b{i}", "nodes": [f"n{i}", f"n{i + 1}"], "E": E_STIFF,
+                 "density": RHO, "section": section} for i in range(n_el)]
+    load = {"node": f"n{n_el}", "direction": "y", "value": value, "function": "constant"}
+    if follower:
+        load["follower"] = True
+    return {"name": "rod", "design": {"variables": design or []},
+            "model": {"type": "structural", "dim": 2, "nodes": nodes, "elements": elements, "loads": [load]},
+            "integrator": {"dt": 1e-4, "t_end": 0.05},
+            "sensitivity": {"enabled": bool(design), "partials": "complex"},
+            "responses": [{"name": "angle", "type": "value", "quantity": {"dof": f"n{n_el}.rz"}},
+                          {"name": "tip_x", "type": "value", "quantity": {"dof": f"n{n_el}.x"}},
+                          {"name": "tip_y_max", "type": "max", "quantity": {"dof": f"n{n_el}.y"}}]}
+
+
+def polar_inertia(case) -> float:
+    """J = φᵀMφ of the rigid rotation about the pin (φ: x_i on y DOFs, 1 on rotations)."""
+    model = case.model
+    params = model.parameters(case.x0)
+    names = model.dof_labels()
+    phi = np.array([float(nm[1:].split(".")[0]) * LEN / 4 if nm.endswith(".y") else
+                    1.0 if nm.endswith(".rz") else 0.0 for nm in names])
+    M = as_dense(params["M"]) if model.full_mass else np.diag(params["mass"])
+    return float(phi @ M @ phi)
+
+
+def test_follower_force_turns_a_rod_with_constant_angular_acceleration() -> None:
+    """A force that stays perpendicular to the rod gives the moment PL at every angle:
+    θ(t) = PLt²/(2J); a dead force of the same size gives PL cos θ and turns it less."""
+    case = load_case_dict(rod())
+    res = dynsens.run_case(case)
+    t, P = 0.05, 1000.0
+    theta = P * LEN * t ** 2 / (2 * polar_inertia(case))
+    assert 1.0 < theta < 2.5                                    # a large rotation
+    assert float(res.responses["angle"].value) == pytest.approx(theta, rel=1e-4)
+    assert float(res.responses["tip_x"].value) == pytest.approx(LEN * (np.cos(theta) - 1), rel=1e-3)
+    # the dead force: J θ'' = PL cos θ, integrated to round-off
+    from scipy.integrate import solve_ivp
+    k = P * LEN / polar_inertia(case)
+    ref = solve_ivp(lambda _, y: [y[1], k * np.cos(y[0])], (0.0, t), [0.0, 0.0], rtol=1e-12, atol=1e-12).y[0, -1]
+    dead = float(dynsens.run_case(load_case_dict(rod(follower=False))).responses["angle"].value)
+    assert dead == pytest.approx(ref, rel=1e-4) and dead < 0.97 * theta
+
+
+def test_follower_jacobian_equals_complex_step_of_the_residual() -> None:
+    case = load_case_dict(rod(value="P*sin(0.5)", design=[{"name": "P", "value": 400.0},
+                                                            {"name": "L", "value": LEN}, {"name": "D", "value": 40.0}]))
+    model = case.model
+    params = model.parameters(case.x0)
+    n = model.traits.n_q
+    rng = np.random.default_rng(5)
+    q, qd, qdd = rng.normal(size=(3, n)) * 0.7
+    empty = np.zeros(0)
+    lin = model.linearize(0.01, StepState(q, qd, qdd, empty, empty, empty), params)
+    cs = np.zeros((n, n))
+    for j in range(n):
+        d = q.astype(complex)
+        d[j] += 1e-30j
+        cs[:, j] = np.imag(model.residual(0.01, StepState(d, qd, qdd, empty, empty, empty), params)) / 1e-30
+    np.testing.assert_allclose(as_dense(lin.R_q), cs, rtol=1e-12, atol=1e-12 * np.abs(cs).max())
+
+
+def test_follower_sensitivities_equal_complex_step_of_the_whole_run() -> None:
+    raw = rod(design=[{"name": "P", "value": 400.0}, {"name": "L", "value": LEN}, {"name": "D", "value": 40.0}],
+              value="P")
+    raw["model"]["elements"] = [dict(el, E=2.1e5) for el in raw["model"]["elements"]]   # flexible now
+    raw["integrator"]["t_end"] = 0.02
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case)
+    cs = complex_step_gradients(case)
+    for name, rv in res.responses.items():
+        np.testing.assert_allclose(np.real(rv.gradient), cs[name], rtol=1e-8,
+                                   atol=1e-10 * np.abs(cs[name]).max(), err_msg=name)
+
+
+@pytest.mark.parametrize("change, path, needle", [
+    ({"follower": "yes"}, "model.loads[0].follower", "true or false"),
+    ({"direction": "rz"}, "model.loads[0].direction", "local x or y"),
+    ({"node": "nowhere"}, "model.loads[0].node", "rotation"),
+])
+def test_bad_follower_loads_are_reported(change, path, needle) -> None:
+    raw = rod()
+    raw["model"]["loads"][0].update(change)
+    with pytest.raises(CaseError) as err:
+        load_case_dict(raw)
+    msgs = [p.message for p in err.value.problems if p.path == path]
+    assert any(needle in m for m in msgs), [str(p) for p in err.value.problems]

@@ -28,6 +28,7 @@ from ._keys import check_keys, did_you_mean
 from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .beams import BeamSet
 from .dampers import NonlinearDampers
+from .follower import FollowerLoads
 from .timefunctions import TimeFunction
 
 GROUND = "ground"
@@ -62,7 +63,8 @@ class StructuralModel(Model):
                  bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
                  rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
-                 beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None):
+                 beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None,
+                 followers: FollowerLoads | None = None):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -93,7 +95,9 @@ class StructuralModel(Model):
         self.full_mass = bool(self.beams.is_consistent.any())
         self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
         self.nl_dampers.freeze()
-        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) or bool(len(self.nl_dampers))
+        self.followers = followers if followers is not None else FollowerLoads()
+        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
+            or bool(len(self.nl_dampers)) or bool(len(self.followers))
         has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers))
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
@@ -313,6 +317,8 @@ class StructuralModel(Model):
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
         f_int = self._internal_force(s.q, params)
         R = self._inertia(params, s.qdd) + f_int - self.external_force(t, params)
+        if len(self.followers):
+            R = R - self.followers.force(t, self._ext(s.q), params["pv"])[..., :self.n]
         if self.traits.has_damping:
             R = R + params["D"] @ s.qd + self._nl_damper_force(s.qd, params)
         return R
@@ -373,6 +379,9 @@ class StructuralModel(Model):
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
         R = self._inertia(st, qdd) + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
+        if len(self.followers):
+            R = R - np.stack([self.followers.force(t, self._ext(q[i]), st["pv"])[..., :self.n]
+                              for i, t in enumerate(ts)])
         if self.traits.has_damping:
             R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
         return R.transpose(0, 2, 1)
@@ -399,7 +408,8 @@ class StructuralModel(Model):
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
             # inertia and effective length enter outputs only (buckling), not F_R: no rows
             touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
-        for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch():
+        for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch() \
+                + self.followers.design_touch():
             touch(params, dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)
@@ -419,6 +429,9 @@ class StructuralModel(Model):
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
+        if len(self.followers):
+            rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
+            K = K - self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"]))
         M = params["M"] if self.full_mass else \
             sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
         D = params["D"] if self.traits.has_damping else None

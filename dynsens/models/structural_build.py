@@ -10,6 +10,7 @@ from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
 from .beams import BeamSet, parse_beam
 from .dampers import NonlinearDampers
+from .follower import FollowerLoads
 from .registry import register
 from .structural import AXES, GROUND, StructuralModel, _Group
 from .timefunctions import build_time_function
@@ -163,9 +164,14 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
                                        f"(known: {', '.join(kinds)})")
     loads = []
+    followers = FollowerLoads()
     for k, ld in enumerate(spec.get("loads", []) or []):
         lp = f"{path}.loads[{k}]"
-        if not check_keys(ld, lp, ("dof", "node", "direction", "value", "function"), problems, required=("value",)):
+        if not check_keys(ld, lp, ("dof", "node", "direction", "value", "function", "follower"), problems,
+                          required=("value",)):
+            continue
+        if ld.get("follower", False) is not False:
+            _follower(ld, lp, rotating, beam_dofs, table, followers, problems)
             continue
         if "dof" in ld:
             target = dof(ld["dof"], f"{lp}.dof")
@@ -217,7 +223,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
-                                spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers)
+                                spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers,
+                                followers=followers)
     except (ValueError, IndexError, TypeError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled
@@ -233,3 +240,25 @@ def _beam_nodes(elements: Any) -> set[str]:
         return set()
     return {str(nd) for el in elements if isinstance(el, dict) and el.get("type") == "beam"
             and isinstance(el.get("nodes"), list) for nd in el["nodes"]}
+
+
+def _follower(ld: dict, lp: str, rotating: set[str], beam_dofs: Any, table: ParameterTable,
+              followers: FollowerLoads, problems: ProblemCollector) -> None:
+    """A ``follower: true`` load: along the local x or y axis of a node that rotates (a beam node)."""
+    if ld.get("follower") is not True:
+        problems.add(f"{lp}.follower", f"expected true or false, found {ld.get('follower')!r}")
+        return
+    node, direction = ld.get("node"), ld.get("direction")
+    if node not in rotating:
+        problems.add(f"{lp}.node", f"a follower load needs a node with a rotation (a beam node), found {node!r}")
+        return
+    if direction not in ("x", "y"):
+        problems.add(f"{lp}.direction", f"a follower force acts along the node's local x or y, found {direction!r}")
+        return
+    fn = build_time_function(ld.get("function"), f"{lp}.function", table, problems)
+    if fn is None:
+        return
+    followers.dofs.append(tuple(beam_dofs(node, f"{lp}.node")))
+    followers.local.append((1.0, 0.0) if direction == "x" else (0.0, 1.0))
+    followers.amp.append(table.add(ld.get("value"), f"{lp}.value", problems))
+    followers.fn.append(fn)
