@@ -41,10 +41,9 @@ def main() -> None:
     with h5py.File(source, "r") as f:
         st = f["optimization/start_0"].attrs
         x = np.asarray(st["x_opt"], float)
-        stats = {k: int(st[k]) for k in ("nit", "n_sim") if k in st}
+        stats = {"iterations": int(st["nit"]), "simulations": int(st["nfev"])}
         status = str(f.attrs.get("status", ""))
-        wall = float(f["optimization/start_0/history/elapsed"][-1]) \
-            if "optimization/start_0/history/elapsed" in f else float("nan")
+        wall = float(st["wall_time"])
         names = json.loads(f["optimization"].attrs["response_names"])
         responses = dict(zip(names, np.asarray(st["responses_opt"], float).tolist()))
     mass0 = float(dynsens.run_case(case, sensitivities=False).responses["mass"].value)
