@@ -207,3 +207,29 @@ def test_bad_follower_loads_are_reported(change, path, needle) -> None:
         load_case_dict(raw)
     msgs = [p.message for p in err.value.problems if p.path == path]
     assert any(needle in m for m in msgs), [str(p) for p in err.value.problems]
+
+
+def test_damper_forces_are_outputs_with_exact_gradients() -> None:
+    """{element: fluid, kind: force} reads F(v) of the nonlinear damper (and c·v of a linear
+    one); their KS/max gradients equal complex step of the whole run."""
+    raw = two_dof()
+    raw["model"]["elements"].append({"type": "damper", "name": "plain", "dofs": ["base", "ground"], "c": 15.0})
+    raw["output"] = {"history": ["qd"]}
+    raw["responses"] = [
+        {"name": "fluid_max", "type": "max", "quantity": {"element": "fluid", "kind": "force"}, "absolute": True},
+        {"name": "both_ks", "type": "ks", "quantity": {"element": ["plain", "fluid"], "kind": "force"},
+         "absolute": True, "rho": 0.05}]
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case)
+    x = dict(zip(case.design_names, case.x0))
+    qd = np.real(res.history["qd"])
+    v = qd[:, 1] - qd[:, 0]
+    F = x["c"] * v * (v * v + x["eps"] ** 2) ** ((x["alpha"] - 1) / 2)
+    assert float(res.responses["fluid_max"].value) == pytest.approx(np.abs(F).max(), rel=1e-12)
+    cs = complex_step_gradients(case)
+    for name, rv in res.responses.items():
+        np.testing.assert_allclose(np.real(rv.gradient), cs[name], rtol=1e-8,
+                                   atol=1e-10 * np.abs(cs[name]).max(), err_msg=name)
+    with pytest.raises(CaseError, match="dampers report only 'force'"):
+        raw["responses"][0]["quantity"]["kind"] = "stress"
+        load_case_dict(raw)

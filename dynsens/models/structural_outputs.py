@@ -21,6 +21,9 @@ class StructuralOutputs:
     bar_names: list[str]
     bar_I: np.ndarray
     beams: Any
+    nl_dampers: Any
+    damper_dofs: np.ndarray
+    c: np.ndarray
     _spring_state: Any
     _bar_state: Any
     _ext: Any
@@ -57,11 +60,14 @@ class StructuralOutputs:
             problems.add(path, "expected 'dof' or 'element'")
             return None
         names = spec["element"]
-        all_names = self.spring_names + self.damper_names + self.bar_names + self.beams.names
+        all_names = self.spring_names + self.damper_names + self.nl_dampers.names + self.bar_names + self.beams.names
         if names == "all":
             names = list(self.bar_names) + list(self.beams.names) if self.bar_names or len(self.beams) \
                 else list(self.spring_names)
         names = names if isinstance(names, list) else [names]
+        dampers = self.damper_names + self.nl_dampers.names
+        if names and all(nm in dampers for nm in names):
+            return self._damper_output(names, kind, path, problems)
         kinds = ("force", "stress", "strain", "buckling")
         if kind not in kinds:
             problems.add(f"{path}.kind", f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
@@ -118,6 +124,25 @@ class StructuralOutputs:
             return np.concatenate([bar_out(t, s, prm), beam_fn(t, s, prm)], axis=-1)
         bar_labels = tuple(f"{self.bar_names[b]}.{kind}" for b in bars)
         return Output(both, bar_labels + beam_labels, unit, batched=True, autonomous=True)
+
+    def _damper_output(self, names: list[str], kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Forces of viscous dampers, linear (c v) or nonlinear (c v (v² + ε²)^((α−1)/2))."""
+        if kind != "force":
+            problems.add(f"{path}.kind", f"dampers report only 'force', not {kind!r}")
+            return None
+        lin = [self.damper_names.index(n) for n in names if n in self.damper_names]
+        nl = [self.nl_dampers.names.index(n) for n in names if n in self.nl_dampers.names]
+        li, ni = np.array(lin, dtype=int), np.array(nl, dtype=int)
+
+        def forces(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            qde = self._ext(s.qd)
+            pv = prm["pv"]
+            v_lin = qde[..., self.damper_dofs[li, 0]] - qde[..., self.damper_dofs[li, 1]]
+            F_nl, _ = self.nl_dampers.force(self.nl_dampers.velocity(qde), pv)
+            return np.concatenate([pv[..., self.c[li]] * v_lin, F_nl[..., ni]], axis=-1)
+        labels = tuple(f"{self.damper_names[i]}.force" for i in lin) + \
+            tuple(f"{self.nl_dampers.names[i]}.force" for i in nl)
+        return Output(forces, labels, "", batched=True, autonomous=True)
 
     def _beam_output(self, bi: np.ndarray, kind: str) -> tuple[Any, tuple[str, ...]]:
         """Beams ``bi``: extreme-fibre stresses (4 per beam: end 1 ±, end 2 ±) or end forces
