@@ -16,9 +16,11 @@ B the rows [r; e₃ − z/ℓ; e₆ − z/ℓ], D = [[EA/L, 0, 0], [0, 4EI/L, 2E
 Rotations of any size are allowed: α is taken on the branch nearest the nodal rotations, so
 local rotations stay small while the element turns through several revolutions.
 
-Mass: ``lumped`` (ρAL/2 per node and direction, ρAL³/78 per rotation: HRZ lumping) or ``consistent`` (the
-cubic-Hermite mass of the undeformed element; it does not turn with the element, so it is the
-exact consistent mass only for small rotations).
+Mass: ``lumped`` (ρAL/2 per node and direction, ρAL³/78 per rotation: HRZ lumping) or ``consistent``:
+the cubic-Hermite mass M_l of the element taken in its chord frame, so that it turns with the
+element, M(β) = Tᵀ(β) M_l T(β) (β the current chord angle): the position-dependent mass of the
+governing equation.  Its inertia forces follow from Lagrange's equations with the kinetic energy
+T = ½ u̇ᵀ M(β) u̇: M ü + (M'u̇)(g·u̇) − ½(u̇ᵀM'u̇) g, g = ∂β/∂u, with exact Jacobians.
 
 Sections: ``{A, I, c}`` given directly (c: distance of the extreme fibre from the neutral
 axis, for stresses), or ``{shape: tube, D, t}``, ``{shape: rectangle, b, h}``, ``{shape: box,
@@ -107,8 +109,10 @@ class BeamSet:
         E, rho = pv[self.E_idx], pv[self.rho_idx]
         out.update(beam_D0=D0, beam_L=L, beam_EA=E * A, beam_EI=E * I, beam_A=A, beam_I=I, beam_c=c,
                    beam_rhoA=rho * A, beam_mass=rho * A * L)
+        if self.is_consistent.any():
+            out["beam_Ml"] = self.local_mass(out)
 
-    STACK_KEYS = ("beam_D0", "beam_L", "beam_EA", "beam_EI", "beam_A", "beam_I", "beam_c")
+    STACK_KEYS = ("beam_D0", "beam_L", "beam_EA", "beam_EI", "beam_A", "beam_I", "beam_c", "beam_Ml")
 
     def lumped_mass(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
         """(DOF indices, masses) of the lumped beams: ρAL/2 per translation and ρAL³/78 per
@@ -119,30 +123,84 @@ class BeamSet:
         vals = np.stack([half, half, rot, half, half, rot], axis=1)
         return self.idx[lump], vals
 
-    def consistent_mass(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """(rows, cols, values) of the consistent beams' mass matrices in global coordinates."""
+    def local_mass(self, params: dict[str, Any]) -> np.ndarray:
+        """Cubic-Hermite (consistent) mass matrices (n_c, 6, 6) of the consistent beams in their
+        chord frame (axial, transverse, rotation at each end)."""
         sel = np.flatnonzero(self.is_consistent)
-        if not sel.size:
-            return None
         L, m = params["beam_L"][sel], params["beam_rhoA"][sel] * params["beam_L"][sel]
-        c, s = (params["beam_D0"][sel, k] / L for k in (0, 1))
         z = np.zeros_like(L)
         one = z + 1
         l2 = L * L
-        local = np.stack([
+        return np.stack([
             [140 * one, z, z, 70 * one, z, z],
             [z, 156 * one, 22 * L, z, 54 * one, -13 * L],
             [z, 22 * L, 4 * l2, z, 13 * L, -3 * l2],
             [70 * one, z, z, 140 * one, z, z],
             [z, 54 * one, 13 * L, z, 156 * one, -22 * L],
             [z, -13 * L, -3 * l2, z, -22 * L, 4 * l2]]).transpose(2, 0, 1) * (m / 420)[:, None, None]
-        R = np.zeros((len(sel), 3, 3), dtype=local.dtype)
-        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1
-        T = np.zeros((len(sel), 6, 6), dtype=local.dtype)
-        T[:, :3, :3], T[:, 3:, 3:] = R, R
-        Mg = np.einsum("eji,ejk,ekl->eil", T, local, T)
+
+    def turning_mass(self, qe: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
+        """Mass M(β) = Tᵀ M_l T of the consistent beams at their current chord angle β and its
+        first two β-derivatives; g = ∂β/∂u and ℓ, r, z (batch axes allowed)."""
+        sel = np.flatnonzero(self.is_consistent)
+        U = qe[..., self.idx[sel]]
+        D0 = params["beam_D0"][..., sel, :]
+        d = D0 + U[..., 3:5] - U[..., 0:2]
+        ell = np.sqrt(np.sum(d * d, axis=-1))
+        c, s = d[..., 0] / ell, d[..., 1] / ell
+        zero, one = 0 * c, 0 * c + 1
+
+        def rot(a: Any, b: Any, e: Any) -> np.ndarray:      # [[a, b, 0], [-b, a, 0], [0, 0, e]] per end
+            R = np.stack([np.stack([a, b, zero], -1), np.stack([-b, a, zero], -1),
+                          np.stack([zero, zero, e], -1)], -2)
+            T = np.zeros(R.shape[:-2] + (6, 6), dtype=R.dtype)
+            T[..., :3, :3] = R
+            T[..., 3:, 3:] = R
+            return T
+        T, T1, T2 = rot(c, s, one), rot(-s, c, zero), rot(-c, -s, zero)   # T(β), T'(β), T''(β)
+        Ml = params["beam_Ml"]
+
+        def sandwich(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+            return np.einsum("...ji,...jk,...kl->...il", X, Ml, Y)
+        M, M1 = sandwich(T, T), sandwich(T1, T) + sandwich(T, T1)
+        M2 = sandwich(T2, T) + 2 * sandwich(T1, T1) + sandwich(T, T2)
+        z = np.stack([s, -c, zero, -s, c, zero], axis=-1)
+        r = np.stack([-c, -s, zero, c, s, zero], axis=-1)
+        return {"M": M, "M1": M1, "M2": M2, "g": z / ell[..., None], "ell": ell, "r": r, "z": z, "sel": sel}
+
+    def inertia(self, qe: np.ndarray, qde: np.ndarray, qdde: np.ndarray, params: dict[str, Any]) -> np.ndarray:
+        r"""Inertia forces (..., n_c, 6) of the consistent beams from Lagrange's equations with
+        T = ½ u̇ᵀ M(β) u̇:  M ü + (M' u̇)(g·u̇) − ½ (u̇ᵀ M' u̇) g."""
+        k = self.turning_mass(qe, params)
+        sel = k["sel"]
+        V, A = qde[..., self.idx[sel]], qdde[..., self.idx[sel]]
+        MV1 = np.einsum("...ij,...j->...i", k["M1"], V)
+        gv = np.sum(k["g"] * V, axis=-1)
+        return np.einsum("...ij,...j->...i", k["M"], A) + MV1 * gv[..., None] \
+            - 0.5 * np.sum(V * MV1, axis=-1)[..., None] * k["g"]
+
+    def inertia_jacobians(self, qe: np.ndarray, qde: np.ndarray, qdde: np.ndarray, params: dict[str, Any]
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols) and the exact ∂/∂ü, ∂/∂u̇, ∂/∂u of :meth:`inertia` (flattened, one state)."""
+        k = self.turning_mass(qe, params)
+        sel = k["sel"]
+        V, A = qde[self.idx[sel]], qdde[self.idx[sel]]
+        M1, M2, g = k["M1"], k["M2"], k["g"]
+        G = -(k["z"][:, :, None] * k["r"][:, None, :] + k["r"][:, :, None] * k["z"][:, None, :]) \
+            / (k["ell"] ** 2)[:, None, None]                     # ∂g/∂u
+        MV1, MV2, MA1 = (np.einsum("eij,ej->ei", X, y) for X, y in ((M1, V), (M2, V), (M1, A)))
+        gv = np.sum(g * V, axis=-1)
+        vMv1, vMv2 = np.sum(V * MV1, axis=-1), np.sum(V * MV2, axis=-1)
+        GV = np.einsum("eij,ej->ei", G, V)
+
+        def outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return a[:, :, None] * b[:, None, :]
+        C = outer(MV1, g) + gv[:, None, None] * M1 - outer(g, MV1)
+        K = outer(MA1, g) + gv[:, None, None] * outer(MV2, g) + outer(MV1, GV) \
+            - 0.5 * vMv2[:, None, None] * outer(g, g) - 0.5 * vMv1[:, None, None] * G
         idx = self.idx[sel]
-        return np.repeat(idx, 6, axis=1).ravel(), np.tile(idx, (1, 6)).ravel(), Mg.reshape(len(sel), -1).ravel()
+        rows, cols = np.repeat(idx, 6, axis=1).ravel(), np.tile(idx, (1, 6)).ravel()
+        return rows, cols, k["M"].reshape(-1), C.reshape(-1), K.reshape(-1)
 
     # ------------------------------------------------------------------ state
     def state(self, qe: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:

@@ -90,14 +90,15 @@ class StructuralModel(StructuralOutputs, Model):
         self.rayleigh = rayleigh
         self.beams = beams if beams is not None else BeamSet()
         self.beams.freeze()
-        # consistent-mass beams make M a full (banded) matrix instead of a diagonal
-        self.full_mass = bool(self.beams.is_consistent.any())
+        # consistent-mass beams: a mass M(q) that turns with them (inertia forces per element)
+        self.rotating_mass = bool(self.beams.is_consistent.any())
         self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
         self.nl_dampers.freeze()
         self.followers = followers if followers is not None else FollowerLoads()
         nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
             or bool(len(self.nl_dampers)) or bool(len(self.followers))
-        has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers))
+        has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers)) \
+            or self.rotating_mass       # (the turning mass's inertia forces depend on q̇)
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
                              has_damping=has_damping, sparse=use_sparse)
@@ -106,6 +107,7 @@ class StructuralModel(StructuralOutputs, Model):
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
+        self._inertia_scatter = self._scatter(self.beams.idx[self.beams.is_consistent], np.ones(6), per_element=False)
         self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
@@ -153,8 +155,8 @@ class StructuralModel(StructuralOutputs, Model):
             idx, vals = self.beams.lumped_mass(out)
             np.add.at(mass, idx, vals)
         out["mass"] = mass[:self.n]
-        if self.full_mass:
-            out["M"] = self._mass_matrix(out, pv.dtype)
+        if self.rotating_mass:
+            out["M0"] = self._mass_matrix(out, pv.dtype)
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
@@ -164,25 +166,25 @@ class StructuralModel(StructuralOutputs, Model):
             out["D"] = self._damping(out, pv.dtype)
         return out
 
-    def _mass_matrix(self, params: dict[str, Any], dtype: Any) -> Any:
-        """M: the diagonal (point, bar and lumped beam masses) plus the consistent beam masses."""
+    def _mass_matrix(self, params: dict[str, Any], dtype: Any, q: np.ndarray | None = None) -> Any:
+        """M(q): the diagonal (point, bar and lumped beam masses) plus the consistent beams'
+        masses at state q (default: the undeformed structure, as Rayleigh damping uses it)."""
         diag = np.arange(self.n)
-        rows, cols, vals = [diag], [diag], [params["mass"]]
-        extra = self.beams.consistent_mass(params)
-        if extra is not None:
-            rows.append(extra[0])
-            cols.append(extra[1])
-            vals.append(extra[2])
-        return self._assemble("mass", rows, cols, vals, dtype)
+        qe = self._ext(np.zeros(self.n, dtype=dtype) if q is None else q)
+        Mb = self.beams.turning_mass(qe, params)["M"]
+        idx = self.beams.idx[self.beams.is_consistent]
+        rows = [diag, np.repeat(idx, 6, axis=1).ravel()]
+        cols = [diag, np.tile(idx, (1, 6)).ravel()]
+        return self._assemble("mass", rows, cols, [params["mass"], Mb.reshape(-1)], np.result_type(dtype, Mb))
 
-    def _inertia(self, params: dict[str, Any], qdd: np.ndarray) -> np.ndarray:
-        """M q̈ for one parameter set or stacked sets (leading batch axes of qdd)."""
-        if not self.full_mass:
-            return params["mass"] * qdd
-        M = params["M"]
-        if qdd.ndim == 1:
-            return M @ qdd
-        return (M @ qdd[..., None])[..., 0]
+    def _inertia(self, params: dict[str, Any], s: Any) -> np.ndarray:
+        """Inertia forces (..., n): M q̈ of the diagonal masses plus the consistent beams'
+        M(q)q̈ + velocity terms; params and state leaves may carry leading batch axes."""
+        f = params["mass"] * s.qdd
+        if self.rotating_mass:
+            fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
+            f = f + fe.reshape(fe.shape[:-2] + (-1,)) @ self._inertia_scatter
+        return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pv = params["pv"]
@@ -277,7 +279,7 @@ class StructuralModel(StructuralOutputs, Model):
             pv = params["pv"]
             alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
             Mdiag = params["mass"]
-            M = params["M"] if self.full_mass else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
+            M = params["M0"] if self.rotating_mass else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
             D = D + alpha * M + beta * params["K0"]
         return D
 
@@ -315,7 +317,7 @@ class StructuralModel(StructuralOutputs, Model):
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
         f_int = self._internal_force(s.q, params)
-        R = self._inertia(params, s.qdd) + f_int - self.external_force(t, params)
+        R = self._inertia(params, s) + f_int - self.external_force(t, params)
         if len(self.followers):
             R = R - self.followers.force(t, self._ext(s.q), params["pv"])[..., :self.n]
         if self.traits.has_damping:
@@ -370,13 +372,11 @@ class StructuralModel(StructuralOutputs, Model):
             st = self.stack_parameters(params_list)
             if self.traits.has_damping:
                 st["D"] = np.stack([p["D"] for p in params_list])
-            if self.full_mass:
-                st["M"] = np.stack([p["M"] for p in params_list])
             self._stacked = (params_list, st)
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
-        R = self._inertia(st, qdd) + self._internal_force(q, st)
+        R = self._inertia(st, StepState(q, qd, qdd, None, None, None)) + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
         if len(self.followers):
             R = R - np.stack([self.followers.force(t, self._ext(q[i]), st["pv"])[..., :self.n]
@@ -431,12 +431,20 @@ class StructuralModel(StructuralOutputs, Model):
         if len(self.followers):
             rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
             K = K - self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"]))
-        M = params["M"] if self.full_mass else \
-            sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+        M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+        if self.rotating_mass:
+            rows, cols, m_v, c_v, k_v = self.beams.inertia_jacobians(
+                self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
+            dtype = np.result_type(s.q, s.qd, s.qdd, params["pv"])
+            M = M + self._assemble("inertia_M", [rows], [cols], [m_v], dtype)
+            K = K + self._assemble("inertia_K", [rows], [cols], [k_v], dtype)
+            C = self._assemble("inertia_C", [rows], [cols], [c_v], dtype)
         D = params["D"] if self.traits.has_damping else None
         if len(self.nl_dampers):
             D = D + self._assemble("nl_damping", *self.nl_dampers.tangent(self._ext(s.qd), params["pv"]),
                                    np.result_type(s.qd, params["pv"]))
+        if self.rotating_mass:
+            D = D + C
         return Linearization(R_z=M, R_q=K, R_qd=D)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
