@@ -59,8 +59,10 @@ def _req(name: str, kind: str, doc: str, **kw: Any) -> Key:
 
 
 TIME_FUNCTION_TYPES = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
-RESPONSE_TYPES = ("value", "ks", "integral", "event_time", "end_time", "mass", "expression")
-STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar")
+AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio")
+RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "integral", "event_time", "end_time", "mass", "expression")
+STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar", "beam")
+BEAM_SECTION_SHAPES = ("tube", "rectangle", "box", "properties")
 FORCE_TYPES = ("point_force", "torque", "spring_damper", "rotational_spring_damper", "hydraulic_cylinder")
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin")
 
@@ -68,6 +70,21 @@ _RESPONSE_COMMON = (
     _req("name", "name", "response name (an identifier); later expressions and the optimization refer to it"),
     _req("type", "enum", "response type", values=RESPONSE_TYPES),
     _k("unit", "string", "unit shown in reports and stored in the result file (default: the quantity's)"),
+)
+_AGGREGATE_KEYS = (
+    *_RESPONSE_COMMON,
+    _k("quantity", "any", "one quantity (or give `quantities`)"),
+    _k("quantities", "list", "several quantities aggregated together", item="any"),
+    _k("components", "any", "components taken: a list of labels or indices (one list per quantity with "
+                            "`quantities`; null: all)", default="all"),
+    _k("absolute", "bool", "aggregate |value| (both signs)", default=False),
+    _k("limit", "expr", "divide by this positive constant (the response becomes a ratio, unit '-')", default=1.0),
+)
+_RATIO_KEYS = (
+    *_RESPONSE_COMMON,
+    _k("elements", "any", "all, an element name or a list of them", default="all"),
+    _k("aggregate", "enum", "KS (smooth) or the sampled maximum", values=("ks", "max"), default="ks"),
+    _k("rho", "number", "KS parameter (required with aggregate: ks)"),
 )
 _TF_TYPE = _req("type", "enum", "time function", values=TIME_FUNCTION_TYPES)
 
@@ -89,6 +106,25 @@ SECTIONS: dict[str, Section] = {
     )),
     "design": Section("design", "The design variables x.", (
         _k("variables", "list", "one entry per design variable, in the order of x", item="design.variable"),
+        _k("families", "list", "families of per-element variables A[element], appended after `variables` "
+           "(see the README, Per-member design variables)", item="design.family"),
+    )),
+    "design.family": Section("design.families[i]", "One variable per selected element, named NAME[element].", (
+        _req("name", "name", "family name; its members are NAME[element]"),
+        _k("elements", "any", "all, a list of element names, or a glob pattern such as 'diag*'", default="all"),
+        _k("type", "enum", "element type selected", values=("bar", "beam", "spring", "damper", "mass"),
+           default="bar"),
+        _req("value", "number", "initial value shared by the members"),
+        _k("lower", "number", "lower bound shared by the members", default="-inf"),
+        _k("upper", "number", "upper bound shared by the members", default="inf"),
+        _k("scale", "number", "typical magnitude shared by the members", default="|value|, or 1"),
+        _req("assign", "map", "element key -> expression of the family name (NAME stands for NAME[element])",
+             item="expr"),
+        _k("members", "map", "element name -> its own start, bounds or scale", item="design.family.member"),
+    )),
+    "design.family.member": Section("design.families[i].members.ELEMENT", "One member's own start and bounds.", (
+        _k("value", "number", "initial value"), _k("lower", "number", "lower bound"),
+        _k("upper", "number", "upper bound"), _k("scale", "number", "typical magnitude"),
     )),
     "design.variable": Section("design.variables[i]", "One design variable.", (
         _req("name", "name", "name used in expressions"),
@@ -182,13 +218,28 @@ SECTIONS: dict[str, Section] = {
         _k("derivative", "enum", "at an event: total gradient, or with the event time held fixed",
            values=("total", "fixed_time"), default="total"),
     ), type_value="value"),
-    "response.ks": Section("responses[i], type: ks", "Kreisselmeier–Steinhauser maximum over time and components.", (
-        *_RESPONSE_COMMON,
-        _k("quantity", "any", "one quantity (or give `quantities`)"),
-        _k("quantities", "list", "several quantities aggregated together", item="any"),
-        _req("rho", "number", "aggregation parameter (1/unit of the quantity); larger is closer to the maximum"),
-        _k("components", "any", "reserved: all components are aggregated"),
+    "response.ks": Section("responses[i], type: ks", "Kreisselmeier–Steinhauser maximum (or minimum) over time "
+                           "and components.", (
+        *_AGGREGATE_KEYS,
+        _req("rho", "number", "aggregation parameter (1/unit of the aggregated value); larger is closer to the "
+                              "maximum"),
+        _k("side", "enum", "smooth maximum (upper) or smooth minimum (lower)", values=("upper", "lower"),
+           default="upper"),
     ), type_value="ks"),
+    "response.max": Section("responses[i], type: max", "Sampled maximum over the steps and components "
+                            "(gradient of the active sample).", _AGGREGATE_KEYS, type_value="max"),
+    "response.min": Section("responses[i], type: min", "Sampled minimum over the steps and components.",
+                            _AGGREGATE_KEYS, type_value="min"),
+    "response.stress_ratio": Section("responses[i], type: stress_ratio", "σ/σ_t in tension and −σ/σ_c in "
+                                     "compression (or |σ|/limit), aggregated over the elements and the run.", (
+        *_RATIO_KEYS,
+        _k("tension_limit", "expr", "allowable tensile stress σ_t (a positive constant)"),
+        _k("compression_limit", "expr", "allowable compressive stress σ_c (a positive constant)"),
+        _k("limit", "expr", "one allowable |σ| for both signs (instead of the two limits)"),
+    ), type_value="stress_ratio"),
+    "response.buckling_ratio": Section("responses[i], type: buckling_ratio", "−N/P_E (compression over the Euler "
+                                       "load π²EI/(KL)²) of bars with `inertia`, aggregated over the elements and "
+                                       "the run.", _RATIO_KEYS, type_value="buckling_ratio"),
     "response.integral": Section("responses[i], type: integral", "Trapezoid integral over the steps, of one "
                                  "quantity's component or of an expression of quantities.", (
         *_RESPONSE_COMMON,
@@ -229,8 +280,8 @@ SECTIONS: dict[str, Section] = {
         _TF_TYPE, _req("t", "vector", "times, increasing"), _req("values", "vector", "values")),
         type_value="table"),
     # ------------------------------------------------------------------ structural models
-    "model.structural": Section("model (type: structural)", "Point masses, springs, dampers and truss bars on "
-                                "scalar DOFs or nodes.", (
+    "model.structural": Section("model (type: structural)", "Point masses, springs, dampers, truss bars and "
+                                "plane beams on scalar DOFs or nodes.", (
         _req("type", "enum", "model kind", values=("structural",)),
         _k("dim", "enum", "node dimension", values=(2, 3), default=2),
         _k("dofs", "list", "scalar DOF names", item="name"),
@@ -245,7 +296,7 @@ SECTIONS: dict[str, Section] = {
     )),
     "structural.node": Section("model.nodes.NAME", "A node.", (
         _req("coords", "vector", "coordinates (length dim)"),
-        _k("fixed", "any", "'all' or a list of directions x, y, z held at zero"),
+        _k("fixed", "any", "'all' or a list of directions x, y, z (and rz at a beam node) held at zero"),
     )),
     "structural.mass": Section("elements[i], type: mass", "A point mass on a DOF, or on every direction of a node.", (
         _req("type", "enum", "element type", values=("mass",)),
@@ -258,20 +309,45 @@ SECTIONS: dict[str, Section] = {
         _req("k", "expr", "linear stiffness"), _k("k2", "expr", "quadratic stiffness", default=0.0),
         _k("k3", "expr", "cubic stiffness", default=0.0),
     ), type_value="spring"),
-    "structural.damper": Section("elements[i], type: damper", "f = c δ̇ between two DOFs.", (
+    "structural.damper": Section("elements[i], type: damper", "f = c δ̇ between two DOFs, or nonlinear "
+                                 "f = c δ̇ (δ̇² + ε²)^((α−1)/2) with `exponent` and `regularization`.", (
         _req("type", "enum", "element type", values=("damper",)), _k("name", "name", "element name"),
         _req("dofs", "list", "[a, b]; b may be 'ground'", item="name"), _req("c", "expr", "damping coefficient"),
+        _k("exponent", "expr", "velocity exponent α > 0 (nonlinear damper; give with `regularization`)"),
+        _k("regularization", "expr", "velocity ε > 0 that smooths the law at δ̇ = 0 (nonlinear damper)"),
     ), type_value="damper"),
     "structural.bar": Section("elements[i], type: bar", "Geometrically nonlinear truss bar (Green–Lagrange strain).", (
         _req("type", "enum", "element type", values=("bar",)), _k("name", "name", "element name"),
         _req("nodes", "list", "[node_1, node_2]", item="name"), _req("area", "expr", "cross-section area"),
         _req("E", "expr", "Young's modulus"), _k("density", "expr", "density (lumped mass)", default=0.0),
+        _k("inertia", "expr", "second moment of area I (needed by the buckling quantity and response)"),
+        _k("effective_length_factor", "expr", "K of the Euler load π²EI/(KL)²", default=1.0),
     ), type_value="bar"),
+    "structural.beam": Section("elements[i], type: beam", "Plane co-rotational Euler–Bernoulli beam between two "
+                               "nodes (x, y, θz each); dim 2 only.", (
+        _req("type", "enum", "element type", values=("beam",)), _k("name", "name", "element name"),
+        _req("nodes", "list", "[node_1, node_2]", item="name"), _req("E", "expr", "Young's modulus"),
+        _k("density", "expr", "density", default=0.0),
+        _req("section", "section", "cross-section", item="structural.beam_section"),
+        _k("mass", "enum", "lumped, or consistent (turns with the element)", values=("lumped", "consistent"),
+           default="lumped"),
+    ), type_value="beam"),
+    "structural.beam_section": Section("elements[i].section (beam)", "Cross-section: a shape and its "
+                                       "dimensions (tube: D, t; rectangle: b, h; box: b, h, t; properties: "
+                                       "A, I, c).", (
+        _k("shape", "enum", "section shape", values=BEAM_SECTION_SHAPES, default="properties"),
+        _k("D", "expr", "outer diameter (tube)"), _k("t", "expr", "wall thickness (tube, box)"),
+        _k("b", "expr", "width (rectangle, box)"), _k("h", "expr", "height (rectangle, box)"),
+        _k("A", "expr", "area (properties)"), _k("I", "expr", "second moment of area (properties)"),
+        _k("c", "expr", "distance of the extreme fibre from the axis (properties)"),
+    )),
     "structural.load": Section("model.loads[i]", "value · function(t) on a DOF or a node direction.", (
         _k("dof", "name", "the DOF"), _k("node", "name", "or a node"),
-        _k("direction", "enum", "the node's direction", values=("x", "y", "z")),
+        _k("direction", "enum", "the node's direction (rz: a moment at a beam node; a follower load: its local "
+                                "x or y)", values=("x", "y", "z", "rz")),
         _req("value", "expr", "amplitude"),
         _k("function", "any", "time function: a name or a mapping (see Time functions)", default="constant"),
+        _k("follower", "bool", "the force turns with the rotation of its (beam) node", default=False),
     )),
     "structural.initial": Section("model.initial", "Initial state (DOF name -> value).", (
         _k("displacement", "map", "DOF -> initial displacement", item="expr"),
@@ -287,8 +363,9 @@ SECTIONS: dict[str, Section] = {
     "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}` or "
                                    "`{element: NAME | [NAMES] | all, kind}`.", (
         _k("dof", "any", "DOF name(s)"), _k("element", "any", "element name(s) or 'all'"),
-        _k("kind", "enum", "displacement | velocity | acceleration (DOFs); force | stress | strain (elements)",
-           values=("displacement", "velocity", "acceleration", "force", "stress", "strain")),
+        _k("kind", "enum", "displacement | velocity | acceleration (DOFs); force | stress | strain | buckling "
+                           "(elements; beams: force, stress; dampers: force)",
+           values=("displacement", "velocity", "acceleration", "force", "stress", "strain", "buckling")),
     )),
     # ------------------------------------------------------------------ multibody models
     "model.multibody": Section("model (type: multibody)", "Rigid bodies (Euler parameters), joints, forces and "

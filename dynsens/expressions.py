@@ -1,7 +1,8 @@
 """Restricted, complex-step-safe arithmetic expressions for case files.
 
 Any numeric entry of a case may be a number or a string such as ``"2*l_AZ*cos(theta)"``.
-The string is parsed with :mod:`ast` and only numbers, names, ``+ - * / **``, unary
+The string is parsed with :mod:`ast` and only numbers, names (``A[diag7]``: the member
+diag7 of a design-variable family A), ``+ - * / **``, unary
 signs, parentheses and calls of the whitelisted math functions are accepted; the tree
 is turned into nested closures.  Nothing is ever passed to ``eval``.
 
@@ -174,6 +175,17 @@ def _chain(node: ast.BinOp) -> tuple[list[ast.AST], list[type]]:
     return operands[::-1], ops[::-1]
 
 
+def _member_symbol(node: ast.AST) -> str | None:
+    """``A[diag7]`` (a member of the design-variable family A) as the symbol 'A[diag7]'."""
+    if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
+        key = node.slice
+        if isinstance(key, ast.Name):
+            return f"{node.value.id}[{key.id}]"
+        if isinstance(key, ast.Constant) and isinstance(key.value, int) and not isinstance(key.value, bool):
+            return f"{node.value.id}[{key.value}]"
+    return None
+
+
 def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
                   text: str, depth: int = 0, functions: Mapping[str, Callable[..., Number]] | None = None
                   ) -> Callable[[Mapping[str, Number]], Number]:
@@ -209,8 +221,11 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
             raise ExpressionError(f"expression '{_short(text)}' has a number too large for a floating-point "
                                   "value") from None
         return lambda env: value
-    if isinstance(node, ast.Name):
-        name = node.id
+    member = _member_symbol(node)
+    if member is None and isinstance(node, ast.Name):
+        member = node.id
+    if member is not None:
+        name = member
         if name in CONSTANTS:
             c = CONSTANTS[name]
             return lambda env: c

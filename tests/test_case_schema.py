@@ -86,3 +86,25 @@ def test_every_section_documents_every_key() -> None:
         assert sec.title in text
         for k in sec.keys:
             assert k.doc and f"| `{k.name}` |" in text, (name, k.name)
+
+
+@pytest.mark.parametrize("section,where", [
+    ("design.family", ("design", "families", 0)),
+    ("response.stress_ratio", ("responses", 1)),
+    ("response.buckling_ratio", ("responses", 2)),
+    ("structural.bar", ("model", "elements", 0)),
+])
+def test_the_sizing_loaders_accept_exactly_the_table_keys(section, where) -> None:
+    # the sizing responses, design families and bar keys are checked against the same table
+    raw = yaml.safe_load((REPO / "cases" / "tower_sizing.yaml").read_text())
+    node = raw
+    for w in where:
+        node = node[w]
+    if section == "structural.bar":
+        node = next(el for el in raw["model"]["elements"] if el["type"] == "bar")
+    node["not_a_key"] = 1
+    with pytest.raises(dynsens.CaseError) as exc:
+        dynsens.load_case_dict(raw)
+    line = next(ln for ln in str(exc.value).splitlines() if "not_a_key" in ln)
+    listed = line.split("allowed: ", 1)[1].rstrip(")").split(", ")
+    assert listed == sorted(set(allowed(section)))

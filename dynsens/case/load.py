@@ -27,12 +27,14 @@ from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
 from ..records import QuantitySpec, Recorder
-from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, KSAggregate, Response, ResponseSet,
+from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, Response, ResponseSet,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
 from ..solver.newton import NewtonSettings
+from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
+from .families import design_with_families
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 from .quantities import parse_quantities
@@ -41,6 +43,7 @@ from .yamltext import parse_yaml, read_case_text
 TOP_KEYS = allowed("case")
 RESPONSE_TYPES = case_keys.RESPONSE_TYPES
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_DESIGN_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_]+\])?$")   # A or a family member A[diag7]
 
 
 @dataclass(frozen=True)
@@ -153,7 +156,8 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     check_reference_types(raw, "", pc)
     if len(pc.problems) > n_before:
         pc.raise_if_any()
-    design, declared = _design(raw.get("design", {"variables": []}), pc)
+    # families of per-element variables expand into design variables and element keys first
+    design, declared = design_with_families(raw, pc, _design)
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
@@ -256,7 +260,7 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
         if not check_keys(v, p, allowed("design.variable"), pc, required=("name", "value")):
             continue
         name = v.get("name")
-        if not isinstance(name, str) or not _IDENT.match(name):
+        if not isinstance(name, str) or not _DESIGN_NAME.match(name):
             pc.add(f"{p}.name", f"expected an identifier (letters, digits, _), found {name!r}")
             continue
         if name in declared:
@@ -509,19 +513,10 @@ def _responses(spec: Any, output_id: Callable, outputs: list[Output], event_name
             u = unit or outputs[oid].unit
             makers.append(lambda n=name, o=oid, c=comp, u=u, tm=time, e=event, f=(deriv == "fixed_time"):
                           ValueAt(n, o, c, u, time=tm, event=e, fixed_time=f))
-        elif kind == "ks":
-            check_keys(r, p, allowed("response.ks"), pc, required=("rho",))
-            qs = r.get("quantities", [r["quantity"]] if "quantity" in r else None)
-            if not isinstance(qs, list) or not qs:
-                pc.add(p, "a KS response needs 'quantity' or a list 'quantities'")
-                continue
-            rho = _number(r.get("rho"), f"{p}.rho", pc, positive=True)
-            oids = [output_id(q, f"{p}.quantities[{k}]") for k, q in enumerate(qs)]
-            if rho is None or any(o is None for o in oids):
-                continue
-            comps = tuple(slice(None) for _ in oids)
-            u = unit or outputs[oids[0]].unit
-            makers.append(lambda n=name, o=tuple(oids), c=comps, rho=rho, u=u: KSAggregate(n, o, c, rho, u))
+        elif kind in AGGREGATE_TYPES:
+            maker = aggregate_maker(name, kind, r, p, output_id, outputs, pc)
+            if maker is not None:
+                makers.append(maker)
         elif kind == "integral" and "expression" in r:
             made = _expression_integral(r, p, name, unit, output_id, outputs, pc)
             if made is not None:

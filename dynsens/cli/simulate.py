@@ -45,6 +45,7 @@ def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
             continue
         g = "-" if r.gradient is None else "[" + ", ".join(f"{v:.6g}" for v in np.real(r.gradient)) + "]"
         lines.append(f"{name:<16}{float(np.real(r.value)):>16.8g}  {r.unit:<8}{g}")
+        lines += _aggregate_notes(r.extra)
     c = result.counters
     lines += ["", f"steps {c['steps']}, Newton iterations {c['newton_iterations']}, "
                   f"factorizations {c['factorizations']} (time-step matrix {c['step_factorizations']}), "
@@ -70,6 +71,16 @@ def zero_gradient_columns(result, design_names) -> list[str]:  # type: ignore[no
         return []
     g = np.vstack(grads)
     return [n for j, n in enumerate(design_names) if j < g.shape[1] and not np.any(g[:, j])]
+
+
+def _aggregate_notes(extra: dict) -> list[str]:
+    """A KS value's sampled extreme and gap bound, and its warning (empty for other responses)."""
+    for key in ("sampled_max", "sampled_min"):
+        if key in extra:
+            notes = [f"{'':<16}{extra[key]:>16.8g}  {'':<8}{key.replace('_', ' ')} of the "
+                     f"{extra['samples']} samples (KS over-estimate <= ln(N)/rho = {extra['ks_gap_bound']:.4g})"]
+            return notes + ([f"{'':<16}warning: {extra['warning']}"] if "warning" in extra else [])
+    return []
 
 
 @cli.command()

@@ -13,7 +13,9 @@ Layout (a contract; see the README):
 * ``/monitors/<name>`` (N,) — per-step diagnostics such as constraint drift;
 * ``/design/names``, ``/design/values`` (m,), ``/design/lower``, ``/design/upper``;
 * ``/responses/<name>/value`` () and ``/responses/<name>/gradient`` (m,), attributes
-  ``unit`` (and ``units``, the netCDF name) and ``missing`` (empty when present);
+  ``unit`` (and ``units``, the netCDF name) and ``missing`` (empty when present); a KS response
+  also carries ``sampled_max`` (or ``sampled_min``), ``samples``, ``ks_gap_bound`` = ln(N)/rho
+  and, when that bound is more than a few percent of the value, ``warning``;
 * ``/stats`` attributes: steps, newton_iterations, factorizations, residual_evaluations,
   ..., wall_time_s; with sensitivities also ``derivative_method`` (direct | adjoint) and
   ``derivative_method_reason``.
@@ -105,6 +107,8 @@ def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:
         rg.attrs["unit"] = r.unit
         rg.attrs["units"] = r.unit
         rg.attrs["missing"] = r.missing or ""
+        for key, v in r.extra.items():   # e.g. a KS value's sampled maximum and warning
+            rg.attrs[key] = v
 
 
 def read_result_dict(path: str | Path, group: str = "/") -> dict[str, Any]:

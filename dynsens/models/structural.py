@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import ProblemCollector
-from ..case_keys import allowed
-from ._keys import check_keys, did_you_mean
-from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
-from .registry import register
-from .timefunctions import TimeFunction, build_time_function
+from .base import Linearization, Model, ParameterTable, StepState, Traits
+from .beams import BeamSet
+from .dampers import NonlinearDampers
+from .follower import FollowerLoads
+from .structural_outputs import StructuralOutputs
+from .timefunctions import TimeFunction
 
 GROUND = "ground"
 AXES = ("x", "y", "z")
@@ -54,14 +54,16 @@ class _Group:
         return idx, {k: np.array(v, dtype=int) for k, v in self.params.items()}
 
 
-class StructuralModel(Model):
+class StructuralModel(StructuralOutputs, Model):
     """Assembled structural model; built from a case by :func:`build_structural`."""
 
     def __init__(self, *, dof_names: list[str], table: ParameterTable, mass_terms: list[tuple[int, int]],
                  springs: _Group, dampers: _Group, bars: _Group, dim: int, node_coords: dict[str, list[int]],
                  bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
-                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool):
+                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
+                 beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None,
+                 followers: FollowerLoads | None = None):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -78,14 +80,25 @@ class StructuralModel(Model):
         self.bar_dofs, bar_par = bars.freeze(2 * dim)
         self.bar_names = bars.names
         self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))
+        # second moment of area and effective-length factor (buckling); -1: not given
+        self.bar_I, self.bar_K = (bar_par.get(k, np.zeros(0, int)) for k in ("I", "K"))
         # undeformed bar vectors from nodal coordinates (parameter indices, may be design-dependent)
         self.bar_X = np.array([[node_coords[b] + [] for b in pair] for pair in bar_nodes], dtype=int) \
             .reshape(-1, 2, dim) if bar_nodes else np.zeros((0, 2, dim), int)
         self.loads = loads
         self.init_q, self.init_qd = initial
         self.rayleigh = rayleigh
-        nonlinear = bool(len(self.bar_names)) or spring_nonlinear
-        has_damping = bool(len(self.damper_names)) or rayleigh is not None
+        self.beams = beams if beams is not None else BeamSet()
+        self.beams.freeze()
+        # consistent-mass beams: a mass M(q) that turns with them (inertia forces per element)
+        self.rotating_mass = bool(self.beams.is_consistent.any())
+        self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
+        self.nl_dampers.freeze()
+        self.followers = followers if followers is not None else FollowerLoads()
+        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
+            or bool(len(self.nl_dampers)) or bool(len(self.followers))
+        has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers)) \
+            or self.rotating_mass       # (the turning mass's inertia forces depend on q̇)
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
                              has_damping=has_damping, sparse=use_sparse)
@@ -93,6 +106,9 @@ class StructuralModel(Model):
         self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
         self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
+        self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
+        self._inertia_scatter = self._scatter(self.beams.idx[self.beams.is_consistent], np.ones(6), per_element=False)
+        self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
@@ -128,7 +144,19 @@ class StructuralModel(Model):
             lumped = np.repeat(half[:, None], 2 * self.dim, axis=1)
             np.add.at(mass, self.bar_dofs, lumped)
             out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
+            # Euler load π²EI/(KL)² (force unit); infinite for a bar without 'inertia' (the
+            # buckling output refuses such bars)
+            KL = pv[self.bar_K] * L0
+            has = self.bar_I >= 0
+            inertia = np.where(has, pv[np.maximum(self.bar_I, 0)], 1.0)
+            out["P_euler"] = np.where(has, np.pi ** 2 * E * inertia / (KL * KL), np.inf)
+        if len(self.beams):
+            self.beams.parameters(pv, out)
+            idx, vals = self.beams.lumped_mass(out)
+            np.add.at(mass, idx, vals)
         out["mass"] = mass[:self.n]
+        if self.rotating_mass:
+            out["M0"] = self._mass_matrix(out, pv.dtype)
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
@@ -137,6 +165,26 @@ class StructuralModel(Model):
             # viscous and Rayleigh damping depend on the design only: assemble once per design
             out["D"] = self._damping(out, pv.dtype)
         return out
+
+    def _mass_matrix(self, params: dict[str, Any], dtype: Any, q: np.ndarray | None = None) -> Any:
+        """M(q): the diagonal (point, bar and lumped beam masses) plus the consistent beams'
+        masses at state q (default: the undeformed structure, as Rayleigh damping uses it)."""
+        diag = np.arange(self.n)
+        qe = self._ext(np.zeros(self.n, dtype=dtype) if q is None else q)
+        Mb = self.beams.turning_mass(qe, params)["M"]
+        idx = self.beams.idx[self.beams.is_consistent]
+        rows = [diag, np.repeat(idx, 6, axis=1).ravel()]
+        cols = [diag, np.tile(idx, (1, 6)).ravel()]
+        return self._assemble("mass", rows, cols, [params["mass"], Mb.reshape(-1)], np.result_type(dtype, Mb))
+
+    def _inertia(self, params: dict[str, Any], s: Any) -> np.ndarray:
+        """Inertia forces (..., n): M q̈ of the diagonal masses plus the consistent beams'
+        M(q)q̈ + velocity terms; params and state leaves may carry leading batch axes."""
+        f = params["mass"] * s.qdd
+        if self.rotating_mass:
+            fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
+            f = f + fe.reshape(fe.shape[:-2] + (-1,)) @ self._inertia_scatter
+        return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pv = params["pv"]
@@ -211,6 +259,11 @@ class StructuralModel(Model):
             rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
             cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
             vals.append(ke.reshape(len(idx), -1).ravel())
+        if len(self.beams):
+            r, c, v = self.beams.tangent(self._ext(q), params)
+            rows.append(r)
+            cols.append(c)
+            vals.append(v)
         return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
@@ -226,7 +279,8 @@ class StructuralModel(Model):
             pv = params["pv"]
             alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
             Mdiag = params["mass"]
-            D = D + alpha * (sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)) + beta * params["K0"]
+            M = params["M0"] if self.rotating_mass else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
+            D = D + alpha * M + beta * params["K0"]
         return D
 
     def _assemble(self, site: str, rows: list, cols: list, vals: list, dtype: Any) -> Any:
@@ -263,10 +317,19 @@ class StructuralModel(Model):
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
         f_int = self._internal_force(s.q, params)
-        R = params["mass"] * s.qdd + f_int - self.external_force(t, params)
+        R = self._inertia(params, s) + f_int - self.external_force(t, params)
+        if len(self.followers):
+            R = R - self.followers.force(t, self._ext(s.q), params["pv"])[..., :self.n]
         if self.traits.has_damping:
-            R = R + params["D"] @ s.qd
+            R = R + params["D"] @ s.qd + self._nl_damper_force(s.qd, params)
         return R
+
+    def _nl_damper_force(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
+        """Nodal forces (..., n) of the nonlinear viscous dampers (0 without any)."""
+        if not len(self.nl_dampers):
+            return 0.0
+        F, _ = self.nl_dampers.force(self.nl_dampers.velocity(self._ext(qd)), params["pv"])
+        return F @ self._nl_damper_scatter
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
@@ -280,13 +343,17 @@ class StructuralModel(Model):
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
             flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
             f = f + flat @ self._bar_scatter
+        if len(self.beams):
+            fb = self.beams.forces(self._ext(q), params)
+            f = f + fb.reshape(fb.shape[:-2] + (-1,)) @ self._beam_scatter
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
         """Parameter arrays stacked along a leading batch axis, without the damping matrix: the
         outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
         set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
-        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3") if k in params_list[0]]
+        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3", "P_euler")
+                + BeamSet.STACK_KEYS if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -310,10 +377,14 @@ class StructuralModel(Model):
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
-        R = st["mass"] * qdd + self._internal_force(q, st)
+        empty = np.zeros(q.shape[:-1] + (0,))
+        R = self._inertia(st, StepState(q, qd, qdd, empty, empty, empty)) + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
+        if len(self.followers):
+            R = R - np.stack([self.followers.force(t, self._ext(q[i]), st["pv"])[..., :self.n]
+                              for i, t in enumerate(ts)])
         if self.traits.has_damping:
-            R = R + (st["D"] @ qd[..., None])[..., 0]
+            R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
         return R.transpose(0, 2, 1)
 
     def design_pattern(self) -> list[np.ndarray]:
@@ -336,6 +407,11 @@ class StructuralModel(Model):
             touch(self.c[e], dofs)
         for e, dofs in enumerate(self.bar_dofs):
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
+            # inertia and effective length enter outputs only (buckling), not F_R: no rows
+            touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
+        for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch() \
+                + self.followers.design_touch():
+            touch(params, dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)
         if self.rayleigh is not None:
@@ -354,281 +430,34 @@ class StructuralModel(Model):
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
+        if len(self.followers):
+            rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
+            K = K - self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"]))
         M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+        if self.rotating_mass:
+            rows, cols, m_v, c_v, k_v = self.beams.inertia_jacobians(
+                self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
+            dtype = np.result_type(s.q, s.qd, s.qdd, params["pv"])
+            M = M + self._assemble("inertia_M", [rows], [cols], [m_v], dtype)
+            K = K + self._assemble("inertia_K", [rows], [cols], [k_v], dtype)
+            C = self._assemble("inertia_C", [rows], [cols], [c_v], dtype)
         D = params["D"] if self.traits.has_damping else None
+        if len(self.nl_dampers):
+            rows, cols, vals = self.nl_dampers.tangent(self._ext(s.qd), params["pv"])
+            D = D + self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"]))
+        if self.rotating_mass:
+            D = D + C
         return Linearization(R_z=M, R_q=K, R_qd=D)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
-        """Sum of point masses and bar masses ρAL (mass unit of the case)."""
-        total = np.sum(params["pv"][self.mass_idx]) if len(self.mass_idx) else 0.0
+        """Sum of point masses, bar and beam masses ρAL (mass unit of the case); a mass on a
+        node counts once, not once per direction."""
+        total = np.sum(params["pv"][np.unique(self.mass_idx)]) if len(self.mass_idx) else 0.0
         if len(self.bar_names):
             total = total + np.sum(params["bar_mass"])
+        if len(self.beams):
+            total = total + np.sum(params["beam_mass"])
         return total
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
-
-    # ------------------------------------------------------------------ outputs
-    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
-        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
-        ``{element: NAME|[NAMES]|all, kind: force|stress|strain}``."""
-        if not check_keys(spec, path, allowed("structural.quantity"), problems):
-            return None
-        kind = spec.get("kind", "displacement" if "dof" in spec else "force")
-        if "dof" in spec:
-            names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
-            field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
-            if kind not in field_of:
-                problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "
-                                             f"(known: {', '.join(field_of)})")
-                return None
-            idx = []
-            for nm in names:
-                if nm not in self.dof_names:
-                    problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
-                else:
-                    idx.append(self.dof_names.index(nm))
-            if len(idx) != len(names):
-                return None
-            ia = np.array(idx)
-            fld = field_of[kind]
-            unit = ""  # the case's own unit system; a response may name it with 'unit'
-            return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
-                          tuple(f"{n}.{kind}" for n in names), unit, linear=True)
-        if "element" not in spec:
-            problems.add(path, "expected 'dof' or 'element'")
-            return None
-        names = spec["element"]
-        all_names = self.spring_names + self.damper_names + self.bar_names
-        if names == "all":
-            names = list(self.bar_names) if self.bar_names else list(self.spring_names)
-        names = names if isinstance(names, list) else [names]
-        kinds = ("force", "stress", "strain")
-        if kind not in kinds:
-            problems.add(f"{path}.kind",
-                         f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
-            return None
-        bars, springs = [], []
-        for nm in names:
-            if nm in self.bar_names:
-                bars.append(self.bar_names.index(nm))
-            elif nm in self.spring_names and kind == "force":
-                springs.append(self.spring_names.index(nm))
-            elif nm in self.spring_names:
-                problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
-            else:
-                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
-        if len(bars) + len(springs) != len(names):
-            return None
-        if springs and bars:
-            problems.add(f"{path}.element", "mix springs and bars in separate quantities")
-            return None
-        if springs:
-            si = np.array(springs)
-            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i)[0],
-                          tuple(f"{n}.force" for n in names), "", batched=True, autonomous=True)
-        bi = np.array(bars)
-
-        def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
-            bs = self._bar_state(s.q, prm)
-            if _k == "strain":
-                return bs["strain"][..., _i]
-            if _k == "force":
-                return bs["N"][..., _i]
-            return (prm["E"] * bs["strain"])[..., _i]
-
-        return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "",
-                      batched=True, autonomous=True)
-
-
-# ---------------------------------------------------------------------- builder
-_MODEL_KEYS = allowed("model.structural")
-
-
-@register("structural")
-def build_structural(spec: dict, path: str, table: ParameterTable,
-                     problems: ProblemCollector) -> StructuralModel | None:
-    """Build a :class:`StructuralModel` from the case's ``model`` mapping."""
-    n_before = len(problems.problems)
-    check_keys(spec, path, _MODEL_KEYS, problems)
-    dim = spec.get("dim", 2)
-    if dim not in (2, 3):
-        problems.add(f"{path}.dim", f"must be 2 or 3, found {dim!r}")
-        dim = 2
-    dof_names: list[str] = []
-    fixed: set[str] = set()
-    scalar = spec.get("dofs", [])
-    if not isinstance(scalar, list) or not all(isinstance(d, str) for d in scalar):
-        problems.add(f"{path}.dofs", f"expected a list of DOF names, found {scalar!r}")
-        scalar = []
-    dof_names += scalar
-    node_coords: dict[str, list[int]] = {}
-    nodes = spec.get("nodes", {}) or {}
-    if not isinstance(nodes, dict):
-        problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
-        nodes = {}
-    for name, nd in nodes.items():
-        npath = f"{path}.nodes.{name}"
-        if not check_keys(nd, npath, allowed("structural.node"), problems, required=("coords",)):
-            continue
-        node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
-        fx = nd.get("fixed", [])
-        if fx is True or fx == "all":
-            fx = list(AXES[:dim])
-        if not isinstance(fx, list) or any(a not in AXES[:dim] for a in fx):
-            problems.add(f"{npath}.fixed", f"expected a list of axes from {list(AXES[:dim])} or 'all', found {fx!r}")
-            fx = []
-        for a in AXES[:dim]:
-            (fixed.add if a in fx else dof_names.append)(f"{name}.{a}")
-    if len(set(dof_names)) != len(dof_names):
-        problems.add(f"{path}.dofs", "DOF names must be unique")
-    n = len(dof_names)
-    index = {d: i for i, d in enumerate(dof_names)}
-
-    def dof(name: Any, p: str) -> int:
-        if not isinstance(name, str):
-            problems.add(p, f"expected a DOF name, found {name!r}")
-            return n
-        if name == GROUND or name in fixed:
-            return n
-        if name not in index:
-            problems.add(p, f"unknown dof {name!r}{did_you_mean(name, list(index) + [GROUND])}")
-            return n
-        return index[name]
-
-    def node_dofs(name: Any, p: str) -> list[int]:
-        if not isinstance(name, str) or name not in node_coords:
-            problems.add(p, f"unknown node {name!r}{did_you_mean(name, node_coords)}")
-            return [n] * dim
-        return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
-
-    mass_terms: list[tuple[int, int]] = []
-    springs, dampers, bars = _Group(), _Group(), _Group()
-    bar_nodes: list[tuple[str, str]] = []
-    names_seen: set[str] = set()
-    spring_nonlinear = False
-    zero_index = -1
-    elements = spec.get("elements", [])
-    if not isinstance(elements, list):
-        problems.add(f"{path}.elements", "expected a list")
-        elements = []
-    kinds = ("mass", "spring", "damper", "bar")
-    for k, el in enumerate(elements):
-        ep = f"{path}.elements[{k}]"
-        if not isinstance(el, dict):
-            problems.add(ep, f"expected a mapping, found {el!r}")
-            continue
-        kind = el.get("type")
-        name = str(el.get("name", f"{kind}{k}"))
-        if name in names_seen:
-            problems.add(f"{ep}.name", f"duplicate element name {name!r}")
-        names_seen.add(name)
-        if kind == "mass":
-            check_keys(el, ep, allowed("structural.mass"), problems, required=("mass",))
-            pi = table.add(el.get("mass"), f"{ep}.mass", problems, positive=True)
-            targets = [dof(el["dof"], f"{ep}.dof")] if "dof" in el else \
-                node_dofs(el.get("node"), f"{ep}.node") if "node" in el else []
-            if not targets:
-                problems.add(ep, "a mass needs 'dof' or 'node'")
-            mass_terms += [(d, pi) for d in targets]
-        elif kind in ("spring", "damper"):
-            keys = allowed(f"structural.{kind}")
-            check_keys(el, ep, keys, problems, required=("dofs", "k" if kind == "spring" else "c"))
-            pair = el.get("dofs", [])
-            if not isinstance(pair, list) or len(pair) not in (1, 2):
-                problems.add(f"{ep}.dofs", f"expected [dof] or [dof_a, dof_b|ground], found {pair!r}")
-                continue
-            ids = [dof(d, f"{ep}.dofs") for d in pair] + ([n] if len(pair) == 1 else [])
-            if kind == "spring":
-                higher = {}
-                for key in ("k2", "k3"):
-                    if key in el:
-                        spring_nonlinear = True
-                        higher[key] = table.add(el[key], f"{ep}.{key}", problems)
-                    else:
-                        if zero_index < 0:
-                            zero_index = table.add(0.0, "", problems)
-                        higher[key] = zero_index
-                springs.add(name, ids, k1=table.add(el.get("k"), f"{ep}.k", problems), **higher)
-            else:
-                dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
-        elif kind == "bar":
-            check_keys(el, ep, allowed("structural.bar"), problems,
-                       required=("nodes", "area", "E"))
-            pair = el.get("nodes", [])
-            if not isinstance(pair, list) or len(pair) != 2:
-                problems.add(f"{ep}.nodes", f"expected [node_a, node_b], found {pair!r}")
-                continue
-            ids = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
-            bars.add(name, ids, A=table.add(el.get("area"), f"{ep}.area", problems, positive=True),
-                     E=table.add(el.get("E"), f"{ep}.E", problems, positive=True),
-                     rho=table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
-            bar_nodes.append((pair[0], pair[1]))
-        else:
-            problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
-                                       f"(known: {', '.join(kinds)})")
-    loads = []
-    load_specs = spec.get("loads", []) or []
-    if not isinstance(load_specs, list):
-        problems.add(f"{path}.loads", f"expected a list of loads, found {load_specs!r}")
-        load_specs = []
-    for k, ld in enumerate(load_specs):
-        lp = f"{path}.loads[{k}]"
-        if not check_keys(ld, lp, allowed("structural.load"), problems, required=("value",)):
-            continue
-        if "dof" in ld:
-            target = dof(ld["dof"], f"{lp}.dof")
-        elif "node" in ld:
-            direction = ld.get("direction")
-            if direction not in AXES[:dim]:
-                problems.add(f"{lp}.direction", f"expected one of {list(AXES[:dim])}, found {direction!r}")
-                continue
-            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)]
-        else:
-            problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
-            continue
-        amp = table.add(ld.get("value"), f"{lp}.value", problems)
-        fn = build_time_function(ld.get("function"), f"{lp}.function", table, problems)
-        if fn is not None:
-            loads.append((target, amp, fn))
-    init = spec.get("initial", {}) or {}
-    init_lists: tuple[list[tuple[int, int]], list[tuple[int, int]]] = ([], [])
-    if check_keys(init, f"{path}.initial", allowed("structural.initial"), problems):
-        for j, key in enumerate(("displacement", "velocity")):
-            entries = init.get(key, {}) or {}
-            if not isinstance(entries, dict):
-                problems.add(f"{path}.initial.{key}", "expected a mapping dof -> value")
-                continue
-            for d, v in entries.items():
-                ip = f"{path}.initial.{key}.{d}"
-                di = dof(d, ip)
-                init_lists[j].append((di, table.add(v, ip, problems)))
-    rayleigh = None
-    damping = spec.get("damping")
-    if damping is not None and check_keys(damping, f"{path}.damping", allowed("structural.damping"), problems):
-        ry = damping.get("rayleigh")
-        if check_keys(ry, f"{path}.damping.rayleigh", allowed("structural.rayleigh"), problems):
-            rayleigh = (table.add(ry.get("alpha", 0.0), f"{path}.damping.rayleigh.alpha", problems, nonnegative=True),
-                        table.add(ry.get("beta", 0.0), f"{path}.damping.rayleigh.beta", problems, nonnegative=True))
-    la = spec.get("linear_algebra", "auto")
-    if la not in ("auto", "dense", "sparse"):
-        problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
-    if n == 0:
-        problems.add(path, "the model has no free degrees of freedom")
-    massed = {d for d, _ in mass_terms} | ({d for row in bars.dofs for d in row} if bars.names else set())
-    for i, d in enumerate(dof_names):
-        if i not in massed:
-            problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
-    try:
-        model = StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
-                                dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
-                                bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
-                                sparse=None if la == "auto" else la == "sparse",
-                                spring_nonlinear=spring_nonlinear)
-    except (ValueError, IndexError, TypeError, KeyError):
-        if len(problems.problems) > n_before:
-            return None  # the problems already listed explain why it cannot be assembled
-        raise
-    # with problems listed, the model is still returned so that the responses can be checked
-    # against its DOFs and elements; the loader raises before anything runs
-    return model

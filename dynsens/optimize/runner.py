@@ -69,16 +69,21 @@ def start_points(case: Case, n: int, seed: int, x0: np.ndarray) -> np.ndarray:
 def resolve_x0(case: Case, x0: Mapping[str, float] | None) -> np.ndarray:
     """The case's initial design with ``x0`` entries replaced; checks names and bounds."""
     x = case.x0.copy()
+    names = case.design_names
     for name, v in (x0 or {}).items():
-        if name not in case.design_names:
-            raise OptimizationError(f"-x {name}={v}: unknown design variable {name!r} "
-                                    f"(design variables: {', '.join(case.design_names)})")
-        j = case.design_names.index(name)
-        lo, up = case.lower[j], case.upper[j]
-        if not (np.isfinite(v) and lo <= v <= up):
-            raise OptimizationError(f"-x {name}={v:g} is outside the bounds of design variable {name!r}: "
-                                    f"[{lo:g}, {up:g}]")
-        x[j] = float(v)
+        # a family's name addresses all its members A[...]
+        targets = [names.index(name)] if name in names else \
+            [j for j, n in enumerate(names) if n.startswith(f"{name}[") and n.endswith("]")]
+        if not targets:
+            shown = ", ".join(names[:20]) + (f" ... ({len(names)} in all)" if len(names) > 20 else "")
+            raise OptimizationError(f"-x {name}={v}: unknown design variable {name!r} (nor a family) "
+                                    f"(design variables: {shown})")
+        for j in targets:
+            lo, up = case.lower[j], case.upper[j]
+            if not (np.isfinite(v) and lo <= v <= up):
+                raise OptimizationError(f"-x {name}={v:g} is outside the bounds of design variable "
+                                        f"{names[j]!r}: [{lo:g}, {up:g}]")
+            x[j] = float(v)
     return x
 
 

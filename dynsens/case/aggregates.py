@@ -1,0 +1,179 @@
+"""Case entries of the aggregate responses (``ks``, ``max``, ``min``, ``stress_ratio``,
+``buckling_ratio``): validated here, built as :class:`dynsens.responses_sizing.Aggregate`.
+
+Every key these responses accept changes the result; any other key is an error.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from ..case_keys import AGGREGATE_TYPES, allowed
+from ..errors import ProblemCollector
+from ..expressions import ExpressionError, compile_expression
+from ..models._keys import check_keys
+from ..models.base import Output
+from ..responses import Response
+from ..responses_sizing import Aggregate, Term
+
+__all__ = ["AGGREGATE_TYPES", "aggregate_maker"]
+
+OutputId = Callable[[Any, str], "int | None"]
+
+
+def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
+                    outputs: list[Output], pc: ProblemCollector) -> Callable[[], Response] | None:
+    """Validate response entry ``r`` (at YAML ``path``) of type ``kind`` in AGGREGATE_TYPES;
+    a factory of fresh :class:`Aggregate` accumulators, or None (problems reported)."""
+    unit = r.get("unit")
+    if kind in ("stress_ratio", "buckling_ratio"):
+        return _ratio_maker(name, kind, r, path, output_id, outputs, pc)
+    check_keys(r, path, allowed(f"response.{kind}"), pc, required=("rho",) if kind == "ks" else ())
+    n0 = len(pc.problems)
+    qs = r["quantities"] if "quantities" in r else [r["quantity"]] if "quantity" in r else None
+    if "quantity" in r and "quantities" in r:
+        pc.add(path, "give 'quantity' or 'quantities', not both")
+    if not isinstance(qs, list) or not qs:
+        pc.add(path, f"a {kind} response needs 'quantity' or a non-empty list 'quantities'")
+        return None
+    # (a single 'quantity' is reported as quantities[0], as the loader always has)
+    oids = [output_id(q, f"{path}.quantities[{k}]") for k, q in enumerate(qs)]
+    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" else None
+    side = r.get("side", "upper")
+    if side not in ("upper", "lower"):
+        pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
+    absolute = r.get("absolute", False)
+    if not isinstance(absolute, bool):
+        pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
+    limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
+    ids = [o for o in oids if o is not None]
+    if len(ids) != len(oids) or limit is None or len(pc.problems) > n0:
+        return None
+    comps = _components(r.get("components"), [outputs[o] for o in ids], "quantities" in r,
+                        f"{path}.components", pc)
+    if comps is None:
+        return None
+    signs = [1.0, -1.0] if absolute else [1.0]
+    terms = tuple(Term(o, c, np.array([[s / limit] * len(c) for s in signs])) for o, c in zip(ids, comps))
+    how = "ks" if kind == "ks" else "max"
+    sense = -1 if kind == "min" or side == "lower" else 1
+    u = str(unit) if unit is not None else ("-" if "limit" in r else outputs[ids[0]].unit)
+    return lambda: Aggregate(name, terms, how, u, sense=sense, rho=rho)
+
+
+def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
+                 outputs: list[Output], pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``stress_ratio``: σ/σ_t (tension) and −σ/σ_c (compression), or |σ|/σ_lim (``limit``);
+    ``buckling_ratio``: −N/P_E; both aggregated over the elements and the run."""
+    limits = ("tension_limit", "compression_limit", "limit") if kind == "stress_ratio" else ()
+    check_keys(r, path, allowed(f"response.{kind}"), pc)
+    n0 = len(pc.problems)
+    how = r.get("aggregate", "ks")
+    if how not in ("ks", "max"):
+        pc.add(f"{path}.aggregate", f"expected ks or max, found {how!r}")
+    rho = None
+    if how == "ks":
+        rho = _positive(r["rho"], f"{path}.rho", pc) if "rho" in r else None
+        if "rho" not in r:
+            pc.add(f"{path}.rho", "missing required key (aggregate: ks)")
+    elif "rho" in r:
+        pc.add(f"{path}.rho", "rho applies to 'aggregate: ks' only (the sampled maximum has none)")
+    elements = r.get("elements", "all")
+    side_rows: list[float] = [1.0]
+    quantity_kind = "buckling"
+    if kind == "stress_ratio":
+        quantity_kind = "stress"
+        read = {k: _positive(r[k], f"{path}.{k}", pc) for k in limits if k in r}
+        given = {k: v for k, v in read.items() if v is not None}   # a bad limit is reported above
+        if "limit" in given and len(given) > 1:
+            pc.add(f"{path}.limit", "give 'limit' (|σ|) or tension_limit/compression_limit, not both")
+        elif not read:
+            pc.add(path, "give tension_limit and/or compression_limit, or limit (|σ| <= limit)")
+        if "limit" in given:
+            given = {"tension_limit": given["limit"], "compression_limit": given["limit"]}
+        side_rows = []
+        if given.get("tension_limit"):
+            side_rows.append(1.0 / given["tension_limit"])
+        if given.get("compression_limit"):
+            side_rows.append(-1.0 / given["compression_limit"])
+    if len(pc.problems) > n0:
+        return None
+    picked = _shared_output(elements, quantity_kind, f"{path}.elements", output_id, outputs, pc)
+    if picked is None:
+        return None
+    oid, comps = picked
+    k = len(comps)
+    term = Term(oid, comps, np.array([[c] * k for c in side_rows]))
+    u = str(r.get("unit", "-"))
+    return lambda: Aggregate(name, (term,), str(how), u, rho=rho)
+
+
+def _shared_output(elements: Any, kind: str, path: str, output_id: OutputId, outputs: list[Output],
+                   pc: ProblemCollector) -> tuple[int, np.ndarray] | None:
+    """The output of ``kind`` over all elements and the components of ``elements``: every ratio
+    response of a case then reads one output (evaluated once per block) instead of one each.
+    Falls back to the elements' own output, which reports any problem with them."""
+    n0 = len(pc.problems)
+    oid = output_id({"element": "all", "kind": kind}, path)
+    if oid is not None and elements != "all" and isinstance(elements, (list, str)):
+        wanted = elements if isinstance(elements, list) else [elements]
+        labels = outputs[oid].labels
+        owner = [lab.split(".", 1)[0] for lab in labels]
+        if all(isinstance(w, str) for w in wanted) and set(wanted) <= set(owner):
+            chosen = set(wanted)
+            return oid, np.array([i for i, o in enumerate(owner) if o in chosen], dtype=int)
+        oid = None
+    if oid is not None and elements == "all":
+        return oid, np.arange(len(outputs[oid].labels))
+    del pc.problems[n0:]          # the elements' own output says what is wrong, if anything
+    oid = output_id({"element": elements, "kind": kind}, path)
+    return None if oid is None else (oid, np.arange(len(outputs[oid].labels)))
+
+
+def _positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
+    """A positive finite number (or a constant expression) at ``path``."""
+    found = value
+    if isinstance(value, str):
+        try:
+            value = compile_expression(value, set()).evaluate({})
+        except ExpressionError:
+            value = None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        pc.add(path, f"expected a positive number or a constant expression, found {found!r}")
+        return None
+    return float(value)
+
+
+def _components(spec: Any, outs: list[Output], several: bool, path: str,
+                pc: ProblemCollector) -> list[np.ndarray] | None:
+    """Component indices per output: all of them without ``spec``; with one quantity a list
+    of names or indices; with ``quantities`` one such list (or null: all) per quantity."""
+    if spec is None:
+        return [np.arange(len(o.labels)) for o in outs]
+    per_output = spec if several else [spec]
+    if not isinstance(per_output, list) or len(per_output) != len(outs):
+        pc.add(path, f"expected one list of components per quantity ({len(outs)}), found {spec!r}")
+        return None
+    out = []
+    for j, (sel, o) in enumerate(zip(per_output, outs)):
+        p = f"{path}[{j}]" if several else path
+        if sel is None:
+            out.append(np.arange(len(o.labels)))
+            continue
+        sel = sel if isinstance(sel, list) else [sel]
+        idx = []
+        for c in sel:
+            if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(o.labels):
+                idx.append(c)
+            elif c in o.labels:
+                idx.append(o.labels.index(c))
+            else:
+                pc.add(p, f"component {c!r} not found (components: {list(o.labels)})")
+        if len(idx) != len(sel):
+            return None
+        if not idx:
+            pc.add(p, "expected at least one component")
+            return None
+        out.append(np.array(idx, dtype=int))
+    return out

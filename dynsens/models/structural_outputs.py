@@ -1,0 +1,166 @@
+"""Quantities of a structural model that responses and events read (``Model.output``):
+DOF displacements, velocities, accelerations; element forces, stresses, strains, buckling
+ratios (bars), extreme-fibre stresses and end forces (beams), spring forces."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..case_keys import allowed
+from ..errors import ProblemCollector
+from ._keys import check_keys, did_you_mean
+from .base import Output, StepState
+
+
+class StructuralOutputs:
+    """Mixin of :class:`~dynsens.models.structural.StructuralModel`: its ``output`` method."""
+
+    dof_names: list[str]
+    spring_names: list[str]
+    damper_names: list[str]
+    bar_names: list[str]
+    bar_I: np.ndarray
+    beams: Any
+    nl_dampers: Any
+    damper_dofs: np.ndarray
+    c: np.ndarray
+    _spring_state: Any
+    _bar_state: Any
+    _ext: Any
+
+    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
+        ``{element: NAME|[NAMES]|all, kind: force|stress|strain|buckling}``; ``buckling`` is the
+        ratio −N/P_E of the compressive axial force to the Euler load π²EI/(KL)² (bars with
+        ``inertia``; positive in compression, > 1 means buckled)."""
+        if not check_keys(spec, path, allowed("structural.quantity"), problems):
+            return None
+        kind = spec.get("kind", "displacement" if "dof" in spec else "force")
+        if "dof" in spec:
+            names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
+            field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
+            if kind not in field_of:
+                problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "
+                                             f"(known: {', '.join(field_of)})")
+                return None
+            idx = []
+            for nm in names:
+                if nm not in self.dof_names:
+                    problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
+                else:
+                    idx.append(self.dof_names.index(nm))
+            if len(idx) != len(names):
+                return None
+            ia = np.array(idx)
+            fld = field_of[kind]
+            unit = ""  # the case's own unit system; a response may name it with 'unit'
+            return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
+                          tuple(f"{n}.{kind}" for n in names), unit, linear=True)
+        if "element" not in spec:
+            problems.add(path, "expected 'dof' or 'element'")
+            return None
+        names = spec["element"]
+        all_names = self.spring_names + self.damper_names + self.nl_dampers.names + self.bar_names + self.beams.names
+        if names == "all":
+            names = list(self.bar_names) + list(self.beams.names) if self.bar_names or len(self.beams) \
+                else list(self.spring_names)
+        names = names if isinstance(names, list) else [names]
+        dampers = self.damper_names + self.nl_dampers.names
+        if names and all(nm in dampers for nm in names):
+            return self._damper_output(names, kind, path, problems)
+        kinds = ("force", "stress", "strain", "buckling")
+        if kind not in kinds:
+            problems.add(f"{path}.kind",
+                         f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
+            return None
+        bars, springs, beams = [], [], []
+        for nm in names:
+            if nm in self.bar_names:
+                bars.append(self.bar_names.index(nm))
+            elif nm in self.beams.names and kind in ("force", "stress"):
+                beams.append(self.beams.names.index(nm))
+            elif nm in self.beams.names:
+                problems.add(f"{path}.kind", f"beams report 'force' (N, M1, M2) and 'stress' (extreme fibres), "
+                                             f"not {kind!r}")
+            elif nm in self.spring_names and kind == "force":
+                springs.append(self.spring_names.index(nm))
+            elif nm in self.spring_names:
+                problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
+            else:
+                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
+        if len(bars) + len(springs) + len(beams) != len(names):
+            return None
+        lacking = [self.bar_names[b] for b in bars if self.bar_I[b] < 0]
+        if kind == "buckling" and lacking:
+            problems.add(f"{path}.element", f"buckling needs the bar's 'inertia' (second moment of area); "
+                                            f"missing for {', '.join(lacking[:5])}{' ...' if len(lacking) > 5 else ''}")
+            return None
+        if springs and (bars or beams):
+            problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
+            return None
+        if springs:
+            si = np.array(springs)
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i)[0],
+                          tuple(f"{n}.force" for n in names), "", batched=True, autonomous=True)
+        bi = np.array(bars)
+
+        def bar_out(t: float, s: StepState, prm: dict[str, Any], _i: np.ndarray = bi, _k: str = kind) -> np.ndarray:
+            bs = self._bar_state(s.q, prm)
+            if _k == "strain":
+                return bs["strain"][..., _i]
+            if _k == "force":
+                return bs["N"][..., _i]
+            if _k == "buckling":
+                return (-bs["N"] / prm["P_euler"])[..., _i]
+            return (prm["E"] * bs["strain"])[..., _i]
+
+        unit = "-" if kind in ("strain", "buckling") else ""
+        if not beams:
+            return Output(bar_out, tuple(f"{n}.{kind}" for n in names), unit, batched=True, autonomous=True)
+        beam_fn, beam_labels = self._beam_output(np.array(beams), kind)
+        if not bars:
+            return Output(beam_fn, beam_labels, unit, batched=True, autonomous=True)
+
+        def both(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            return np.concatenate([bar_out(t, s, prm), beam_fn(t, s, prm)], axis=-1)
+        bar_labels = tuple(f"{self.bar_names[b]}.{kind}" for b in bars)
+        return Output(both, bar_labels + beam_labels, unit, batched=True, autonomous=True)
+
+    def _damper_output(self, names: list[str], kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Forces of viscous dampers, linear (c v) or nonlinear (c v (v² + ε²)^((α−1)/2))."""
+        if kind != "force":
+            problems.add(f"{path}.kind", f"dampers report only 'force', not {kind!r}")
+            return None
+        lin = [self.damper_names.index(n) for n in names if n in self.damper_names]
+        nl = [self.nl_dampers.names.index(n) for n in names if n in self.nl_dampers.names]
+        li, ni = np.array(lin, dtype=int), np.array(nl, dtype=int)
+
+        def forces(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            qde = self._ext(s.qd)
+            pv = prm["pv"]
+            v_lin = qde[..., self.damper_dofs[li, 0]] - qde[..., self.damper_dofs[li, 1]]
+            F_nl, _ = self.nl_dampers.force(self.nl_dampers.velocity(qde), pv)
+            return np.concatenate([pv[..., self.c[li]] * v_lin, F_nl[..., ni]], axis=-1)
+        labels = tuple(f"{self.damper_names[i]}.force" for i in lin) + \
+            tuple(f"{self.nl_dampers.names[i]}.force" for i in nl)
+        return Output(forces, labels, "", batched=True, autonomous=True)
+
+    def _beam_output(self, bi: np.ndarray, kind: str) -> tuple[Any, tuple[str, ...]]:
+        """Beams ``bi``: extreme-fibre stresses (4 per beam: end 1 ±, end 2 ±) or end forces
+        (N, M1, M2 per beam); the function and the component labels."""
+        names = [self.beams.names[b] for b in bi]
+        if kind == "stress":
+            labels = tuple(f"{n}.stress.{e}" for n in names for e in ("1+", "1-", "2+", "2-"))
+
+            def fn(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+                sig = self.beams.fibre_stress(self._ext(s.q), prm)[..., bi, :]
+                return sig.reshape(sig.shape[:-2] + (-1,))
+            return fn, labels
+        labels = tuple(f"{n}.{c}" for n in names for c in ("N", "M1", "M2"))
+
+        def forces(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            st = self.beams.state(self._ext(s.q), prm)
+            f = np.stack([st["N"], st["M1"], st["M2"]], axis=-1)[..., bi, :]
+            return f.reshape(f.shape[:-2] + (-1,))
+        return forces, labels

@@ -1,0 +1,115 @@
+r"""Aggregates over time and components for sizing: sampled maximum/minimum and KS.
+
+Every aggregate reads one or more outputs, picks components of each and maps every picked
+component v through one or more signed scalings c (a *side*): g = c·v.  A stress ratio in
+tension and compression, for instance, uses the two sides c = 1/σ_t and c = −1/σ_c of the
+same stress; ``absolute`` uses c = ±1 (so that max g = max |v|).  The aggregate of all g over
+all instants of the run is then
+
+* ``max``: the sampled maximum g* = max_k g_k, with the gradient of its active sample ∇g_{k*}
+  (exact where the maximum is attained by one sample; a kink where two samples tie);
+* ``ks``: the Kreisselmeier–Steinhauser function KS = g* + (1/ρ) ln Σ_k exp(ρ(g_k − g*)) with
+  ∇KS = Σ_k w_k ∇g_k, softmax weights w_k.  ρ carries the inverse unit of g; g* ≤ KS ≤
+  g* + ln(N)/ρ for N samples, so ln(N)/ρ bounds the over-estimate.  The sampled maximum is
+  reported beside the KS value, with a warning when ln(N)/ρ exceeds ``KS_WARN_FRACTION``
+  of |KS|.
+
+``min`` and a lower KS (``sense = −1``) aggregate −g and negate the result.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .responses import FinishContext, Response, ResponseValue, Samples
+
+KS_WARN_FRACTION = 0.03  # ln(N)/ρ above this share of |KS| is reported as a warning
+
+
+@dataclass(frozen=True)
+class Term:
+    """Components ``components`` (k,) of output ``output_id``, each mapped through the rows of
+    ``sides`` (S, k): g = sides[s] · v for every side s."""
+
+    output_id: int
+    components: np.ndarray
+    sides: np.ndarray
+
+
+class Aggregate(Response):
+    """Sampled maximum (``how='max'``) or KS (``how='ks'``) of g over time and components;
+    ``sense=-1`` turns either into the corresponding minimum."""
+
+    def __init__(self, name: str, terms: tuple[Term, ...], how: str, unit: str, *,
+                 sense: int = 1, rho: float | None = None):
+        if how not in ("max", "ks") or sense not in (1, -1) or (how == "ks" and not rho):
+            raise ValueError(f"invalid aggregate {how!r}, sense {sense}, rho {rho}")
+        self.name, self.unit = name, unit
+        self.terms = terms
+        self.output_ids = tuple(dict.fromkeys(t.output_id for t in terms))
+        self.how, self.sense, self.rho = how, sense, rho
+        self._best: Any = None               # the sampled maximum of sense·g so far
+        self._best_grad: np.ndarray | None = None
+        self._sum: Any = 0.0                  # KS: Σ exp(ρ(g_k − g*))
+        self._wgrad: np.ndarray | None = None  # KS: Σ exp(ρ(g_k − g*)) ∇g_k
+        self._count = 0
+
+    def _gather(self, smp: Samples) -> tuple[np.ndarray, np.ndarray | None]:
+        """sense·g of all samples of a block, (N,), and their gradients (N, m) or None."""
+        vals: list[np.ndarray] = []
+        grads: list[np.ndarray | None] = []
+        for t in self.terms:
+            v = smp.value[t.output_id][:, t.components]            # (K, k)
+            g = smp.grad[t.output_id]
+            g = None if g is None else g[:, t.components]          # (K, k, m)
+            for side in t.sides:
+                c = self.sense * side
+                vals.append(c * v)
+                grads.append(None if g is None else c[None, :, None] * g)
+        value = np.concatenate(vals, axis=1).ravel()
+        if any(g is None for g in grads):
+            return value, None
+        grad = np.concatenate([g for g in grads if g is not None], axis=1)
+        return value, grad.reshape(value.size, grad.shape[-1])
+
+    def feed(self, samples: Samples) -> None:
+        v, G = self._gather(samples)
+        self._count += v.size
+        k = int(np.argmax(v.real))
+        if self._best is None or v[k].real > np.real(self._best):
+            if self._best is not None and self.how == "ks":
+                factor = np.exp(self.rho * (self._best - v[k]))
+                self._sum = self._sum * factor
+                if self._wgrad is not None:
+                    self._wgrad = self._wgrad * factor
+            self._best = v[k]
+            self._best_grad = None if G is None else G[k]
+        if self.how == "ks":
+            w = np.exp(self.rho * (v - self._best))
+            self._sum = self._sum + np.sum(w)
+            if G is not None:
+                contrib = w @ G
+                self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
+
+    def finish(self, ctx: FinishContext) -> ResponseValue:
+        if self._best is None:
+            return ResponseValue(np.nan, None, self.unit, missing="no instant was sampled")
+        s = self.sense
+        sampled = s * self._best
+        if self.how == "max":
+            grad = None if self._best_grad is None else s * self._best_grad
+            return ResponseValue(sampled, grad, self.unit)
+        value = s * (self._best + np.log(self._sum) / self.rho)
+        grad = None if self._wgrad is None else s * self._wgrad / self._sum
+        bound = float(np.log(self._count) / self.rho)
+        extra: dict[str, Any] = {"sampled_max" if s > 0 else "sampled_min": float(np.real(sampled)),
+                                 "samples": self._count, "ks_gap_bound": bound}
+        scale = abs(float(np.real(value)))
+        if bound > KS_WARN_FRACTION * scale:
+            share = f"{100 * bound / scale:.0f} %" if scale > 0 else "more than the value itself"
+            extra["warning"] = (f"KS may lie beyond the sampled {'maximum' if s > 0 else 'minimum'} by up to "
+                                f"ln(N)/rho = {bound:.4g} ({share} of the value; N = {self._count}): "
+                                f"raise rho or use type 'max'")
+        return ResponseValue(value, grad, self.unit, extra=extra)
