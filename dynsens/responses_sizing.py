@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .responses import FinishContext, Response, ResponseValue, Samples
+from .responses import FinishContext, OutputTrace, Response, ResponseValue, Samples
 
 KS_WARN_FRACTION = 0.03  # ln(N)/ρ above this share of |KS| is reported as a warning
 
@@ -92,6 +92,28 @@ class Aggregate(Response):
             if G is not None:
                 contrib = w @ G
                 self._wgrad = contrib if self._wgrad is None else self._wgrad + contrib
+
+    def adjoint_unsupported(self) -> str | None:
+        return None
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """Weights of the outputs' gradients: the final softmax weights (KS) or 1 at the active
+        sample (max), times ∂(s·g)/∂v = side (the sense cancels); the same sums :meth:`feed` formed."""
+        cols = [(t.output_id, t.components, self.sense * side) for t in self.terms for side in t.sides]
+        g = np.concatenate([c * np.real(trace.value[o][:, comp]) for o, comp, c in cols], axis=1)   # (K, C)
+        if self.how == "max":
+            # the first maximum in (instant, column) order, as feed keeps it
+            W = np.zeros_like(g)
+            W[np.unravel_index(int(np.argmax(g)), g.shape)] = 1.0
+        else:
+            W = np.exp(self.rho * (g - np.real(self._best))) / np.real(self._sum)
+        out: dict[Any, Any] = {o: np.zeros(np.shape(trace.value[o])) for o in self.output_ids}
+        start = 0
+        for o, comp, c in cols:
+            n = len(comp)
+            np.add.at(out[o], (slice(None), comp), W[:, start:start + n] * (self.sense * c))
+            start += n
+        return out
 
     def finish(self, ctx: FinishContext) -> ResponseValue:
         if self._best is None:
