@@ -111,7 +111,7 @@ class Aggregate(Response):
         start = 0
         for o, comp, c in cols:
             n = len(comp)
-            np.add.at(out[o], (slice(None), comp), W[:, start:start + n] * (self.sense * c))
+            np.add.at(out[o].T, comp, (W[:, start:start + n] * (self.sense * c)).T)   # columns comp (repeats add)
             start += n
         return out
 
