@@ -10,34 +10,12 @@ import pytest
 
 import dynsens
 from dynsens.case.load import load_case
+from helpers import SDOF_DESIGN
 
 REPO = Path(__file__).resolve().parents[1]
 SDOF_FILE = REPO / "cases" / "sdof_step.yaml"
 
-# 2-variable SDOF design problem: cost = k + 10 c subject to max displacement (KS) <= 0.2 m
-DESIGN = {
-    "name": "sdof_design",
-    "design": {"variables": [
-        {"name": "c", "value": 2.0, "lower": 0.1, "upper": 20.0},
-        {"name": "k", "value": 100.0, "lower": 10.0, "upper": 400.0},
-    ]},
-    "model": {
-        "type": "structural", "dofs": ["u"],
-        "elements": [
-            {"type": "mass", "name": "body", "dof": "u", "mass": 2.0},
-            {"type": "spring", "name": "spring", "dofs": ["u", "ground"], "k": "k"},
-            {"type": "damper", "name": "damper", "dofs": ["u", "ground"], "c": "c"},
-        ],
-        "loads": [{"dof": "u", "value": 10.0, "function": "constant"}],
-    },
-    "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 1.0e-2, "t_end": 3.0},
-    "sensitivity": {"enabled": True, "partials": "forward"},
-    "responses": [
-        {"name": "q_ks", "type": "ks", "quantity": {"dof": "u", "kind": "displacement"}, "rho": 50.0},
-        {"name": "cost", "type": "expression", "expression": "k + 10*c"},
-    ],
-    "optimization": {"objective": "cost", "constraints": [{"response": "q_ks", "upper": 0.2}]},
-}
+DESIGN = SDOF_DESIGN   # cost = k + 10 c subject to max displacement (KS) <= 0.2 m
 
 
 def test_public_names_are_exported() -> None:
