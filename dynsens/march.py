@@ -23,7 +23,8 @@ from .derivatives.direct import DirectMode
 from .errors import CaseError
 from .integrators.newmark import Newmark
 from .models.base import Model, StepState
-from .responses import EventHit, EventTime, ResponseSet, ResponseValue
+from .response_set import ResponseSet
+from .responses import EventHit, EventTime, ResponseValue
 from .sensitivity import DesignPartials
 from .solver.linalg import Counters
 from .solver.newton import NewtonSettings, StepSolver

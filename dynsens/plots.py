@@ -117,8 +117,10 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
 
 def response_markers(case: Any, result: Any) -> list[Marker]:
     """Markers for the responses of ``case`` that read a recorded quantity of ``result``: values
-    at a time, at an event or at the end as points, KS maxima as levels."""
-    from .responses import KSAggregate, ValueAt
+    at a time, at an event or at the end as points; KS, max and min of the quantity itself (not of
+    a ratio of it) as levels."""
+    from .responses import ValueAt
+    from .responses_sizing import Aggregate
     by_output: dict[int, list[str]] = {}
     for name, q in result.quantities.items():
         by_output.setdefault(q.output_id, []).append(name)
@@ -135,7 +137,7 @@ def response_markers(case: Any, result: Any) -> list[Marker]:
             for name in by_output.get(r.output_ids[0], []):
                 if t is not None:
                     out.append(Marker(name, r.name, value, float(t)))
-        elif isinstance(r, KSAggregate):
+        elif isinstance(r, Aggregate) and all(np.all(np.abs(t.sides) == 1.0) for t in r.terms):
             for oid in r.output_ids:
                 for name in by_output.get(oid, []):
                     out.append(Marker(name, r.name, value))

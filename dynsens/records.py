@@ -17,7 +17,7 @@ import numpy as np
 from .responses import Samples
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .responses import ResponseSet
+    from .response_set import ResponseSet
 
 
 # names the result file uses for its own members (a recorded quantity is a root-level dataset)

@@ -27,7 +27,8 @@ from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output, ParameterTable
 from ..models.registry import build_model
 from ..records import QuantitySpec, Recorder
-from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, Response, ResponseSet,
+from ..response_set import ResponseSet
+from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, Response,
                          StructuralMass, TimeIntegral, ValueAt)
 from ..sensitivity import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
