@@ -149,3 +149,13 @@ def test_simulate_plots_recorded_quantities(tmp_path):
     assert [u for u, _ in panels({k: type("Q", (), {"unit": v})() for k, v in res.units.items()})] == \
         ["N", "mm", "MPa", "rad"]
     assert np.isfinite(res.quantities["cylinder_force"]).all()
+
+
+def test_plot_markers_show_a_ks_of_a_recorded_quantity_as_a_level():
+    from dynsens.plots import response_markers
+    case = dynsens.load_case(CASES / "sdof_step.yaml", ["integrator.t_end=1.0"])
+    result = dynsens.run_case(case)
+    markers = {m.name: m for m in response_markers(case, result)}
+    assert markers["q_ks"].t is None                                   # a level over the run
+    assert markers["q_ks"].value == pytest.approx(float(result.responses["q_ks"].value))
+    assert markers["q_end"].t == pytest.approx(1.0)                    # a point at the end
