@@ -28,6 +28,7 @@ from ..case_keys import allowed
 from ._keys import check_keys, did_you_mean
 from .base import Linearization, Model, Output, ParameterTable, StepState, Traits
 from .registry import register
+from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
 from .timefunctions import TimeFunction, build_time_function
 
 GROUND = "ground"
@@ -96,6 +97,9 @@ class StructuralModel(Model):
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
+        self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per site
+        self._unions = UnionCache()                              # sparse iteration matrices
+        self._mass_matrix: tuple[np.ndarray, Any] | None = None  # (mass vector, its sparse M)
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
         """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
@@ -245,7 +249,9 @@ class StructuralModel(Model):
         keep, r, c, flat = plan
         v = np.concatenate([np.ravel(x) for x in vals])[keep]
         if self.traits.sparse:
-            return sp.csc_matrix((v, (r, c)), shape=(n, n))
+            if site not in self._patterns:
+                self._patterns[site] = PatternAssembly(n, r, c)
+            return self._patterns[site].matrix(v, dtype)
         # bincount sums repeated positions (as np.add.at) at a fraction of its cost
         K = np.bincount(flat, v.real, n * n)
         if np.iscomplexobj(v) or np.dtype(dtype).kind == "c":
@@ -354,9 +360,13 @@ class StructuralModel(Model):
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
         K = self._tangent(s.q, params)
-        M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
         D = params["D"] if self.traits.has_damping else None
-        return Linearization(R_z=M, R_q=K, R_qd=D)
+        if not self.traits.sparse:
+            return Linearization(R_z=np.diag(params["mass"]), R_q=K, R_qd=D)
+        mass = params["mass"]
+        if self._mass_matrix is None or self._mass_matrix[0] is not mass:   # once per design
+            self._mass_matrix = (mass, sp.diags(mass).tocsc())
+        return SparseLinearization(R_z=self._mass_matrix[1], R_q=K, R_qd=D, unions=self._unions)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
         """Sum of point masses and bar masses ρAL (mass unit of the case)."""
