@@ -168,7 +168,7 @@ class StructuralModel(Model):
             if key not in self._elongation_of:
                 self._elongation_of[key] = self._spring_elongation[:, springs]
             elongation = self._elongation_of[key]
-        delta = q @ elongation                       # δ = u_a − u_b for every spring
+        delta = _times(q, elongation)                # δ = u_a − u_b for every spring
 
         def pick(key: str) -> np.ndarray:
             return params[key] if springs is None else params[key][..., springs]
@@ -280,12 +280,12 @@ class StructuralModel(Model):
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
             fs, _ = self._spring_state(q, params)
-            f = f + fs @ self._spring_scatter
+            f = f + _times(fs, self._spring_scatter)
         if len(self.bar_names):
             bs = self._bar_state(q, params)
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
             flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
-            f = f + flat @ self._bar_scatter
+            f = f + _times(flat, self._bar_scatter)
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -297,28 +297,28 @@ class StructuralModel(Model):
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
         """F_R for several parameter sets at one state, vectorized: (n, B)."""
-        if self.traits.sparse:
-            return super().residual_batch(t, s, params_list)
         return self.residual_batch_steps(np.array([t]), [s], params_list)[0]
 
     def residual_batch_steps(self, ts: np.ndarray, states: list[StepState],
                              params_list: list[dict[str, Any]]) -> np.ndarray:
         """F_R at K states (times ts, s) for several parameter sets, vectorized over both:
-        (K, n, B).  Sparse models evaluate state by state and set by set."""
-        if self.traits.sparse:
-            return super().residual_batch_steps(ts, states, params_list)
+        (K, n, B).  Sparse models multiply the damping matrix of each set with all K states."""
         if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
             st = self.stack_parameters(params_list)
-            assert st is not None  # dense models always stack
+            assert st is not None  # structural models always stack
             if self.traits.has_damping:
-                st["D"] = np.stack([p["D"] for p in params_list])
+                Ds = [p["D"] for p in params_list]
+                st["D"] = Ds if self.traits.sparse else np.stack(Ds)
             self._stacked = (params_list, st)
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
         R = st["mass"] * qdd + self._internal_force(q, st)
         R = R - np.stack([self.external_force(t, st) for t in ts])
-        if self.traits.has_damping:
+        if self.traits.has_damping and self.traits.sparse:
+            # one sparse product per parameter set, over the K states: (K, B, n)
+            R = R + np.stack([(D @ qd[:, 0, :].T).T for D in st["D"]], axis=1)
+        elif self.traits.has_damping:
             R = R + (st["D"] @ qd[..., None])[..., 0]
         return R.transpose(0, 2, 1)
 
@@ -449,6 +449,14 @@ class StructuralModel(Model):
 
         return Output(bar_out, tuple(f"{n}.{kind}" for n in names), "-" if kind == "strain" else "",
                       batched=True, autonomous=True)
+
+
+def _times(x: np.ndarray, M: Any) -> np.ndarray:
+    """x @ M for x (..., a) and M (a, b) dense or sparse (scipy's sparse products take at most
+    two dimensions: the leading axes are folded into one)."""
+    if x.ndim <= 2 or not sp.issparse(M):
+        return x @ M
+    return (x.reshape(-1, x.shape[-1]) @ M).reshape(x.shape[:-1] + (M.shape[1],))
 
 
 # ---------------------------------------------------------------------- builder
