@@ -76,15 +76,18 @@ def main() -> None:
           "dynsens ÷ SuperLU | dynsens ÷ tridiagonal | yardstick gradient vs dynsens |")
     print("|---|---|---|---|---|---|---|")
     for n, t, worst in rows:
-        def pair(name: str) -> str:
-            return f"{t[name + ' primal']:.3f} / {t[name + ' + gradient']:.3f}"
+        print(f"| {n} | {_pair(t, 'dynsens')} | {_pair(t, 'SuperLU')} | {_pair(t, 'tridiagonal')} | "
+              f"{_ratio(t, 'SuperLU')} | {_ratio(t, 'tridiagonal')} | {worst:.0e} |")
 
-        def ratio(name: str) -> str:
-            return (f"{t['dynsens primal'] / t[name + ' primal']:.2f} / "
-                    f"{t['dynsens + gradient'] / t[name + ' + gradient']:.2f}")
-        print(f"| {n} | {pair('dynsens')} | {pair('SuperLU')} | {pair('tridiagonal')} | "
-              f"{ratio('SuperLU')} | {ratio('tridiagonal')} | {worst:.0e} |")
 
+def _pair(t: dict[str, float], name: str) -> str:
+    return f"{t[name + ' primal']:.3f} / {t[name + ' + gradient']:.3f}"
+
+
+def _ratio(t: dict[str, float], name: str) -> str:
+    """dynsens ÷ the named yardstick, primal / primal + gradient."""
+    return (f"{t['dynsens primal'] / t[name + ' primal']:.2f} / "
+            f"{t['dynsens + gradient'] / t[name + ' + gradient']:.2f}")
 
 if __name__ == "__main__":
     main()

@@ -68,7 +68,7 @@ def test_sparse_wide_pattern_keeps_superlu_column_order_across_values() -> None:
     pattern = sp.random(n, n, density=0.03, random_state=4, format="csc")
     A = sp.csc_matrix(pattern + sp.identity(n) * 10.0)
     rng = np.random.default_rng(5)
-    for k in range(3):                                 # new values, same pattern
+    for _ in range(3):                                 # new values, same pattern
         S = A.copy()
         S.data = S.data * (1.0 + rng.random(S.nnz))
         f = Factor(S, Counters())

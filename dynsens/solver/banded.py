@@ -147,8 +147,8 @@ class SparsePlan:
         band = BandPlan(n, i, j, perm)
         self.band = band if band.width <= SPARSE_BAND_MAX else None
         self.perm_c: np.ndarray | None = None     # SuperLU's column order, from the first LU
-        self._data_order: np.ndarray | None = None
-        self._permuted: sp.csc_matrix | None = None
+        self._data_order: Any = None           # S.data → data of S[:, order] (from the first LU)
+        self._permuted: Any = None             # S[:, order] on the kept pattern
 
     def matches(self, S: sp.csc_matrix) -> bool:
         """Whether S has exactly this plan's pattern."""

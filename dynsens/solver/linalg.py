@@ -67,6 +67,7 @@ class Factor:
     def __init__(self, S: Any, counters: Counters, dense_general: bool = False):
         self.counters = counters
         self.n = S.shape[0]
+        self._lu: Any = None   # the factor: of the kind below
         counters.factorizations += 1
         plan = None
         if sp.issparse(S) and not dense_general:
