@@ -146,9 +146,9 @@ class SparsePlan:
         perm = reverse_cuthill_mckee((sym + sym.T).tocsr(), symmetric_mode=True).astype(np.intp)
         band = BandPlan(n, i, j, perm)
         self.band = band if band.width <= SPARSE_BAND_MAX else None
-        self.perm_c: np.ndarray | None = None     # SuperLU's column order, from the first LU
-        self._data_order: Any = None           # S.data → data of S[:, order] (from the first LU)
-        self._permuted: Any = None             # S[:, order] on the kept pattern
+        # SuperLU's column order from the first factorization: (order, data gather, pattern of
+        # S[:, order]), set once as a whole and only read afterwards (runs may share a plan)
+        self._kept: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def matches(self, S: sp.csc_matrix) -> bool:
         """Whether S has exactly this plan's pattern."""
@@ -157,20 +157,17 @@ class SparsePlan:
 
     def superlu(self, S: sp.csc_matrix) -> Any:
         """SuperLU of S; from the second call on with the kept column order (no ordering step)."""
-        if self.perm_c is None:
+        kept = self._kept
+        if kept is None:
             lu = spla.splu(S)
-            self.perm_c = lu.perm_c.copy()
-            # columns in the order perm_c, as a fixed pattern whose data is gathered from S's
-            order = np.argsort(self.perm_c)          # new column k is old column order[k]
-            P = S[:, order]
+            order = np.argsort(lu.perm_c)            # new column k is old column order[k]
             tag = sp.csc_matrix((np.arange(S.nnz, dtype=float), S.indices, S.indptr), shape=S.shape)
-            self._data_order = tag[:, order].data.astype(np.intp)
-            self._permuted = sp.csc_matrix((P.data, P.indices, P.indptr), shape=S.shape)
-            self._col_order = order
+            P = tag[:, order]
+            self._kept = (order, P.data.astype(np.intp), P.indices.copy(), P.indptr.copy())
             return lu
-        Pm = self._permuted
-        Pm.data = S.data[self._data_order]
-        return _ColumnPermutedLU(spla.splu(Pm, permc_spec="NATURAL"), self._col_order)
+        order, gather, indices, indptr = kept
+        Pm = sp.csc_matrix((S.data[gather], indices, indptr), shape=S.shape)
+        return _ColumnPermutedLU(spla.splu(Pm, permc_spec="NATURAL"), order)
 
 
 class _ColumnPermutedLU:
