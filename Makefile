@@ -83,6 +83,7 @@ bench: $(STAMP)
 	$(PY) scripts/bench_sensitivity_cost.py --repeats 3 --no-fd --partials complex cases/tyrolean_weir.yaml
 	$(PY) scripts/bench_sensitivity_cost.py --repeats 5 cases/duffing_chain.yaml cases/sdof_step.yaml cases/truss_impact.yaml
 	$(PY) scripts/bench_large.py
+	$(PY) scripts/bench_step_cost.py --repeats 5
 
 bench-peers: $(STAMP)
 	$(VENV)/bin/pip install --quiet -e ".[peers]"

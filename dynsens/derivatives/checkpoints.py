@@ -34,13 +34,7 @@ def _matrix_bytes(a: Any) -> int:
 
 def factor_bytes(f: Factor | None) -> int:
     """Memory held by a factor (bytes)."""
-    if f is None:
-        return 0
-    if f.kind == "diag":
-        return int(f._inv.nbytes)
-    if f.kind == "sparse":
-        return 12 * int(f._lu.L.nnz + f._lu.U.nnz)
-    return int(f._lu[0].nbytes)
+    return 0 if f is None else f.nbytes
 
 
 class RecordStore:

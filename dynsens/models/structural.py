@@ -27,6 +27,7 @@ from .base import Linearization, Model, ParameterTable, StepState, Traits
 from .beams import BeamSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
+from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
 from .structural_outputs import StructuralOutputs
 from .timefunctions import TimeFunction
 
@@ -112,6 +113,10 @@ class StructuralModel(StructuralOutputs, Model):
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
+        self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per _assemble site
+        self._sums: dict[str, UnionCache] = {}                   # sparse models: per _add site
+        self._unions = UnionCache()                              # sparse iteration matrices
+        self._diag_mass: tuple[np.ndarray, Any] | None = None    # (mass vector, its sparse diag(M))
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
         """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
@@ -183,7 +188,7 @@ class StructuralModel(StructuralOutputs, Model):
         f = params["mass"] * s.qdd
         if self.rotating_mass:
             fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
-            f = f + fe.reshape(fe.shape[:-2] + (-1,)) @ self._inertia_scatter
+            f = f + _times(fe.reshape(fe.shape[:-2] + (-1,)), self._inertia_scatter)
         return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -212,7 +217,7 @@ class StructuralModel(StructuralOutputs, Model):
             if key not in self._elongation_of:
                 self._elongation_of[key] = self._spring_elongation[:, springs]
             elongation = self._elongation_of[key]
-        delta = q @ elongation                       # δ = u_a − u_b for every spring
+        delta = _times(q, elongation)                # δ = u_a − u_b for every spring
 
         def pick(key: str) -> np.ndarray:
             return params[key] if springs is None else params[key][..., springs]
@@ -299,7 +304,9 @@ class StructuralModel(StructuralOutputs, Model):
         keep, r, c, flat = plan
         v = np.concatenate([np.ravel(x) for x in vals])[keep]
         if self.traits.sparse:
-            return sp.csc_matrix((v, (r, c)), shape=(n, n))
+            if site not in self._patterns:
+                self._patterns[site] = PatternAssembly(n, r, c)
+            return self._patterns[site].matrix(v, dtype)
         # bincount sums repeated positions (as np.add.at) at a fraction of its cost
         K = np.bincount(flat, v.real, n * n)
         if np.iscomplexobj(v) or np.dtype(dtype).kind == "c":
@@ -329,7 +336,7 @@ class StructuralModel(StructuralOutputs, Model):
         if not len(self.nl_dampers):
             return 0.0
         F, _ = self.nl_dampers.force(self.nl_dampers.velocity(self._ext(qd)), params["pv"])
-        return F @ self._nl_damper_scatter
+        return _times(F, self._nl_damper_scatter)
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
@@ -337,15 +344,15 @@ class StructuralModel(StructuralOutputs, Model):
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
             fs, _ = self._spring_state(q, params)
-            f = f + fs @ self._spring_scatter
+            f = f + _times(fs, self._spring_scatter)
         if len(self.bar_names):
             bs = self._bar_state(q, params)
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
             flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
-            f = f + flat @ self._bar_scatter
+            f = f + _times(flat, self._bar_scatter)
         if len(self.beams):
             fb = self.beams.forces(self._ext(q), params)
-            f = f + fb.reshape(fb.shape[:-2] + (-1,)) @ self._beam_scatter
+            f = f + _times(fb.reshape(fb.shape[:-2] + (-1,)), self._beam_scatter)
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -358,21 +365,18 @@ class StructuralModel(StructuralOutputs, Model):
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
         """F_R for several parameter sets at one state, vectorized: (n, B)."""
-        if self.traits.sparse:
-            return super().residual_batch(t, s, params_list)
         return self.residual_batch_steps(np.array([t]), [s], params_list)[0]
 
     def residual_batch_steps(self, ts: np.ndarray, states: list[StepState],
                              params_list: list[dict[str, Any]]) -> np.ndarray:
         """F_R at K states (times ts, s) for several parameter sets, vectorized over both:
-        (K, n, B).  Sparse models evaluate state by state and set by set."""
-        if self.traits.sparse:
-            return super().residual_batch_steps(ts, states, params_list)
+        (K, n, B).  Sparse models multiply the damping matrix of each set with all K states."""
         if self._stacked is None or self._stacked[0] is not params_list:   # keeps the list alive
             st = self.stack_parameters(params_list)
-            assert st is not None  # dense models always stack
+            assert st is not None  # structural models always stack
             if self.traits.has_damping:
-                st["D"] = np.stack([p["D"] for p in params_list])
+                Ds = [p["D"] for p in params_list]
+                st["D"] = Ds if self.traits.sparse else np.stack(Ds)
             self._stacked = (params_list, st)
         st = self._stacked[1]
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
@@ -383,7 +387,10 @@ class StructuralModel(StructuralOutputs, Model):
         if len(self.followers):
             R = R - np.stack([self.followers.force(t, self._ext(q[i]), st["pv"])[..., :self.n]
                               for i, t in enumerate(ts)])
-        if self.traits.has_damping:
+        if self.traits.has_damping and self.traits.sparse:
+            # one sparse product per parameter set, over the K states: (K, B, n)
+            R = R + np.stack([(D @ qd[:, 0, :].T).T for D in st["D"]], axis=1) + self._nl_damper_force(qd, st)
+        elif self.traits.has_damping:
             R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
         return R.transpose(0, 2, 1)
 
@@ -429,25 +436,52 @@ class StructuralModel(StructuralOutputs, Model):
                 for params in self.table.design_dependents()]
 
     def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
-        K = self._tangent(s.q, params)
+        # each block gathers its terms (follower loads, nonlinear dampers, a turning mass) and sums
+        # them once (sparse models: on a pattern kept per block, see :meth:`_add`)
+        Ks = [self._tangent(s.q, params)]
         if len(self.followers):
             rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
-            K = K - self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"]))
-        M = sp.diags(params["mass"]).tocsc() if self.traits.sparse else np.diag(params["mass"])
+            Ks.append(-self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"])))
+        Ms = [self._diagonal_mass(params)]
+        Ds = [params["D"]] if self.traits.has_damping else []
+        if len(self.nl_dampers):
+            rows, cols, vals = self.nl_dampers.tangent(self._ext(s.qd), params["pv"])
+            Ds.append(self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"])))
         if self.rotating_mass:
             rows, cols, m_v, c_v, k_v = self.beams.inertia_jacobians(
                 self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
             dtype = np.result_type(s.q, s.qd, s.qdd, params["pv"])
-            M = M + self._assemble("inertia_M", [rows], [cols], [m_v], dtype)
-            K = K + self._assemble("inertia_K", [rows], [cols], [k_v], dtype)
-            C = self._assemble("inertia_C", [rows], [cols], [c_v], dtype)
-        D = params["D"] if self.traits.has_damping else None
-        if len(self.nl_dampers):
-            rows, cols, vals = self.nl_dampers.tangent(self._ext(s.qd), params["pv"])
-            D = D + self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"]))
-        if self.rotating_mass:
-            D = D + C
-        return Linearization(R_z=M, R_q=K, R_qd=D)
+            Ms.append(self._assemble("inertia_M", [rows], [cols], [m_v], dtype))
+            Ks.append(self._assemble("inertia_K", [rows], [cols], [k_v], dtype))
+            Ds.append(self._assemble("inertia_C", [rows], [cols], [c_v], dtype))
+        M, K = self._add("M", Ms), self._add("K", Ks)
+        D = self._add("D", Ds) if Ds else None
+        if not self.traits.sparse:
+            return Linearization(R_z=M, R_q=K, R_qd=D)
+        return SparseLinearization(R_z=M, R_q=K, R_qd=D, unions=self._unions)
+
+    def _diagonal_mass(self, params: dict[str, Any]) -> Any:
+        """diag(M) of the point, bar and lumped beam masses; sparse: made once per design."""
+        mass = params["mass"]
+        if not self.traits.sparse:
+            return np.diag(mass)
+        kept = self._diag_mass          # read once: the pair stays consistent
+        if kept is None or kept[0] is not mass:
+            kept = self._diag_mass = (mass, sp.diags(mass).tocsc())
+        return kept[1]
+
+    def _add(self, site: str, terms: list[Any]) -> Any:
+        """terms[0] + terms[1] + … in this order; sparse models sum on the union pattern kept
+        for ``site``, entries that cancel staying as explicit zeros, so that the iteration matrix
+        keeps one pattern for the whole run (its factorization plan is made once)."""
+        if len(terms) == 1:
+            return terms[0]
+        if not self.traits.sparse:
+            total = terms[0]
+            for term in terms[1:]:
+                total = total + term
+            return total
+        return self._sums.setdefault(site, UnionCache()).add(terms)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
         """Sum of point masses, bar and beam masses ρAL (mass unit of the case); a mass on a
@@ -461,3 +495,11 @@ class StructuralModel(StructuralOutputs, Model):
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
+
+
+def _times(x: np.ndarray, M: Any) -> np.ndarray:
+    """x @ M for x (..., a) and M (a, b) dense or sparse (scipy's sparse products take at most
+    two dimensions: the leading axes are folded into one)."""
+    if x.ndim <= 2 or not sp.issparse(M):
+        return x @ M
+    return (x.reshape(-1, x.shape[-1]) @ M).reshape(x.shape[:-1] + (M.shape[1],))

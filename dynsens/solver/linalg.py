@@ -1,8 +1,12 @@
 """Factorizations of the iteration matrix: one factor, many right-hand sides.
 
-Dense LU (LAPACK getrf via scipy) or sparse LU (SuperLU via ``splu``), chosen once from
-the model's traits.  A diagonal matrix needs no factorization at all: it is inverted
-elementwise (lumped masses, the initial-acceleration solve of spring-mass systems).
+Dense LU (LAPACK getrf), band LU (LAPACK gbtrf) or sparse LU (SuperLU via ``splu``).  The
+model's traits say whether S comes dense or sparse; what its pattern then allows is analysed
+once per pattern (:mod:`.banded`): a sparse matrix whose band after reverse Cuthill–McKee is
+narrow, or a dense one with a narrow band, is factorized as a band; other sparse matrices by
+SuperLU with the column ordering of the first factorization kept.  A diagonal matrix needs
+no factorization at all: it is inverted elementwise (lumped masses, the initial-acceleration
+solve of spring-mass systems).  The m sensitivity right-hand sides go to one solve call.
 """
 from __future__ import annotations
 
@@ -12,7 +16,12 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+
+from .banded import dense_band_plan, sparse_plan
+
+# plans kept per pattern (see .banded): the structure of S is analysed once per run
+_DENSE_PLANS: dict[Any, Any] = {}
+_SPARSE_PLANS: dict[Any, Any] = {}
 
 
 class SingularMatrixError(ArithmeticError):
@@ -65,8 +74,16 @@ class Factor:
     def __init__(self, S: Any, counters: Counters, dense_general: bool = False):
         self.counters = counters
         self.n = S.shape[0]
-        diag = None if dense_general else _diagonal_or_none(S)
+        self._lu: Any = None   # the factor: of the kind below
         counters.factorizations += 1
+        plan = None
+        if sp.issparse(S) and not dense_general:
+            S = S if S.format == "csc" and S.has_canonical_format else sp.csc_matrix(S)
+            plan = sparse_plan(S, _SPARSE_PLANS)
+            # only a matrix of band width 1 can be diagonal
+            diag = _diagonal_or_none(S) if plan.band is not None and plan.band.width == 1 else None
+        else:
+            diag = None if dense_general else _diagonal_or_none(S)
         if diag is not None:
             # a diagonal matrix is its own factorization: invert elementwise
             if np.any(diag.real == 0.0) or not np.all(np.isfinite(diag)):
@@ -75,10 +92,24 @@ class Factor:
             self._inv = 1.0 / diag
             counters.diagonal_inversions += 1
             return
-        if not dense_general and sp.issparse(S):
+        band = None
+        if plan is not None:
+            band = plan.band
+        elif not sp.issparse(S):
+            band = dense_band_plan(S, _DENSE_PLANS)
+        if band is not None:
+            values = S.data if plan is not None else S
+            if not np.isfinite(values.sum()) and not np.all(np.isfinite(values)):
+                raise SingularMatrixError("matrix has non-finite entries")
+            self._kind = "banded"
+            self._lu = band.factor(values)
+            if self._lu.info > 0:
+                raise SingularMatrixError(f"exactly zero pivot in column {self._lu.info}")
+            udiag = self._lu.u_diagonal()
+        elif plan is not None:
             self._kind = "sparse"
             try:
-                self._lu = spla.splu(sp.csc_matrix(S))
+                self._lu = plan.superlu(S)
             except RuntimeError as exc:  # SuperLU reports exact singularity this way
                 raise SingularMatrixError(str(exc)) from None
             udiag = self._lu.U.diagonal()
@@ -104,8 +135,19 @@ class Factor:
                 raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
 
     @property
+    def nbytes(self) -> int:
+        """Memory held by the factor (bytes; SuperLU's: 12 per entry of L and U)."""
+        if self._kind == "diag":
+            return int(self._inv.nbytes)
+        if self._kind == "banded":
+            return int(self._lu.lu.nbytes + self._lu.piv.nbytes)
+        if self._kind == "sparse":
+            return 12 * int(self._lu.L.nnz + self._lu.U.nnz)
+        return int(self._lu[0].nbytes)
+
+    @property
     def kind(self) -> str:
-        """``diag``, ``dense`` or ``sparse``: how S was factorized."""
+        """``diag``, ``dense``, ``banded`` or ``sparse``: how S was factorized."""
         return self._kind
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -114,6 +156,8 @@ class Factor:
         self.counters.solve_columns += 1 if rhs.ndim == 1 else rhs.shape[1]
         if self._kind == "diag":
             return rhs * (self._inv if rhs.ndim == 1 else self._inv[:, None])
+        if self._kind == "banded":
+            return self._lu.solve(rhs)
         if self._kind == "sparse":
             if np.iscomplexobj(rhs) and not np.iscomplexobj(self._lu.U.data):
                 return self._lu.solve(np.ascontiguousarray(rhs.real)) + \
@@ -125,7 +169,6 @@ class Factor:
         x, info = self._getrs(lu, piv, rhs)
         return x
 
-
     def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:
         """Solve Sᵀ x = rhs (transpose, not conjugate transpose) with the same factor; rhs (n,)
         or (n, k), real or complex (the adjoint sweep's solves)."""
@@ -133,6 +176,8 @@ class Factor:
         self.counters.solve_columns += 1 if rhs.ndim == 1 else rhs.shape[1]
         if self._kind == "diag":
             return rhs * (self._inv if rhs.ndim == 1 else self._inv[:, None])
+        if self._kind == "banded":
+            return self._lu.solve(rhs, transposed=True)
         if self._kind == "sparse":
             if np.iscomplexobj(rhs) and not np.iscomplexobj(self._lu.U.data):
                 return self._lu.solve(np.ascontiguousarray(rhs.real), trans="T") + \

@@ -1,0 +1,217 @@
+"""Structure of an iteration matrix, analysed once per pattern: band plans and kept orderings.
+
+The iteration matrix of a run keeps its sparsity pattern from step to step and from Newton
+iteration to Newton iteration; only its values change.  What depends on the pattern alone is
+worked out once and kept, keyed by the pattern itself (compared exactly, so a plan is never
+applied to a matrix it was not made for):
+
+* :class:`BandPlan` — a symmetric permutation (reverse Cuthill–McKee for sparse matrices, the
+  identity for dense ones) and the positions of the entries in LAPACK's band storage, for
+  gbtrf / gbtrs when the bandwidth after reordering is small;
+* :class:`OrderedSparsePlan` — SuperLU's column ordering of the first factorization, applied to
+  the values of later ones (only the numeric factorization is repeated).
+
+Which factorization pays is decided from break-even points measured by
+``scripts/bench_linalg.py`` (constants below), not from the size alone.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.linalg import lapack
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+# Measured break-even points (scripts/bench_linalg.py, BENCHMARKS.md "Linear algebra that costs
+# what the matrix needs"): a dense matrix is factorized as a band from DENSE_BAND_MIN_N
+# unknowns on when its band (kl + ku + 1) is at most DENSE_BAND_FRACTION of n (band and dense
+# LU break even near n = 48 for a tridiagonal matrix, n = 64 for a band of 9, n ≈ 200 for 129);
+# a sparse one whenever its band after reordering is at most SPARSE_BAND_MAX wide (band LU
+# was faster than SuperLU in every measured case up to that width, n = 8 … 10 000).
+DENSE_BAND_MIN_N = 48
+DENSE_BAND_FRACTION = 1 / 6
+SPARSE_BAND_MAX = 129
+
+_GB: dict[Any, tuple[Any, Any]] = {}
+
+
+def _gb(dtype: Any) -> tuple[Any, Any]:
+    """gbtrf, gbtrs for a dtype (looked up once)."""
+    if dtype not in _GB:
+        _GB[dtype] = tuple(lapack.get_lapack_funcs(("gbtrf", "gbtrs"), dtype=dtype))
+    return _GB[dtype]
+
+
+class BandPlan:
+    """Band storage of a matrix with rows/columns reordered by ``perm`` (None: as they are).
+
+    ``rows``, ``cols``: where each stored entry (CSC data order, or the row-major positions
+    ``src`` of a dense matrix) goes in the (2 kl + ku + 1, n) band array.
+    """
+
+    def __init__(self, n: int, i: np.ndarray, j: np.ndarray, perm: np.ndarray | None,
+                 src: np.ndarray | None = None):
+        self.n, self.perm, self.src = n, perm, src
+        if perm is not None:
+            inv = np.empty(n, dtype=np.intp)
+            inv[perm] = np.arange(n)
+            i, j = inv[i], inv[j]
+        self.kl = int(max(np.max(i - j, initial=0), 0))
+        self.ku = int(max(np.max(j - i, initial=0), 0))
+        self.rows = self.kl + self.ku + i - j
+        self.cols = j
+
+    @property
+    def width(self) -> int:
+        """kl + ku + 1: the number of stored diagonals."""
+        return self.kl + self.ku + 1
+
+    def factor(self, values: np.ndarray) -> "BandFactor":
+        """Factorize the matrix whose stored entries are ``values`` (see ``src``)."""
+        ab = np.zeros((2 * self.kl + self.ku + 1, self.n), dtype=values.dtype, order="F")
+        ab[self.rows, self.cols] = values if self.src is None else values.ravel()[self.src]
+        gbtrf, gbtrs = _gb(ab.dtype)
+        lu, piv, info = gbtrf(ab, self.kl, self.ku, overwrite_ab=1)
+        return BandFactor(self, lu, piv, info, gbtrs)
+
+
+class BandFactor:
+    """LU of a band matrix (gbtrf); ``solve`` for real or complex (n,) or (n, k) right-hand sides,
+    with S or its transpose Sᵀ (not the conjugate transpose)."""
+
+    def __init__(self, plan: BandPlan, lu: np.ndarray, piv: np.ndarray, info: int, gbtrs: Any):
+        self.plan, self.lu, self.piv, self.info, self._gbtrs = plan, lu, piv, info, gbtrs
+        self.complex = lu.dtype.kind == "c"
+
+    def u_diagonal(self) -> np.ndarray:
+        """Diagonal of U (the pivots), for the singularity test."""
+        p = self.plan
+        return self.lu[p.kl + p.ku]
+
+    def solve(self, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
+        """x with S x = rhs, or Sᵀ x = rhs when ``transposed``.  The symmetric reordering
+        P S Pᵀ has the transpose P Sᵀ Pᵀ: the same permutation serves both."""
+        if np.iscomplexobj(rhs) and not self.complex:
+            return self.solve(rhs.real, transposed) + 1j * self.solve(rhs.imag, transposed)
+        p = self.plan
+        b = rhs if p.perm is None else rhs[p.perm]
+        x, _ = self._gbtrs(self.lu, p.kl, p.ku, b.reshape(p.n, -1), self.piv, trans=int(transposed))
+        x = x.reshape(rhs.shape)
+        if p.perm is None:
+            return x
+        out = np.empty_like(x)
+        out[p.perm] = x
+        return out
+
+
+def dense_band_plan(S: np.ndarray, cache: dict[Any, BandPlan | None]) -> BandPlan | None:
+    """The band plan of a dense square matrix S if it pays (else None), kept per shape in
+    ``cache`` and re-used while S has no entry outside the kept band (one count, exact)."""
+    n = S.shape[0]
+    if n < DENSE_BAND_MIN_N:
+        return None
+    key = (n, S.dtype.kind)
+    plan = cache.get(key)
+    nnz = np.count_nonzero(S)
+    if plan is not None and np.count_nonzero(S.ravel()[plan.src]) == nnz:
+        return plan
+    i, j = np.nonzero(S)
+    lower = int(np.max(i - j, initial=0))
+    upper = int(np.max(j - i, initial=0))
+    if lower + upper + 1 > DENSE_BAND_FRACTION * n:
+        cache.pop(key, None)
+        return None
+    # every position of the band (entries that are zero now may not be later)
+    d = np.arange(-lower, upper + 1)
+    jj = (np.arange(n)[None, :] + 0 * d[:, None])
+    ii = jj - d[:, None]
+    ok = (ii >= 0) & (ii < n)
+    ii, jj = ii[ok], jj[ok]
+    plan = BandPlan(n, ii, jj, None, src=ii * n + jj)
+    cache[key] = plan
+    return plan
+
+
+class SparsePlan:
+    """What the pattern of a sparse (CSC, canonical) matrix decides, worked out once: a band
+    plan after reverse Cuthill–McKee when the band is narrow, else SuperLU's column order."""
+
+    def __init__(self, S: sp.csc_matrix):
+        self.indptr, self.indices = S.indptr.copy(), S.indices.copy()
+        n = S.shape[0]
+        self.n = n
+        j = np.repeat(np.arange(n), np.diff(S.indptr))
+        i = S.indices
+        # the symmetric pattern S + Sᵀ orders rows and columns alike
+        sym = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
+        perm = reverse_cuthill_mckee((sym + sym.T).tocsr(), symmetric_mode=True).astype(np.intp)
+        band = BandPlan(n, i, j, perm)
+        self.band = band if band.width <= SPARSE_BAND_MAX else None
+        # SuperLU's column order from the first factorization: (order, data gather, pattern of
+        # S[:, order]), set once as a whole and only read afterwards (runs may share a plan)
+        self._kept: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def matches(self, S: sp.csc_matrix) -> bool:
+        """Whether S has exactly this plan's pattern."""
+        return (S.indptr.size == self.indptr.size and S.indices.size == self.indices.size
+                and np.array_equal(S.indptr, self.indptr) and np.array_equal(S.indices, self.indices))
+
+    def superlu(self, S: sp.csc_matrix) -> Any:
+        """SuperLU of S; from the second call on with the kept column order (no ordering step)."""
+        kept = self._kept
+        if kept is None:
+            lu = spla.splu(S)
+            order = np.argsort(lu.perm_c)            # new column k is old column order[k]
+            tag = sp.csc_matrix((np.arange(S.nnz, dtype=float), S.indices, S.indptr), shape=S.shape)
+            P = tag[:, order]
+            self._kept = (order, P.data.astype(np.intp), P.indices.copy(), P.indptr.copy())
+            return lu
+        order, gather, indices, indptr = kept
+        Pm = sp.csc_matrix((S.data[gather], indices, indptr), shape=S.shape)
+        return _ColumnPermutedLU(spla.splu(Pm, permc_spec="NATURAL"), order)
+
+
+class _ColumnPermutedLU:
+    """SuperLU of S[:, order] answering for S: x[order] = y; for Sᵀ, whose rows are permuted
+    instead, the right-hand side is taken in that order: (S[:, order])ᵀ x = rhs[order]."""
+
+    def __init__(self, lu: Any, order: np.ndarray):
+        self.lu, self.order = lu, order
+
+    @property
+    def U(self) -> Any:
+        """U of the column-permuted matrix (its diagonal: the pivots)."""
+        return self.lu.U
+
+    @property
+    def L(self) -> Any:
+        """L of the column-permuted matrix."""
+        return self.lu.L
+
+    def solve(self, rhs: np.ndarray, trans: str = "N") -> np.ndarray:
+        """x with S x = rhs (``trans`` "N") or Sᵀ x = rhs ("T"), as SuperLU's own ``solve``."""
+        if trans == "T":
+            return self.lu.solve(np.ascontiguousarray(rhs[self.order]), trans="T")
+        y = self.lu.solve(rhs)
+        x = np.empty_like(y)
+        x[self.order] = y
+        return x
+
+
+def sparse_plan(S: sp.csc_matrix, cache: dict[Any, list[SparsePlan]]) -> SparsePlan:
+    """The kept plan of S's pattern (made on first sight)."""
+    key = (S.shape[0], S.nnz)
+    for plan in cache.get(key, []):
+        if plan.matches(S):
+            return plan
+    plan = SparsePlan(S)
+    cache.setdefault(key, []).append(plan)
+    # a run sees one or two patterns (t0 and the steps): keep the few most recent ones
+    while sum(len(v) for v in cache.values()) > 4:
+        oldest = next(iter(cache))
+        cache[oldest].pop(0)
+        if not cache[oldest]:
+            del cache[oldest]
+    return plan

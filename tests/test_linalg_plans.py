@@ -1,0 +1,116 @@
+"""Factorizations chosen from the matrix's structure (dynsens/solver/banded.py): band LU for
+narrow bands (dense input, or sparse after reverse Cuthill–McKee), SuperLU with a kept column
+order otherwise; every kind solves to round-off, a kept plan is never applied to another
+pattern, and a whole run gives the numbers of the dense factorization to round-off."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import dynsens.solver.banded as banded
+from dynsens.solver.linalg import Counters, Factor, SingularMatrixError
+
+import scripts_path  # noqa: F401
+import yardstick_chain as ys
+
+
+def _band(n: int, w: int, seed: int = 0) -> sp.csc_matrix:
+    rng = np.random.default_rng(seed)
+    A = sp.diags([rng.standard_normal(n - abs(d)) for d in range(-w, w + 1)], list(range(-w, w + 1)))
+    return sp.csc_matrix(A + sp.identity(n) * (2.0 * w + 1.0))
+
+
+def _residual(S, x, b) -> float:
+    return float(np.max(np.abs(S @ x - b)) / np.max(np.abs(b)))
+
+
+@pytest.mark.parametrize("dtype", [float, complex])
+def test_dense_band_matrix_is_factorized_as_band(dtype) -> None:
+    A = _band(100, 2).toarray().astype(dtype)
+    if dtype is complex:
+        A = A + 1j * np.diag(np.ones(100))
+    rng = np.random.default_rng(1)
+    f = Factor(A, Counters())
+    assert f.kind == "banded"
+    for b in (rng.standard_normal(100), rng.standard_normal((100, 4)) + 1j * rng.standard_normal((100, 4))):
+        x = f.solve(b)
+        assert x.shape == b.shape and _residual(A, x, b) < 1e-14
+        assert np.allclose(x, np.linalg.solve(A, b), rtol=1e-12, atol=0)
+
+
+def test_dense_matrix_leaving_the_kept_band_is_factorized_dense() -> None:
+    A = _band(100, 1).toarray()
+    assert Factor(A, Counters()).kind == "banded"
+    B = A.copy()
+    B[0, 60] = 0.5                     # same size, an entry far outside the kept band
+    f = Factor(B, Counters())
+    assert f.kind == "dense"
+    b = np.arange(1.0, 101.0)
+    assert _residual(B, f.solve(b), b) < 1e-14
+    assert Factor(A, Counters()).kind == "banded"
+    small = _band(20, 1).toarray()     # below the measured break-even: dense
+    assert Factor(small, Counters()).kind == "dense"
+
+
+def test_sparse_permuted_band_is_reordered_and_factorized_as_band() -> None:
+    n = 400
+    p = np.random.default_rng(2).permutation(n)
+    A = sp.csc_matrix(_band(n, 1)[p][:, p])          # a tridiagonal matrix, scrambled
+    f = Factor(A, Counters())
+    assert f.kind == "banded" and f._lu.plan.width <= 5
+    b = np.random.default_rng(3).standard_normal((n, 3)) * (1 + 1j)
+    assert _residual(A, f.solve(b), b) < 1e-14
+
+
+def test_sparse_wide_pattern_keeps_superlu_column_order_across_values() -> None:
+    n = 300
+    pattern = sp.random(n, n, density=0.03, random_state=4, format="csc")
+    A = sp.csc_matrix(pattern + sp.identity(n) * 10.0)
+    rng = np.random.default_rng(5)
+    for _ in range(3):                                 # new values, same pattern
+        S = A.copy()
+        S.data = S.data * (1.0 + rng.random(S.nnz))
+        f = Factor(S, Counters())
+        assert f.kind == "sparse"
+        b = rng.standard_normal(n)
+        assert _residual(S, f.solve(b), b) < 1e-13
+    # same size and count of entries, another pattern: a new plan, not the kept one
+    other = sp.csc_matrix(sp.random(n, n, density=0.03, random_state=6, format="csc") + sp.identity(n) * 10.0)
+    other.data[:] = 1.0
+    other = other + sp.identity(n) * 9.0
+    f = Factor(other, Counters())
+    b = rng.standard_normal(n)
+    assert _residual(other, f.solve(b), b) < 1e-13
+
+
+def test_singular_band_matrix_is_an_error() -> None:
+    A = _band(100, 1).toarray()
+    A[50, :] = 0.0
+    with pytest.raises(SingularMatrixError):
+        Factor(A, Counters())
+    S = sp.csc_matrix(_band(400, 1))
+    S = S.tolil()
+    S[7, 6] = S[7, 8] = 0.0
+    S[7, 7] = 1e-300
+    with pytest.raises(SingularMatrixError):
+        Factor(sp.csc_matrix(S), Counters())
+
+
+@pytest.mark.parametrize("n", [100, 400])
+def test_chain_run_on_band_factorization_matches_dense_and_sparse(n, monkeypatch) -> None:
+    """The chain's responses and gradients (complex partials, exact to round-off) with band LU
+    against the factorization used before (dense LU at N = 100, SuperLU at N = 400): 1e-12."""
+    import dynsens
+    case = ys.dynsens_case(n, 150, "complex")
+    res = dynsens.run_case(case, sensitivities=True, history=())
+    monkeypatch.setattr(banded, "DENSE_BAND_MIN_N", 10 ** 9)
+    monkeypatch.setattr(banded, "SPARSE_BAND_MAX", 0)
+    monkeypatch.setattr("dynsens.solver.linalg._SPARSE_PLANS", {})
+    monkeypatch.setattr("dynsens.solver.linalg._DENSE_PLANS", {})
+    ref = dynsens.run_case(ys.dynsens_case(n, 150, "complex"), sensitivities=True, history=())
+    for name, r in ref.responses.items():
+        a = res.responses[name]
+        assert abs(a.value - r.value) <= 1e-13 * abs(r.value)
+        assert np.max(np.abs(a.gradient - r.gradient)) <= 1e-12 * np.max(np.abs(r.gradient))
+    assert res.counters["factorizations"] == ref.counters["factorizations"]
