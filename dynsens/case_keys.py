@@ -59,7 +59,7 @@ def _req(name: str, kind: str, doc: str, **kw: Any) -> Key:
 
 
 TIME_FUNCTION_TYPES = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
-AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio")
+AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio", "displacement_limit")
 RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "integral", "event_time", "end_time", "mass", "expression")
 STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar", "beam")
 BEAM_SECTION_SHAPES = ("tube", "rectangle", "box", "properties")
@@ -240,6 +240,14 @@ SECTIONS: dict[str, Section] = {
     "response.buckling_ratio": Section("responses[i], type: buckling_ratio", "−N/P_E (compression over the Euler "
                                        "load π²EI/(KL)²) of bars with `inertia`, aggregated over the elements and "
                                        "the run.", _RATIO_KEYS, type_value="buckling_ratio"),
+    "response.displacement_limit": Section("responses[i], type: displacement_limit", "|u|/limit, aggregated "
+                                           "over the nodes (or DOFs) and the run: |u| is the length of a node's "
+                                           "translation vector, or the absolute value of a DOF (both signs).", (
+        *_RESPONSE_COMMON, *_RATIO_KEYS[len(_RESPONSE_COMMON) + 1:],     # aggregate, rho
+        _k("nodes", "any", "a node name or a list of them: the length of each node's translation"),
+        _k("dofs", "any", "a DOF name or a list of them: the absolute value of each (instead of `nodes`)"),
+        _req("limit", "expr", "allowable |u| (a positive constant, the case's length unit)"),
+    ), type_value="displacement_limit"),
     "response.integral": Section("responses[i], type: integral", "Trapezoid integral over the steps, of one "
                                  "quantity's component or of an expression of quantities.", (
         *_RESPONSE_COMMON,
@@ -360,9 +368,11 @@ SECTIONS: dict[str, Section] = {
         _k("alpha", "expr", "mass-proportional (1/s)", default=0.0),
         _k("beta", "expr", "stiffness-proportional (s)", default=0.0),
     )),
-    "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}` or "
-                                   "`{element: NAME | [NAMES] | all, kind}`.", (
+    "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}`, `{node: NAME, "
+                                   "kind}` or `{element: NAME | [NAMES] | all, kind}`.", (
         _k("dof", "any", "DOF name(s)"), _k("element", "any", "element name(s) or 'all'"),
+        _k("node", "name", "a node: its free translation DOFs x, y (z) (kinds displacement, velocity, "
+                           "acceleration)"),
         _k("kind", "enum", "displacement | velocity | acceleration (DOFs); force | stress | strain | buckling "
                            "(elements; beams: force, stress; dampers: force)",
            values=("displacement", "velocity", "acceleration", "force", "stress", "strain", "buckling")),

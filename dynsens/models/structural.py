@@ -77,6 +77,7 @@ class StructuralModel(StructuralOutputs, Model):
         self.damper_names = dampers.names
         self.c = dp_par.get("c", np.zeros(0, int))
         self.dim = dim
+        self.node_names = list(node_coords)
         self.bar_dofs, bar_par = bars.freeze(2 * dim)
         self.bar_names = bars.names
         self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))

@@ -17,6 +17,8 @@ class StructuralOutputs:
     """Mixin of :class:`~dynsens.models.structural.StructuralModel`: its ``output`` method."""
 
     dof_names: list[str]
+    node_names: list[str]
+    dim: int
     spring_names: list[str]
     damper_names: list[str]
     bar_names: list[str]
@@ -30,13 +32,24 @@ class StructuralOutputs:
     _ext: Any
 
     def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
-        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}``,
+        ``{node: NAME, kind: ...}`` (the node's free translation DOFs x, y (z)) or
         ``{element: NAME|[NAMES]|all, kind: force|stress|strain|buckling}``; ``buckling`` is the
         ratio −N/P_E of the compressive axial force to the Euler load π²EI/(KL)² (bars with
         ``inertia``; positive in compression, > 1 means buckled)."""
         if not check_keys(spec, path, allowed("structural.quantity"), problems):
             return None
-        kind = spec.get("kind", "displacement" if "dof" in spec else "force")
+        kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
+        if "node" in spec and "dof" not in spec and "element" not in spec:
+            node = spec["node"]
+            if not isinstance(node, str) or node not in self.node_names:
+                problems.add(f"{path}.node", f"unknown node {node!r}{did_you_mean(str(node), self.node_names)}")
+                return None
+            free = [f"{node}.{a}" for a in "xyz"[:self.dim] if f"{node}.{a}" in self.dof_names]
+            if not free:
+                problems.add(f"{path}.node", f"every translation of node {node!r} is fixed")
+                return None
+            spec = {"dof": free, "kind": kind}
         if "dof" in spec:
             names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
             field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
