@@ -196,7 +196,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             if direction not in directions:
                 problems.add(f"{lp}.direction", f"expected one of {directions}, found {direction!r}")
                 continue
-            target = beam_dofs(ld["node"], f"{lp}.node")[directions.index(direction)]
+            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)] if direction in AXES else \
+                beam_dofs(ld["node"], f"{lp}.node")[directions.index(direction)]
         else:
             problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
             continue
