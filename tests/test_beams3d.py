@@ -273,6 +273,7 @@ def test_space_frame_mass_is_the_sum_of_rho_A_L(frame_run) -> None:
      "Iy"),
     (lambda el: el.update(orientation=[0, 0]), "model.elements[0].orientation", "non-zero vector"),
     (lambda el: el.update(mass="diagonal"), "model.elements[0].mass", "lumped or consistent"),
+    (lambda el: el.update(orientation=[-2.0, 0.0, 0.0]), "model.elements[0].orientation", "parallel"),
 ])
 def test_bad_3d_beam_entries_are_reported_with_their_path(change, path, needle) -> None:
     raw = cantilever(2)

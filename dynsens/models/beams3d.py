@@ -223,9 +223,10 @@ class Beam3DSet:
 
 def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: ParameterTable,
                   node_dofs: Callable[[Any, str], list[int]], node_coords: dict[str, list[int]],
-                  problems: ProblemCollector) -> None:
+                  problems: ProblemCollector, given_coords: dict[str, Any] | None = None) -> None:
     """Read one ``type: beam`` element entry of a ``dim: 3`` model into ``beams``; node_dofs
-    gives a node's (x, y, z, rx, ry, rz) DOFs."""
+    gives a node's (x, y, z, rx, ry, rz) DOFs; ``given_coords`` (the nodes' ``coords`` entries)
+    let an ``orientation`` along the beam be refused when the coordinates are numbers."""
     check_keys(el, ep, allowed("structural.beam"), problems, required=("nodes", "E", "G", "section"))
     pair = el.get("nodes", [])
     if not isinstance(pair, list) or len(pair) != 2:
@@ -258,6 +259,15 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
                           or not np.any(np.asarray(v, float))):
         problems.add(f"{ep}.orientation", f"expected a non-zero vector [x, y, z], found {v!r}")
         return
+    ends = [(given_coords or {}).get(p) for p in pair]
+    if v is not None and all(isinstance(c, list) and len(c) == 3 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in c) for c in ends):
+        d = np.asarray(ends[1], float) - np.asarray(ends[0], float)
+        w = np.asarray(v, float)
+        if np.linalg.norm(np.cross(d, w)) <= 1e-9 * np.linalg.norm(d) * np.linalg.norm(w):
+            problems.add(f"{ep}.orientation", f"the orientation {v} is parallel to the beam (it sets local y, "
+                                              f"which must cross the beam axis)")
+            return
     beams.names.append(name)
     beams.dofs.append(dofs)
     beams.coords.append(node_coords[pair[0]] + node_coords[pair[1]])

@@ -163,7 +163,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                  problems, positive=True))
             bar_nodes.append((pair[0], pair[1]))
         elif kind == "beam" and dim == 3:
-            parse_beam_3d(el, ep, name, frames, table, beam_dofs, node_coords, problems)
+            parse_beam_3d(el, ep, name, frames, table, beam_dofs, node_coords, problems,
+                          {k: nd.get("coords") for k, nd in nodes.items() if isinstance(nd, dict)})
         elif kind == "beam":
             for key in ("G", "orientation"):
                 if key in el:
