@@ -339,6 +339,8 @@ SECTIONS: dict[str, Section] = {
         _req("nodes", "list", "[node_1, node_2]", item="name"), _req("E", "expr", "Young's modulus"),
         _k("density", "expr", "density", default=0.0),
         _k("G", "expr", "shear modulus (3D beams: torsion GJ; required there)"),
+        _k("kinematics", "enum", "3D beams: small rotations (linear), or corotational (large displacements and "
+                                 "rotations, lumped mass)", values=("small", "corotational"), default="small"),
         _k("orientation", "vector", "3D beams: a vector in the local x–y plane, giving local y (the section's "
                                     "h direction)", length=3, default="global z; global y for a beam along z"),
         _req("section", "section", "cross-section", item="structural.beam_section"),

@@ -292,3 +292,87 @@ def test_plane_beams_refuse_3d_keys() -> None:
     with pytest.raises(CaseError) as err:
         load_case_dict(raw)
     assert any(p.path == "model.elements[0].G" for p in err.value.problems)
+
+
+# ---------------------------------------------------------------------- co-rotational (large rotations)
+def corot(n_el: int, **kw) -> dict:
+    raw = cantilever(n_el, **kw)
+    for el in raw["model"]["elements"]:
+        el["kinematics"] = "corotational"
+    return raw
+
+
+def _tangent_at(case, q):
+    model = case.model
+    params = model.parameters(case.x0)
+    z = np.zeros_like(q)
+    return as_dense(model.linearize(0.0, StepState(q, z, z, np.zeros(0), np.zeros(0), np.zeros(0)), params).R_q)
+
+
+def test_corotational_beam_at_rest_is_the_small_rotation_beam() -> None:
+    for axis in ((1.0, 0.0, 0.0), (1.0, 2.0, 2.0)):
+        small, large = (load_case_dict(f(4, axis=axis)) for f in (cantilever, corot))
+        K_small = _tangent_at(small, np.zeros(small.model.traits.n_q))
+        np.testing.assert_allclose(_tangent_at(large, np.zeros(large.model.traits.n_q)), K_small,
+                                   rtol=1e-12, atol=1e-12 * np.abs(K_small).max())
+
+
+def test_corotational_tangent_equals_complex_step_of_the_residual_at_a_large_rotation_state() -> None:
+    case = load_case_dict(corot(3, axis=(1.0, 2.0, 2.0)))
+    model = case.model
+    params = model.parameters(case.x0)
+    n = model.traits.n_q
+    q = np.random.default_rng(4).normal(scale=[60.0, 60.0, 60.0, 1.0, 1.0, 1.0] * 3)   # rotations ~1 rad
+    K = _tangent_at(case, q)
+    h, e = 1e-30, np.zeros(0)
+    cs = np.zeros((n, n))
+    for j in range(n):
+        qc = q.astype(complex)
+        qc[j] += 1j * h
+        zc = np.zeros(n, complex)
+        cs[:, j] = np.imag(model.residual(0.0, StepState(qc, zc, zc, e, e, e), params)) / h
+    np.testing.assert_allclose(K, cs, rtol=1e-11, atol=1e-11 * np.abs(cs).max())
+    np.testing.assert_allclose(K, K.T, rtol=1e-10, atol=1e-10 * np.abs(K).max())     # a potential's Hessian
+
+
+@pytest.mark.parametrize("direction, inertia, turns, n_el", [("ry", IZ_R, 0.5, 16), ("rz", IY_R, 0.75, 24)])
+def test_corotational_cantilever_rolled_up_by_an_end_moment(direction, inertia, turns, n_el) -> None:
+    """M = 2π·turns·EI/L bends the cantilever into an arc of radius R = EI/M through θ = ML/EI."""
+    from test_beams import static_solution
+    M = 2 * np.pi * turns * E * inertia / L
+    case = load_case_dict(corot(n_el, loads=[{"node": f"n{n_el}", "direction": direction, "value": M}]))
+    q = static_solution(case, load_steps=int(16 * turns))
+    u = dict(zip(case.model.dof_labels(), q))
+    theta, R = M * L / (E * inertia), E * inertia / M
+    tip = f"n{n_el}"
+    assert u[f"{tip}.{direction}"] == pytest.approx(theta, rel=1e-9)       # uniform curvature: exact rotations
+    bend = "z" if direction == "ry" else "y"                                 # moment about y bends x into −z
+    sign = -1.0 if direction == "ry" else 1.0
+    err = np.hypot(L + u[f"{tip}.x"] - R * np.sin(theta), u[f"{tip}.{bend}"] - sign * R * (1 - np.cos(theta)))
+    assert err < 2e-3 * L, err
+    other = "y" if bend == "z" else "z"
+    assert abs(u[f"{tip}.{other}"]) < 1e-9 * L
+
+
+def test_corotational_frame_sensitivities_equal_complex_step_and_adjoint_equals_direct() -> None:
+    raw = space_frame()
+    for el in raw["model"]["elements"][:3]:
+        el["kinematics"] = "corotational"
+        el["mass"] = "lumped"
+    raw["model"]["loads"][0]["value"] = 3.0e5          # a large sway and twist: rotations up to ~1 rad
+    raw["model"]["loads"][1]["value"] = 2.0e7
+    raw["responses"].append({"name": "roll", "type": "max", "quantity": {"dof": "d.rz"}, "absolute": True})
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case)
+    assert res.status == "completed"
+    assert float(np.real(res.responses["roll"].value)) > 0.4
+    cs = complex_step_gradients(case)
+    for name, rv in res.responses.items():
+        np.testing.assert_allclose(np.real(rv.gradient), cs[name], rtol=1e-8,
+                                   atol=1e-10 * np.abs(cs[name]).max(), err_msg=name)
+    c = copy.copy(case)
+    c.plan = replace(case.plan, method="adjoint")
+    adjoint = dynsens.run_case(c)
+    for name, rv in res.responses.items():
+        np.testing.assert_allclose(adjoint.responses[name].gradient, rv.gradient, rtol=1e-10,
+                                   atol=1e-12 * np.abs(rv.gradient).max(), err_msg=name)

@@ -38,6 +38,7 @@ from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
+from .beams3d_corot import element_forces, local_forces
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),
            "properties": ("A", "Iy", "Iz", "J", "cy", "cz")}
@@ -121,9 +122,10 @@ class Beam3DSet:
     shape: list[str] = field(default_factory=list)
     dims: list[list[int]] = field(default_factory=list)
     consistent: list[bool] = field(default_factory=list)
+    corot: list[bool] = field(default_factory=list)
 
-    STACK_KEYS = ("frame_K", "frame_M", "frame_T", "frame_L", "frame_EA", "frame_GJ", "frame_EIy", "frame_EIz",
-                  "frame_A", "frame_Wy", "frame_Wz", "frame_round")
+    STACK_KEYS = ("frame_K", "frame_M", "frame_T", "frame_D0", "frame_R0", "frame_L", "frame_EA", "frame_GJ",
+                  "frame_EIy", "frame_EIz", "frame_A", "frame_Wy", "frame_Wz", "frame_round")
 
     def freeze(self) -> None:
         """Index arrays for vectorized evaluation."""
@@ -133,6 +135,7 @@ class Beam3DSet:
         self.E_idx, self.G_idx, self.rho_idx = (np.array(a, int) for a in (self.E, self.G, self.rho))
         self.is_consistent = np.array(self.consistent, bool)
         self.round = np.array([s == "tube" for s in self.shape], bool)
+        self.is_corot = np.array(self.corot, bool)
 
     def __len__(self) -> int:
         return len(self.names)
@@ -159,7 +162,8 @@ class Beam3DSet:
         Kl = local_stiffness(L, E * A, G * J, E * Iy, E * Iz)
         m = rho * A * L
         Ml = local_mass(L, m, (Iy + Iz) / A)
-        out.update(frame_T=T, frame_L=L, frame_EA=E * A, frame_GJ=G * J, frame_EIy=E * Iy, frame_EIz=E * Iz,
+        out.update(frame_T=T, frame_D0=D0, frame_R0=R, frame_L=L, frame_EA=E * A, frame_GJ=G * J,
+                   frame_EIy=E * Iy, frame_EIz=E * Iz,
                    frame_A=A, frame_Wy=Iy / cz, frame_Wz=Iz / cy, frame_round=self.round, frame_mass=m,
                    frame_rhoIp=rho * (Iy + Iz) * L,
                    frame_K=np.einsum("eji,ejk,ekl->eil", T, Kl, T),
@@ -188,19 +192,46 @@ class Beam3DSet:
         return np.einsum("...eij,...ej->...ei", params["frame_M"][..., self.is_consistent, :, :],
                          qdde[..., self.idx[self.is_consistent]])
 
-    def forces(self, qe: np.ndarray, params: dict[str, Any]) -> np.ndarray:
-        """Element end forces and moments (..., n_e, 12) in global coordinates, K u."""
-        return np.einsum("...eij,...ej->...ei", params["frame_K"], qe[..., self.idx])
+    def _corot(self, params: dict[str, Any]) -> dict[str, Any]:
+        """The co-rotational beams' data (``frame_*`` entries restricted to them)."""
+        cr = self.is_corot
+        return {k: params[f"frame_{k}"][..., cr, :, :] if k == "R0" else
+                params[f"frame_{k}"][..., cr, :] if k == "D0" else params[f"frame_{k}"][..., cr]
+                for k in ("D0", "L", "R0", "EA", "GJ", "EIy", "EIz")}
 
-    def tangent(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, values) of the (constant) element stiffness matrices."""
-        return np.repeat(self.idx, 12, axis=1).ravel(), np.tile(self.idx, (1, 12)).ravel(), params["frame_K"].ravel()
+    def forces(self, qe: np.ndarray, params: dict[str, Any]) -> np.ndarray:
+        """Element end forces and moments (..., n_e, 12) in global coordinates: K u, or ∇Π of
+        the co-rotational beams."""
+        f = np.einsum("...eij,...ej->...ei", params["frame_K"], qe[..., self.idx])
+        if not self.is_corot.any():
+            return f
+        f_cr, _ = element_forces(qe[..., self.idx[self.is_corot]], self._corot(params), 1)
+        f = f.astype(np.result_type(f, f_cr))
+        f[..., self.is_corot, :] = f_cr
+        return f
+
+    def tangent(self, qe: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, values) of the element stiffness matrices (∇²Π of the co-rotational
+        beams at state qe, one state)."""
+        K = params["frame_K"]
+        if self.is_corot.any():
+            _, K_cr = element_forces(qe[self.idx[self.is_corot]], self._corot(params), 2)
+            K = K.astype(np.result_type(K, K_cr))
+            K[self.is_corot] = K_cr
+        return np.repeat(self.idx, 12, axis=1).ravel(), np.tile(self.idx, (1, 12)).ravel(), K.ravel()
 
     def end_forces(self, qe: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """Section forces (..., n_e, 6): N, T, M_y1, M_z1, M_y2, M_z2 (sagging/tension positive;
-        the moments as the beam's own, not the nodal reactions: end 1 negated)."""
+        the moments as the beam's own, not the nodal reactions: end 1 negated), in the element
+        frame (the current one of a co-rotational beam)."""
         fl = np.einsum("...eij,...ej->...ei", params["frame_T"], self.forces(qe, params))
-        return np.stack([fl[..., 6], fl[..., 9], -fl[..., 4], -fl[..., 5], fl[..., 10], fl[..., 11]], axis=-1)
+        out = np.stack([fl[..., 6], fl[..., 9], -fl[..., 4], -fl[..., 5], fl[..., 10], fl[..., 11]], axis=-1)
+        if self.is_corot.any():
+            n, _, m1y, m1z, m2x, m2y, m2z = local_forces(qe[..., self.idx[self.is_corot]], self._corot(params))
+            cr = np.stack([n, m2x, -m1y, -m1z, m2y, m2z], axis=-1)
+            out = out.astype(np.result_type(out, cr))
+            out[..., self.is_corot, :] = cr
+        return out
 
     def fibre_stress(self, qe: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """Largest and smallest fibre stresses (..., n_e, 4): end 1 +, −, end 2 +, −."""
@@ -250,6 +281,11 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
     mass = el.get("mass", "lumped")
     if mass not in ("lumped", "consistent"):
         problems.add(f"{ep}.mass", f"expected lumped or consistent, found {mass!r}")
+    kinematics = el.get("kinematics", "small")
+    if kinematics not in ("small", "corotational"):
+        problems.add(f"{ep}.kinematics", f"expected small or corotational, found {kinematics!r}")
+    elif kinematics == "corotational" and mass == "consistent":
+        problems.add(f"{ep}.mass", "a corotational 3D beam has lumped mass only, so far")
     v = el.get("orientation")
     dofs = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
     if any(p not in node_coords for p in pair):
@@ -278,4 +314,5 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
     beams.shape.append(shape)
     beams.dims.append([table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed])
     beams.consistent.append(mass == "consistent")
+    beams.corot.append(kinematics == "corotational")
 

@@ -102,7 +102,7 @@ class StructuralModel(StructuralOutputs, Model):
         self.nl_dampers.freeze()
         self.followers = followers if followers is not None else FollowerLoads()
         nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
-            or bool(len(self.nl_dampers)) or bool(len(self.followers))
+            or bool(len(self.nl_dampers)) or bool(len(self.followers)) or bool(self.frames.is_corot.any())
         has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers)) \
             or self.rotating_mass       # (the turning mass's inertia forces depend on q̇)
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
@@ -287,7 +287,7 @@ class StructuralModel(StructuralOutputs, Model):
             cols.append(c)
             vals.append(v)
         if len(self.frames):
-            r, c, v = self.frames.tangent(params)
+            r, c, v = self.frames.tangent(self._ext(q), params)
             rows, cols, vals = rows + [r], cols + [c], vals + [v]
         return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
 

@@ -166,7 +166,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             parse_beam_3d(el, ep, name, frames, table, beam_dofs, node_coords, problems,
                           {k: nd.get("coords") for k, nd in nodes.items() if isinstance(nd, dict)})
         elif kind == "beam":
-            for key in ("G", "orientation"):
+            for key in ("G", "orientation", "kinematics"):
                 if key in el:
                     problems.add(f"{ep}.{key}", f"'{key}' belongs to 3D beams (dim: 3); a plane beam has none")
             parse_beam(el, ep, name, beams, table, beam_dofs, node_coords, problems)
