@@ -1,5 +1,5 @@
 r"""Space-frame beams (``dim: 3``): Euler–Bernoulli bending in two planes, axial and St-Venant
-torsion, small rotations.
+torsion; small rotations, or large ones with co-rotational kinematics.
 
 Each beam has six unknowns per node in global coordinates, u = (u_x, u_y, u_z, θ_x, θ_y, θ_z):
 three translations and a small rotation vector.  The element frame is explicit: the local x
@@ -10,11 +10,16 @@ mass are K = Tᵀ K_l T, M = Tᵀ M_l T, K_l the textbook 12 × 12 matrix (EA/L 
 torsion, EI_z (12, 6L, 4L², 2L²)/L³ for bending in the local x–y plane, EI_y with the
 opposite coupling sign in the x–z plane).
 
-Rotations: this element is linear (the displacements and rotations are small; K is constant),
-so the rotation vector is additive and the Newmark update handles it like any other unknown.
-A geometrically nonlinear (co-rotational) version needs node frames that are updated
-multiplicatively (incremental rotation vectors composed into a node rotation); the frame data
-kept here (R per element, global node unknowns) is what that version will rotate.
+Rotations (``kinematics: small``, the default): the element is linear (K constant), the
+rotation vector is additive and the Newmark update handles it like any other unknown.
+``kinematics: corotational`` (:mod:`dynsens.models.beams3d_corot`): large displacements and
+rotations; the node unknowns are then a total rotation vector ψ per node (R_i = exp(ψ_i)R₀), still a
+vector that Newmark updates additively (no multiplicative update is needed), regular for
+|ψ| < 2π; chosen over incremental rotation vectors because the state stays a plain vector in
+global coordinates, which the sensitivity and adjoint machinery and a later coupling to rigid
+bodies take as they are.  Its lumped rotary inertia acts on ψ̈ in global axes (exact for small
+rotations and for turning about a fixed axis; otherwise the rotary inertia, a share ~(h/L)² of
+the translational one, is approximate); consistent mass is refused with it.
 
 Mass: ``lumped`` ρAL/2 per translation, ρAL³/78 per bending rotation (HRZ, as the plane beam)
 and ρI_pL/2 per twist (I_p = I_y + I_z); or ``consistent`` (cubic-Hermite bending, linear
