@@ -41,7 +41,10 @@ class StructuralOutputs:
         if not check_keys(spec, path, allowed("structural.quantity"), problems):
             return None
         kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
-        if "node" in spec and "dof" not in spec and "element" not in spec:
+        if sum(k in spec for k in ("dof", "node", "element")) > 1:
+            problems.add(path, "give one of 'dof', 'node' or 'element'")
+            return None
+        if "node" in spec:
             node = spec["node"]
             if not isinstance(node, str) or node not in self.node_names:
                 problems.add(f"{path}.node", f"unknown node {node!r}{did_you_mean(str(node), self.node_names)}")
