@@ -216,7 +216,7 @@ def test_ks_reports_the_sampled_maximum_and_warns_when_the_gap_is_large(run) -> 
      "unknown"),
     ({"type": "displacement_limit", "nodes": "c", "limit": 1.0, "components": [0], "rho": 3.0},
      "responses[0].components", "unknown key"),
-    ({"type": "max", "quantity": {"node": "c", "dof": "c.x"}}, "responses[0].quantity", "one of 'dof', 'node'"),
+    ({"type": "max", "quantity": {"node": "c", "dof": "c.x"}}, "responses[0].quantities[0]", "one of 'dof', 'node'"),
 ])
 def test_every_key_is_honoured_or_rejected(entry, path, needle) -> None:
     raw = two_bar(responses=[{"name": "r", **entry}])
