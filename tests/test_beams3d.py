@@ -398,3 +398,24 @@ def test_corotational_45_degree_bend_of_bathe_and_bolourchi() -> None:
     case = load_case_dict(raw)
     u = dict(zip(case.model.dof_labels(), static_solution(case, load_steps=10)))
     np.testing.assert_allclose([u[f"n{n_el}.{a}"] for a in "xyz"], [-23.5, -13.4, 53.4], atol=0.3)
+
+
+def test_corotational_range_is_checked_after_each_step() -> None:
+    """A node turned by nearly a full turn, or an element bent by more than 0.5 rad: ModelError."""
+    from dynsens.errors import ModelError
+    case = load_case_dict(corot(2))
+    model = case.model
+    params = model.parameters(case.x0)
+    names = model.dof_labels()
+    e = np.zeros(0)
+
+    def state(**values):
+        q = np.zeros(len(names))
+        for k, v in values.items():
+            q[names.index(k.replace("_", "."))] = v
+        return StepState(q, 0 * q, 0 * q, e, e, e)
+    model.check_state(0.0, state(n1_ry=0.2, n2_ry=0.4), params)          # within range: no error
+    with pytest.raises(ModelError, match="shorter elements"):
+        model.check_state(0.0, state(n2_ry=1.5), params)
+    with pytest.raises(ModelError, match="full turn"):
+        model.check_state(0.0, state(n1_rx=6.1, n2_rx=6.1), params)     # a rigid twist: no local bending

@@ -43,7 +43,7 @@ from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
-from .beams3d_corot import element_forces, local_forces
+from .beams3d_corot import element_forces, local_deformations, local_forces
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),
            "properties": ("A", "Iy", "Iz", "J", "cy", "cz")}
@@ -250,6 +250,25 @@ class Beam3DSet:
             bend = np.where(params["frame_round"], resultant, corner)
             out += [axial + bend, axial - bend]
         return np.stack(out, axis=-1)
+
+    def range_problem(self, qe: np.ndarray, params: dict[str, Any]) -> str | None:
+        """Why a state leaves the co-rotational beams' range (a node rotation vector near a full
+        turn, or a local rotation beyond 0.5 rad, where the element is too long for the bend), or None."""
+        if not self.is_corot.any():
+            return None
+        Ue = np.real(qe[self.idx[self.is_corot]])
+        psi = np.sqrt(np.sum(np.concatenate([Ue[:, 3:6], Ue[:, 9:12]]) ** 2, axis=1))
+        if psi.max() > 1.9 * np.pi:
+            return (f"a node of a corotational 3D beam turned by |ψ| = {psi.max():.4g} rad, near one full turn "
+                    f"(2π), where its rotation vector is singular")
+        prm = self._corot(params)
+        dl = local_deformations([Ue[:, i] for i in range(12)], *(np.real(prm[k]) for k in ("D0", "L", "R0")))
+        theta = np.abs(np.array(dl[1:]))                                # (6, n_c) local rotations
+        if theta.max() > 0.5:
+            e = np.flatnonzero(self.is_corot)[int(np.argmax(theta.max(axis=0)))]
+            return (f"corotational 3D beam {self.names[e]!r} bends by {theta.max():.3g} rad within the element "
+                    f"(more than 0.5 rad): use shorter elements")
+        return None
 
     def design_touch(self) -> list[tuple[list[int], np.ndarray]]:
         """Per beam: the parameter indices it reads and its DOFs (for the column colouring)."""

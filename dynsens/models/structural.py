@@ -491,5 +491,12 @@ class StructuralModel(StructuralOutputs, Model):
             total = total + np.sum(params["frame_mass"])
         return total
 
+    def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
+        """Raise ModelError when a co-rotational 3D beam leaves its range (:meth:`Beam3DSet.range_problem`)."""
+        why = self.frames.range_problem(self._ext(s.q), params) if len(self.frames) else None
+        if why:
+            from ..errors import ModelError
+            raise ModelError(f"t = {np.real(t):.6g} s: {why}")
+
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
