@@ -59,7 +59,7 @@ def _req(name: str, kind: str, doc: str, **kw: Any) -> Key:
 
 
 TIME_FUNCTION_TYPES = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
-AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio")
+AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio", "displacement_limit")
 RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "integral", "event_time", "end_time", "mass", "expression")
 STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar", "beam")
 BEAM_SECTION_SHAPES = ("tube", "rectangle", "box", "properties")
@@ -240,6 +240,14 @@ SECTIONS: dict[str, Section] = {
     "response.buckling_ratio": Section("responses[i], type: buckling_ratio", "−N/P_E (compression over the Euler "
                                        "load π²EI/(KL)²) of bars with `inertia`, aggregated over the elements and "
                                        "the run.", _RATIO_KEYS, type_value="buckling_ratio"),
+    "response.displacement_limit": Section("responses[i], type: displacement_limit", "|u|/limit, aggregated "
+                                           "over the nodes (or DOFs) and the run: |u| is the length of a node's "
+                                           "translation vector, or the absolute value of a DOF (both signs).", (
+        *_RESPONSE_COMMON, *_RATIO_KEYS[len(_RESPONSE_COMMON) + 1:],     # aggregate, rho
+        _k("nodes", "any", "a node name or a list of them: the length of each node's translation"),
+        _k("dofs", "any", "a DOF name or a list of them: the absolute value of each (instead of `nodes`)"),
+        _req("limit", "expr", "allowable |u| (a positive constant, the case's length unit)"),
+    ), type_value="displacement_limit"),
     "response.integral": Section("responses[i], type: integral", "Trapezoid integral over the steps, of one "
                                  "quantity's component or of an expression of quantities.", (
         *_RESPONSE_COMMON,
@@ -296,7 +304,8 @@ SECTIONS: dict[str, Section] = {
     )),
     "structural.node": Section("model.nodes.NAME", "A node.", (
         _req("coords", "vector", "coordinates (length dim)"),
-        _k("fixed", "any", "'all' or a list of directions x, y, z (and rz at a beam node) held at zero"),
+        _k("fixed", "any", "'all' or a list of directions x, y, z (and rz at a beam node; rx, ry, rz in 3D) "
+                           "held at zero"),
     )),
     "structural.mass": Section("elements[i], type: mass", "A point mass on a DOF, or on every direction of a node.", (
         _req("type", "enum", "element type", values=("mass",)),
@@ -324,27 +333,38 @@ SECTIONS: dict[str, Section] = {
         _k("effective_length_factor", "expr", "K of the Euler load π²EI/(KL)²", default=1.0),
     ), type_value="bar"),
     "structural.beam": Section("elements[i], type: beam", "Plane co-rotational Euler–Bernoulli beam between two "
-                               "nodes (x, y, θz each); dim 2 only.", (
+                               "nodes (x, y, θz each) in dim 2; in dim 3 a space-frame beam, small rotations "
+                               "(x, y, z, θx, θy, θz each).", (
         _req("type", "enum", "element type", values=("beam",)), _k("name", "name", "element name"),
         _req("nodes", "list", "[node_1, node_2]", item="name"), _req("E", "expr", "Young's modulus"),
         _k("density", "expr", "density", default=0.0),
+        _k("G", "expr", "shear modulus (3D beams: torsion GJ; required there)"),
+        _k("kinematics", "enum", "3D beams: small rotations (linear), or corotational (large displacements and "
+                                 "rotations, lumped mass)", values=("small", "corotational"), default="small"),
+        _k("orientation", "vector", "3D beams: a vector in the local x–y plane, giving local y (the section's "
+                                    "h direction)", length=3, default="global z; global y for a beam along z"),
         _req("section", "section", "cross-section", item="structural.beam_section"),
         _k("mass", "enum", "lumped, or consistent (turns with the element)", values=("lumped", "consistent"),
            default="lumped"),
     ), type_value="beam"),
     "structural.beam_section": Section("elements[i].section (beam)", "Cross-section: a shape and its "
                                        "dimensions (tube: D, t; rectangle: b, h; box: b, h, t; properties: "
-                                       "A, I, c).", (
+                                       "A, I, c in 2D, A, Iy, Iz, J, cy, cz in 3D).", (
         _k("shape", "enum", "section shape", values=BEAM_SECTION_SHAPES, default="properties"),
         _k("D", "expr", "outer diameter (tube)"), _k("t", "expr", "wall thickness (tube, box)"),
         _k("b", "expr", "width (rectangle, box)"), _k("h", "expr", "height (rectangle, box)"),
         _k("A", "expr", "area (properties)"), _k("I", "expr", "second moment of area (properties)"),
         _k("c", "expr", "distance of the extreme fibre from the axis (properties)"),
+        _k("Iy", "expr", "3D properties: second moment about local y (bending in the x–z plane)"),
+        _k("Iz", "expr", "3D properties: second moment about local z (bending in the x–y plane)"),
+        _k("J", "expr", "3D properties: torsion constant"),
+        _k("cy", "expr", "3D properties: extreme-fibre distance along local y"),
+        _k("cz", "expr", "3D properties: extreme-fibre distance along local z"),
     )),
     "structural.load": Section("model.loads[i]", "value · function(t) on a DOF or a node direction.", (
         _k("dof", "name", "the DOF"), _k("node", "name", "or a node"),
-        _k("direction", "enum", "the node's direction (rz: a moment at a beam node; a follower load: its local "
-                                "x or y)", values=("x", "y", "z", "rz")),
+        _k("direction", "enum", "the node's direction (rx, ry, rz: a moment at a beam node, rx and ry in 3D; a "
+                                "follower load: its local x or y)", values=("x", "y", "z", "rx", "ry", "rz")),
         _req("value", "expr", "amplitude"),
         _k("function", "any", "time function: a name or a mapping (see Time functions)", default="constant"),
         _k("follower", "bool", "the force turns with the rotation of its (beam) node", default=False),
@@ -360,9 +380,11 @@ SECTIONS: dict[str, Section] = {
         _k("alpha", "expr", "mass-proportional (1/s)", default=0.0),
         _k("beta", "expr", "stiffness-proportional (s)", default=0.0),
     )),
-    "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}` or "
-                                   "`{element: NAME | [NAMES] | all, kind}`.", (
+    "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}`, `{node: NAME, "
+                                   "kind}` or `{element: NAME | [NAMES] | all, kind}`.", (
         _k("dof", "any", "DOF name(s)"), _k("element", "any", "element name(s) or 'all'"),
+        _k("node", "name", "a node: its free translation DOFs x, y (z) (kinds displacement, velocity, "
+                           "acceleration)"),
         _k("kind", "enum", "displacement | velocity | acceleration (DOFs); force | stress | strain | buckling "
                            "(elements; beams: force, stress; dampers: force)",
            values=("displacement", "velocity", "acceleration", "force", "stress", "strain", "buckling")),

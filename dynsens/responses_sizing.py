@@ -15,6 +15,10 @@ all instants of the run is then
   of |KS|.
 
 ``min`` and a lower KS (``sense = −1``) aggregate −g and negate the result.
+
+:class:`MagnitudeAggregate` aggregates lengths instead: g = |v_G|·c of groups G of components
+(a node's translation vector; a one-component group is the absolute value, both signs), with
+|v| = √(Σ v²) written so that a complex step passes through it.
 """
 from __future__ import annotations
 
@@ -96,17 +100,21 @@ class Aggregate(Response):
     def adjoint_unsupported(self) -> str | None:
         return None
 
-    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
-        """Weights of the outputs' gradients: the final softmax weights (KS) or 1 at the active
-        sample (max), times ∂(s·g)/∂v = side (the sense cancels); the same sums :meth:`feed` formed."""
-        cols = [(t.output_id, t.components, self.sense * side) for t in self.terms for side in t.sides]
-        g = np.concatenate([c * np.real(trace.value[o][:, comp]) for o, comp, c in cols], axis=1)   # (K, C)
+    def _sample_weights(self, g: np.ndarray) -> np.ndarray:
+        """dJ/d(sense·g) of every sample g (K, C): the final softmax weights (KS) or 1 at the
+        active sample (max: the first maximum in (instant, column) order, as feed keeps it)."""
         if self.how == "max":
-            # the first maximum in (instant, column) order, as feed keeps it
             W = np.zeros_like(g)
             W[np.unravel_index(int(np.argmax(g)), g.shape)] = 1.0
-        else:
-            W = np.exp(self.rho * (g - np.real(self._best))) / np.real(self._sum)
+            return W
+        return np.exp(self.rho * (g - np.real(self._best))) / np.real(self._sum)
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """Weights of the outputs' gradients: the sample weights times ∂(s·g)/∂v = side (the
+        sense cancels); the same sums :meth:`feed` formed."""
+        cols = [(t.output_id, t.components, self.sense * side) for t in self.terms for side in t.sides]
+        g = np.concatenate([c * np.real(trace.value[o][:, comp]) for o, comp, c in cols], axis=1)   # (K, C)
+        W = self._sample_weights(g)
         out: dict[Any, Any] = {o: np.zeros(np.shape(trace.value[o])) for o in self.output_ids}
         start = 0
         for o, comp, c in cols:
@@ -135,3 +143,57 @@ class Aggregate(Response):
                                 f"ln(N)/rho = {bound:.4g} ({share} of the value; N = {self._count}): "
                                 f"raise rho or use type 'max'")
         return ResponseValue(value, grad, self.unit, extra=extra)
+
+
+@dataclass(frozen=True)
+class GroupTerm:
+    """Groups of components of output ``output_id``, ``groups`` (G, d): g_j = scale·|v[groups[j]]|."""
+
+    output_id: int
+    groups: np.ndarray
+    scale: float
+
+
+def _lengths(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """|v| = √(Σ_c v_c²) over the last axis of v (..., d) and ∂|v|/∂v (..., d); zero where
+    v = 0 (there |v| has no derivative; the subgradient 0 is taken)."""
+    sq = np.sum(v * v, axis=-1)
+    zero = np.real(sq) <= 0.0
+    n = np.sqrt(np.where(zero, 1.0, sq))
+    return np.where(zero, 0.0, n), np.where(zero[..., None], 0.0, v / n[..., None])
+
+
+class MagnitudeAggregate(Aggregate):
+    """Sampled maximum or KS of lengths g = scale·|v_G| over groups, instants and outputs."""
+
+    def __init__(self, name: str, terms: tuple[GroupTerm, ...], how: str, unit: str, *,
+                 rho: float | None = None):
+        super().__init__(name, (), how, unit, rho=rho)
+        self.group_terms = terms
+        self.output_ids = tuple(dict.fromkeys(t.output_id for t in terms))
+
+    def _gather(self, smp: Samples) -> tuple[np.ndarray, np.ndarray | None]:
+        vals, grads = [], []
+        for t in self.group_terms:
+            length, dlen = _lengths(smp.value[t.output_id][:, t.groups])      # (K, G), (K, G, d)
+            vals.append(t.scale * length)
+            g = smp.grad[t.output_id]
+            grads.append(None if g is None else t.scale * np.einsum("kgd,kgdm->kgm", dlen, g[:, t.groups]))
+        value = np.concatenate(vals, axis=1).ravel()
+        if any(g is None for g in grads):
+            return value, None
+        grad = np.concatenate([g for g in grads if g is not None], axis=1)
+        return value, grad.reshape(value.size, grad.shape[-1])
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """The sample weights times ∂g_j/∂v_c = scale·v_c/|v| of the group's components."""
+        parts = [_lengths(np.real(trace.value[t.output_id][:, t.groups])) for t in self.group_terms]
+        W = self._sample_weights(np.concatenate([t.scale * n for t, (n, _) in zip(self.group_terms, parts)], axis=1))
+        out: dict[Any, Any] = {o: np.zeros(np.shape(trace.value[o])) for o in self.output_ids}
+        start = 0
+        for t, (_, dlen) in zip(self.group_terms, parts):
+            G, d = t.groups.shape
+            w = (W[:, start:start + G, None] * t.scale * dlen).reshape(len(W), G * d)   # (K, G·d)
+            np.add.at(out[t.output_id].T, t.groups.ravel(), w.T)
+            start += G
+        return out

@@ -72,6 +72,9 @@ TWO_BAR: dict = {
          "rho": 200.0},
         {"name": "right_ks", "type": "ks", "quantity": {"element": "all", "kind": "stress"},
          "components": ["right.stress"], "rho": 0.2},
+        {"name": "u_node_max", "type": "displacement_limit", "nodes": "c", "limit": 0.5, "aggregate": "max"},
+        {"name": "u_node_ks", "type": "displacement_limit", "nodes": ["c"], "limit": 0.5, "rho": 60.0},
+        {"name": "u_dofs_ks", "type": "displacement_limit", "dofs": ["c.x", "c.y"], "limit": 0.5, "rho": 60.0},
         {"name": "mass", "type": "mass"},
     ],
 }
@@ -131,6 +134,12 @@ def test_responses_equal_hand_computations_from_the_history(run) -> None:
     assert r["uy_min"] == pytest.approx(q[:, 1].min(), rel=1e-12)
     assert r["uy_ks_lower"] == pytest.approx(-ks(-q[:, 1], 200.0), rel=1e-12)
     assert r["uy_ks_lower"] <= r["uy_min"]
+    # |u|: the length of the apex's translation, and the absolute value of each DOF
+    length = np.hypot(q[:, 0], q[:, 1])
+    assert r["u_node_max"] == pytest.approx(length.max() / 0.5, rel=1e-12)
+    assert r["u_node_ks"] == pytest.approx(ks(length / 0.5, 60.0), rel=1e-12)
+    assert r["u_dofs_ks"] == pytest.approx(ks(np.abs(q).ravel() / 0.5, 60.0), rel=1e-12)
+    assert np.argmax(np.abs(q[:, 0])) != np.argmax(length)   # the length is not one DOF's peak here
     # components honoured: the KS of the right bar only, not of both bars
     assert r["right_ks"] == pytest.approx(ks(sigma[:, 1], 0.2), rel=1e-12)
     assert abs(r["right_ks"] - ks(sigma.ravel(), 0.2)) > 1.0
@@ -174,7 +183,8 @@ def test_ks_reports_the_sampled_maximum_and_warns_when_the_gap_is_large(run) -> 
     tight = res.responses["buckling_ks"]
     assert tight.extra["sampled_max"] <= float(np.real(tight.value))
     raw = two_bar()
-    raw["responses"][-2]["rho"] = 50.0                    # /MPa: ln(61)/50 = 0.08 MPa, well under 3 %
+    # /MPa: ln(61)/50 = 0.08 MPa, well under 3 %
+    next(r for r in raw["responses"] if r["name"] == "right_ks")["rho"] = 50.0
     r2 = dynsens.run_case(load_case_dict(raw), sensitivities=False).responses["right_ks"]
     assert "warning" not in r2.extra
     assert float(np.real(r2.value)) - r2.extra["sampled_max"] <= r2.extra["ks_gap_bound"]
@@ -194,6 +204,19 @@ def test_ks_reports_the_sampled_maximum_and_warns_when_the_gap_is_large(run) -> 
     ({"type": "buckling_ratio", "aggregate": "mean", "rho": 1.0}, "responses[0].aggregate", "ks or max"),
     ({"type": "max", "quantity": {"dof": "c.x"}, "limit": -1.0}, "responses[0].limit", "positive"),
     ({"type": "min", "quantity": {"dof": "c.x"}, "absolute": "yes"}, "responses[0].absolute", "true or false"),
+    ({"type": "displacement_limit", "nodes": "c", "rho": 3.0}, "responses[0].limit", "missing"),
+    ({"type": "displacement_limit", "limit": 1.0, "rho": 3.0}, "responses[0]", "one of them"),
+    ({"type": "displacement_limit", "nodes": "c", "dofs": ["c.x"], "limit": 1.0, "rho": 3.0}, "responses[0]",
+     "one of them"),
+    ({"type": "displacement_limit", "nodes": ["c", "q"], "limit": 1.0, "rho": 3.0}, "responses[0].nodes[1].node",
+     "unknown node"),
+    ({"type": "displacement_limit", "nodes": ["a"], "limit": 1.0, "rho": 3.0}, "responses[0].nodes[0].node",
+     "fixed"),
+    ({"type": "displacement_limit", "dofs": "c.z", "limit": 1.0, "aggregate": "max"}, "responses[0].dofs.dof",
+     "unknown"),
+    ({"type": "displacement_limit", "nodes": "c", "limit": 1.0, "components": [0], "rho": 3.0},
+     "responses[0].components", "unknown key"),
+    ({"type": "max", "quantity": {"node": "c", "dof": "c.x"}}, "responses[0].quantities[0]", "one of 'dof', 'node'"),
 ])
 def test_every_key_is_honoured_or_rejected(entry, path, needle) -> None:
     raw = two_bar(responses=[{"name": "r", **entry}])
@@ -227,3 +250,22 @@ def test_post_check_lists_every_members_largest_ratios(run) -> None:
                                             for k in ("abs_stress_max", "buckling_max")))
     assert check_members(case, tension_limit=SIGMA_T).tension == pytest.approx(sigma.max(axis=0) / SIGMA_T)
     assert chk.passes() == (chk.largest <= 1.001)
+
+
+def test_displacement_limits_adjoint_equals_direct() -> None:
+    """|u| responses (max and KS, nodes and DOFs) under the adjoint: equal to the direct gradient."""
+    from dataclasses import replace
+    raw = two_bar(responses=[r for r in TWO_BAR["responses"] if r["type"] == "displacement_limit"])
+    case = load_case_dict(raw)
+    grads = {}
+    for method in ("direct", "adjoint"):
+        c = copy.copy(case)
+        c.plan = replace(case.plan, method=method)
+        res = dynsens.run_case(c)
+        assert res.method == method
+        grads[method] = res.responses
+    assert set(grads["adjoint"]) == {"u_node_max", "u_node_ks", "u_dofs_ks"}
+    for name, rv in grads["direct"].items():
+        np.testing.assert_allclose(grads["adjoint"][name].gradient, rv.gradient, rtol=1e-10,
+                                   atol=1e-12 * np.abs(rv.gradient).max(), err_msg=name)
+        assert np.abs(rv.gradient).max() > 0, name

@@ -1,5 +1,5 @@
 """Case entries of the aggregate responses (``ks``, ``max``, ``min``, ``stress_ratio``,
-``buckling_ratio``): validated here, built as :class:`dynsens.responses_sizing.Aggregate`.
+``buckling_ratio``, ``displacement_limit``): validated here, built as :class:`dynsens.responses_sizing.Aggregate`.
 
 Every key these responses accept changes the result; any other key is an error.
 """
@@ -15,7 +15,7 @@ from ..expressions import ExpressionError, compile_expression
 from ..models._keys import check_keys
 from ..models.base import Output
 from ..responses import Response
-from ..responses_sizing import Aggregate, Term
+from ..responses_sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
 
 __all__ = ["AGGREGATE_TYPES", "aggregate_maker"]
 
@@ -29,6 +29,8 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
     unit = r.get("unit")
     if kind in ("stress_ratio", "buckling_ratio"):
         return _ratio_maker(name, kind, r, path, output_id, outputs, pc)
+    if kind == "displacement_limit":
+        return _displacement_maker(name, r, path, output_id, outputs, pc)
     check_keys(r, path, allowed(f"response.{kind}"), pc, required=("rho",) if kind == "ks" else ())
     n0 = len(pc.problems)
     qs = r["quantities"] if "quantities" in r else [r["quantity"]] if "quantity" in r else None
@@ -69,16 +71,7 @@ def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
     limits = ("tension_limit", "compression_limit", "limit") if kind == "stress_ratio" else ()
     check_keys(r, path, allowed(f"response.{kind}"), pc)
     n0 = len(pc.problems)
-    how = r.get("aggregate", "ks")
-    if how not in ("ks", "max"):
-        pc.add(f"{path}.aggregate", f"expected ks or max, found {how!r}")
-    rho = None
-    if how == "ks":
-        rho = _positive(r["rho"], f"{path}.rho", pc) if "rho" in r else None
-        if "rho" not in r:
-            pc.add(f"{path}.rho", "missing required key (aggregate: ks)")
-    elif "rho" in r:
-        pc.add(f"{path}.rho", "rho applies to 'aggregate: ks' only (the sampled maximum has none)")
+    how, rho = _how_and_rho(r, path, pc)
     elements = r.get("elements", "all")
     side_rows: list[float] = [1.0]
     quantity_kind = "buckling"
@@ -107,6 +100,50 @@ def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
     term = Term(oid, comps, np.array([[c] * k for c in side_rows]))
     u = str(r.get("unit", "-"))
     return lambda: Aggregate(name, (term,), str(how), u, rho=rho)
+
+
+def _how_and_rho(r: dict, path: str, pc: ProblemCollector) -> tuple[str, float | None]:
+    """``aggregate`` (ks or max) and ``rho`` (required with ks, refused with max)."""
+    how = r.get("aggregate", "ks")
+    if how not in ("ks", "max"):
+        pc.add(f"{path}.aggregate", f"expected ks or max, found {how!r}")
+    rho = None
+    if how == "ks":
+        rho = _positive(r["rho"], f"{path}.rho", pc) if "rho" in r else None
+        if "rho" not in r:
+            pc.add(f"{path}.rho", "missing required key (aggregate: ks)")
+    elif "rho" in r:
+        pc.add(f"{path}.rho", "rho applies to 'aggregate: ks' only (the sampled maximum has none)")
+    return str(how), rho
+
+
+def _displacement_maker(name: str, r: dict, path: str, output_id: OutputId, outputs: list[Output],
+                        pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``displacement_limit``: |u|/limit of each node's translation vector (``nodes``) or of
+    each DOF (``dofs``, both signs), aggregated over them and the run."""
+    check_keys(r, path, allowed("response.displacement_limit"), pc, required=("limit",))
+    n0 = len(pc.problems)
+    how, rho = _how_and_rho(r, path, pc)
+    limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else None
+    if ("nodes" in r) == ("dofs" in r):
+        pc.add(path, "give 'nodes' (length of each node's translation) or 'dofs' (|u| of each DOF), one of them")
+    if len(pc.problems) > n0 or limit is None:
+        return None
+    terms: list[GroupTerm] = []
+    if "dofs" in r:
+        oid = output_id({"dof": r["dofs"], "kind": "displacement"}, f"{path}.dofs")
+        if oid is not None:
+            terms.append(GroupTerm(oid, np.arange(len(outputs[oid].labels))[:, None], 1.0 / limit))
+    else:
+        nodes = r["nodes"] if isinstance(r["nodes"], list) else [r["nodes"]]
+        for k, node in enumerate(nodes):
+            oid = output_id({"node": node, "kind": "displacement"}, f"{path}.nodes[{k}]")
+            if oid is not None:
+                terms.append(GroupTerm(oid, np.arange(len(outputs[oid].labels))[None, :], 1.0 / limit))
+    if len(pc.problems) > n0 or not terms:
+        return None
+    u = str(r.get("unit", "-"))
+    return lambda: MagnitudeAggregate(name, tuple(terms), how, u, rho=rho)
 
 
 def _shared_output(elements: Any, kind: str, path: str, output_id: OutputId, outputs: list[Output],

@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from .base import Linearization, Model, ParameterTable, StepState, Traits
 from .beams import BeamSet
+from .beams3d import Beam3DSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
@@ -64,7 +65,7 @@ class StructuralModel(StructuralOutputs, Model):
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
                  rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
                  beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None,
-                 followers: FollowerLoads | None = None):
+                 followers: FollowerLoads | None = None, frames: Beam3DSet | None = None):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -78,6 +79,7 @@ class StructuralModel(StructuralOutputs, Model):
         self.damper_names = dampers.names
         self.c = dp_par.get("c", np.zeros(0, int))
         self.dim = dim
+        self.node_names = list(node_coords)
         self.bar_dofs, bar_par = bars.freeze(2 * dim)
         self.bar_names = bars.names
         self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))
@@ -93,11 +95,15 @@ class StructuralModel(StructuralOutputs, Model):
         self.beams.freeze()
         # consistent-mass beams: a mass M(q) that turns with them (inertia forces per element)
         self.rotating_mass = bool(self.beams.is_consistent.any())
+        # space-frame beams (dim 3, small rotations): constant K and, when consistent, constant M
+        self.frames = frames if frames is not None else Beam3DSet()
+        self.frames.freeze()
+        self.frame_mass = bool(self.frames.is_consistent.any())
         self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
         self.nl_dampers.freeze()
         self.followers = followers if followers is not None else FollowerLoads()
         nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
-            or bool(len(self.nl_dampers)) or bool(len(self.followers))
+            or bool(len(self.nl_dampers)) or bool(len(self.followers)) or bool(self.frames.is_corot.any())
         has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers)) \
             or self.rotating_mass       # (the turning mass's inertia forces depend on q̇)
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
@@ -109,6 +115,9 @@ class StructuralModel(StructuralOutputs, Model):
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
         self._inertia_scatter = self._scatter(self.beams.idx[self.beams.is_consistent], np.ones(6), per_element=False)
+        self._frame_scatter = self._scatter(self.frames.idx, np.ones(12), per_element=False)
+        self._frame_inertia_scatter = self._scatter(self.frames.idx[self.frames.is_consistent], np.ones(12),
+                                                    per_element=False)
         self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
@@ -159,8 +168,12 @@ class StructuralModel(StructuralOutputs, Model):
             self.beams.parameters(pv, out)
             idx, vals = self.beams.lumped_mass(out)
             np.add.at(mass, idx, vals)
+        if len(self.frames):
+            self.frames.parameters(pv, out)
+            idx, vals = self.frames.lumped_mass(out)
+            np.add.at(mass, idx, vals)
         out["mass"] = mass[:self.n]
-        if self.rotating_mass:
+        if self.rotating_mass or self.frame_mass:
             out["M0"] = self._mass_matrix(out, pv.dtype)
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
@@ -176,11 +189,17 @@ class StructuralModel(StructuralOutputs, Model):
         masses at state q (default: the undeformed structure, as Rayleigh damping uses it)."""
         diag = np.arange(self.n)
         qe = self._ext(np.zeros(self.n, dtype=dtype) if q is None else q)
-        Mb = self.beams.turning_mass(qe, params)["M"]
-        idx = self.beams.idx[self.beams.is_consistent]
-        rows = [diag, np.repeat(idx, 6, axis=1).ravel()]
-        cols = [diag, np.tile(idx, (1, 6)).ravel()]
-        return self._assemble("mass", rows, cols, [params["mass"], Mb.reshape(-1)], np.result_type(dtype, Mb))
+        rows, cols, vals = [diag], [diag], [params["mass"]]
+        if self.rotating_mass:
+            Mb = self.beams.turning_mass(qe, params)["M"]
+            idx = self.beams.idx[self.beams.is_consistent]
+            rows.append(np.repeat(idx, 6, axis=1).ravel())
+            cols.append(np.tile(idx, (1, 6)).ravel())
+            vals.append(Mb.reshape(-1))
+        if self.frame_mass:
+            r, c, v = self.frames.consistent_entries(params)
+            rows, cols, vals = rows + [r], cols + [c], vals + [v]
+        return self._assemble("mass", rows, cols, vals, np.result_type(dtype, *vals))
 
     def _inertia(self, params: dict[str, Any], s: Any) -> np.ndarray:
         """Inertia forces (..., n): M q̈ of the diagonal masses plus the consistent beams'
@@ -189,6 +208,9 @@ class StructuralModel(StructuralOutputs, Model):
         if self.rotating_mass:
             fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
             f = f + _times(fe.reshape(fe.shape[:-2] + (-1,)), self._inertia_scatter)
+        if self.frame_mass:
+            fe = self.frames.inertia(self._ext(s.qdd), params)
+            f = f + _times(fe.reshape(fe.shape[:-2] + (-1,)), self._frame_inertia_scatter)
         return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -269,6 +291,9 @@ class StructuralModel(StructuralOutputs, Model):
             rows.append(r)
             cols.append(c)
             vals.append(v)
+        if len(self.frames):
+            r, c, v = self.frames.tangent(self._ext(q), params)
+            rows, cols, vals = rows + [r], cols + [c], vals + [v]
         return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
@@ -284,7 +309,7 @@ class StructuralModel(StructuralOutputs, Model):
             pv = params["pv"]
             alpha, beta = pv[self.rayleigh[0]], pv[self.rayleigh[1]]
             Mdiag = params["mass"]
-            M = params["M0"] if self.rotating_mass else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
+            M = params["M0"] if "M0" in params else sp.diags(Mdiag) if self.traits.sparse else np.diag(Mdiag)
             D = D + alpha * M + beta * params["K0"]
         return D
 
@@ -353,6 +378,9 @@ class StructuralModel(StructuralOutputs, Model):
         if len(self.beams):
             fb = self.beams.forces(self._ext(q), params)
             f = f + _times(fb.reshape(fb.shape[:-2] + (-1,)), self._beam_scatter)
+        if len(self.frames):
+            fb = self.frames.forces(self._ext(q), params)
+            f = f + _times(fb.reshape(fb.shape[:-2] + (-1,)), self._frame_scatter)
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -360,7 +388,7 @@ class StructuralModel(StructuralOutputs, Model):
         outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
         set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
         keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3", "P_euler")
-                + BeamSet.STACK_KEYS if k in params_list[0]]
+                + BeamSet.STACK_KEYS + Beam3DSet.STACK_KEYS if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -416,7 +444,8 @@ class StructuralModel(StructuralOutputs, Model):
             touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
             # inertia and effective length enter outputs only (buckling), not F_R: no rows
             touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
-        for params, dofs in self.beams.design_touch() + self.nl_dampers.design_touch() \
+        for params, dofs in self.beams.design_touch() + self.frames.design_touch() \
+                + self.nl_dampers.design_touch() \
                 + self.followers.design_touch():
             touch(params, dofs)
         for dof, amp, fn in self.loads:
@@ -442,7 +471,8 @@ class StructuralModel(StructuralOutputs, Model):
         if len(self.followers):
             rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
             Ks.append(-self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"])))
-        Ms = [self._diagonal_mass(params)]
+        # the 3D frames' consistent mass is constant (small rotations): kept with the parameters
+        Ms = [params["M0"] if self.frame_mass and not self.rotating_mass else self._diagonal_mass(params)]
         Ds = [params["D"]] if self.traits.has_damping else []
         if len(self.nl_dampers):
             rows, cols, vals = self.nl_dampers.tangent(self._ext(s.qd), params["pv"])
@@ -491,7 +521,16 @@ class StructuralModel(StructuralOutputs, Model):
             total = total + np.sum(params["bar_mass"])
         if len(self.beams):
             total = total + np.sum(params["beam_mass"])
+        if len(self.frames):
+            total = total + np.sum(params["frame_mass"])
         return total
+
+    def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
+        """Raise ModelError when a co-rotational 3D beam leaves its range (:meth:`Beam3DSet.range_problem`)."""
+        why = self.frames.range_problem(self._ext(s.q), params) if len(self.frames) else None
+        if why:
+            from ..errors import ModelError
+            raise ModelError(f"t = {np.real(t):.6g} s: {why}")
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)

@@ -10,6 +10,7 @@ from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .base import ParameterTable
 from .beams import BeamSet, parse_beam
+from .beams3d import Beam3DSet, parse_beam_3d
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
 from .registry import register
@@ -38,10 +39,8 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         scalar = []
     dof_names += scalar
     node_coords: dict[str, list[int]] = {}
-    rotating = _beam_nodes(spec.get("elements"))   # nodes that carry a rotation θz (beams)
-    if rotating and dim != 2:
-        problems.add(f"{path}.elements", "beams are available in plane models (dim: 2) only, so far")
-        rotating = set()
+    rotating = _beam_nodes(spec.get("elements"))   # nodes that carry rotations (beams)
+    rotations = ["rz"] if dim == 2 else ["rx", "ry", "rz"]
     nodes = spec.get("nodes", {}) or {}
     if not isinstance(nodes, dict):
         problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
@@ -52,7 +51,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             continue
         node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
         fx = nd.get("fixed", [])
-        axes = list(AXES[:dim]) + (["rz"] if name in rotating else [])
+        axes = list(AXES[:dim]) + (rotations if name in rotating else [])
         if fx is True or fx == "all":
             fx = axes
         if not isinstance(fx, list) or any(a not in axes for a in fx):
@@ -83,11 +82,14 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
 
     def beam_dofs(name: Any, p: str) -> list[int]:
-        return node_dofs(name, p) + ([dof(f"{name}.rz", p)] if name in node_coords else [n])
+        """(x, y, θz) of a plane beam node; (x, y, z, θx, θy, θz) in 3D."""
+        return node_dofs(name, p) + ([dof(f"{name}.{a}", p) for a in rotations] if name in node_coords
+                                     else [n] * len(rotations))
 
     mass_terms: list[tuple[int, int]] = []
     springs, dampers, bars = _Group(), _Group(), _Group()
     beams = BeamSet()
+    frames = Beam3DSet()
     nl_dampers = NonlinearDampers()
     bar_nodes: list[tuple[str, str]] = []
     names_seen: set[str] = set()
@@ -160,7 +162,13 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                      K=table.add(el.get("effective_length_factor", 1.0), f"{ep}.effective_length_factor",
                                  problems, positive=True))
             bar_nodes.append((pair[0], pair[1]))
+        elif kind == "beam" and dim == 3:
+            parse_beam_3d(el, ep, name, frames, table, beam_dofs, node_coords, problems,
+                          {k: nd.get("coords") for k, nd in nodes.items() if isinstance(nd, dict)})
         elif kind == "beam":
+            for key in ("G", "orientation", "kinematics"):
+                if key in el:
+                    problems.add(f"{ep}.{key}", f"'{key}' belongs to 3D beams (dim: 3); a plane beam has none")
             parse_beam(el, ep, name, beams, table, beam_dofs, node_coords, problems)
         else:
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
@@ -175,6 +183,9 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         lp = f"{path}.loads[{k}]"
         if not check_keys(ld, lp, allowed("structural.load"), problems, required=("value",)):
             continue
+        if ld.get("follower", False) is not False and dim == 3:
+            problems.add(f"{lp}.follower", "follower loads act in plane models (dim: 2) only, so far")
+            continue
         if ld.get("follower", False) is not False:
             _follower(ld, lp, rotating, beam_dofs, table, followers, problems)
             continue
@@ -182,12 +193,12 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             target = dof(ld["dof"], f"{lp}.dof")
         elif "node" in ld:
             direction = ld.get("direction")
-            directions = list(AXES[:dim]) + (["rz"] if ld["node"] in rotating else [])
+            directions = list(AXES[:dim]) + (rotations if ld["node"] in rotating else [])
             if direction not in directions:
                 problems.add(f"{lp}.direction", f"expected one of {directions}, found {direction!r}")
                 continue
-            target = beam_dofs(ld["node"], f"{lp}.node")[2] if direction == "rz" else \
-                node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)]
+            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)] if direction in AXES else \
+                beam_dofs(ld["node"], f"{lp}.node")[directions.index(direction)]
         else:
             problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
             continue
@@ -219,7 +230,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
     if n == 0:
         problems.add(path, "the model has no free degrees of freedom")
-    massed = {d for d, _ in mass_terms} | {d for row in bars.dofs + beams.dofs for d in row}
+    massed = {d for d, _ in mass_terms} | {d for row in bars.dofs + beams.dofs + frames.dofs for d in row}
     for i, d in enumerate(dof_names):
         if i not in massed:
             problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
@@ -229,7 +240,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
                                 sparse=None if la == "auto" else la == "sparse",
                                 spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers,
-                                followers=followers)
+                                followers=followers, frames=frames)
     except (ValueError, IndexError, TypeError, KeyError):
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled

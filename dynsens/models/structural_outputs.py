@@ -17,11 +17,14 @@ class StructuralOutputs:
     """Mixin of :class:`~dynsens.models.structural.StructuralModel`: its ``output`` method."""
 
     dof_names: list[str]
+    node_names: list[str]
+    dim: int
     spring_names: list[str]
     damper_names: list[str]
     bar_names: list[str]
     bar_I: np.ndarray
     beams: Any
+    frames: Any
     nl_dampers: Any
     damper_dofs: np.ndarray
     c: np.ndarray
@@ -30,13 +33,27 @@ class StructuralOutputs:
     _ext: Any
 
     def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
-        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}`` or
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}``,
+        ``{node: NAME, kind: ...}`` (the node's free translation DOFs x, y (z)) or
         ``{element: NAME|[NAMES]|all, kind: force|stress|strain|buckling}``; ``buckling`` is the
         ratio −N/P_E of the compressive axial force to the Euler load π²EI/(KL)² (bars with
         ``inertia``; positive in compression, > 1 means buckled)."""
         if not check_keys(spec, path, allowed("structural.quantity"), problems):
             return None
-        kind = spec.get("kind", "displacement" if "dof" in spec else "force")
+        kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
+        if sum(k in spec for k in ("dof", "node", "element")) > 1:
+            problems.add(path, "give one of 'dof', 'node' or 'element'")
+            return None
+        if "node" in spec:
+            node = spec["node"]
+            if not isinstance(node, str) or node not in self.node_names:
+                problems.add(f"{path}.node", f"unknown node {node!r}{did_you_mean(str(node), self.node_names)}")
+                return None
+            free = [f"{node}.{a}" for a in "xyz"[:self.dim] if f"{node}.{a}" in self.dof_names]
+            if not free:
+                problems.add(f"{path}.node", f"every translation of node {node!r} is fixed")
+                return None
+            spec = {"dof": free, "kind": kind}
         if "dof" in spec:
             names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
             field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
@@ -61,10 +78,10 @@ class StructuralOutputs:
             problems.add(path, "expected 'dof' or 'element'")
             return None
         names = spec["element"]
-        all_names = self.spring_names + self.damper_names + self.nl_dampers.names + self.bar_names + self.beams.names
+        members = list(self.bar_names) + list(self.beams.names) + list(self.frames.names)
+        all_names = self.spring_names + self.damper_names + self.nl_dampers.names + members
         if names == "all":
-            names = list(self.bar_names) + list(self.beams.names) if self.bar_names or len(self.beams) \
-                else list(self.spring_names)
+            names = members if members else list(self.spring_names)
         names = names if isinstance(names, list) else [names]
         dampers = self.damper_names + self.nl_dampers.names
         if names and all(nm in dampers for nm in names):
@@ -74,13 +91,15 @@ class StructuralOutputs:
             problems.add(f"{path}.kind",
                          f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
             return None
-        bars, springs, beams = [], [], []
+        bars, springs, beams, frames = [], [], [], []
         for nm in names:
             if nm in self.bar_names:
                 bars.append(self.bar_names.index(nm))
             elif nm in self.beams.names and kind in ("force", "stress"):
                 beams.append(self.beams.names.index(nm))
-            elif nm in self.beams.names:
+            elif nm in self.frames.names and kind in ("force", "stress"):
+                frames.append(self.frames.names.index(nm))
+            elif nm in self.beams.names or nm in self.frames.names:
                 problems.add(f"{path}.kind", f"beams report 'force' (N, M1, M2) and 'stress' (extreme fibres), "
                                              f"not {kind!r}")
             elif nm in self.spring_names and kind == "force":
@@ -89,14 +108,14 @@ class StructuralOutputs:
                 problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
             else:
                 problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
-        if len(bars) + len(springs) + len(beams) != len(names):
+        if len(bars) + len(springs) + len(beams) + len(frames) != len(names):
             return None
         lacking = [self.bar_names[b] for b in bars if self.bar_I[b] < 0]
         if kind == "buckling" and lacking:
             problems.add(f"{path}.element", f"buckling needs the bar's 'inertia' (second moment of area); "
                                             f"missing for {', '.join(lacking[:5])}{' ...' if len(lacking) > 5 else ''}")
             return None
-        if springs and (bars or beams):
+        if springs and (bars or beams or frames):
             problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
             return None
         if springs:
@@ -116,16 +135,17 @@ class StructuralOutputs:
             return (prm["E"] * bs["strain"])[..., _i]
 
         unit = "-" if kind in ("strain", "buckling") else ""
-        if not beams:
-            return Output(bar_out, tuple(f"{n}.{kind}" for n in names), unit, batched=True, autonomous=True)
-        beam_fn, beam_labels = self._beam_output(np.array(beams), kind)
-        if not bars:
-            return Output(beam_fn, beam_labels, unit, batched=True, autonomous=True)
+        parts = [(bar_out, tuple(f"{self.bar_names[b]}.{kind}" for b in bars))] if bars else []
+        if beams:
+            parts.append(self._beam_output(np.array(beams), kind))
+        if frames:
+            parts.append(self._frame_output(np.array(frames), kind))
+        if len(parts) == 1:
+            return Output(parts[0][0], parts[0][1], unit, batched=True, autonomous=True)
 
-        def both(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
-            return np.concatenate([bar_out(t, s, prm), beam_fn(t, s, prm)], axis=-1)
-        bar_labels = tuple(f"{self.bar_names[b]}.{kind}" for b in bars)
-        return Output(both, bar_labels + beam_labels, unit, batched=True, autonomous=True)
+        def joined(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            return np.concatenate([fn(t, s, prm) for fn, _ in parts], axis=-1)
+        return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True)
 
     def _damper_output(self, names: list[str], kind: str, path: str, problems: ProblemCollector) -> Output | None:
         """Forces of viscous dampers, linear (c v) or nonlinear (c v (v² + ε²)^((α−1)/2))."""
@@ -164,3 +184,19 @@ class StructuralOutputs:
             f = np.stack([st["N"], st["M1"], st["M2"]], axis=-1)[..., bi, :]
             return f.reshape(f.shape[:-2] + (-1,))
         return forces, labels
+
+    def _frame_output(self, fi: np.ndarray, kind: str) -> tuple[Any, tuple[str, ...]]:
+        """3D beams ``fi``: largest and smallest fibre stresses at both ends (4 per beam) or
+        section forces N, T, My1, Mz1, My2, Mz2; the function and the component labels."""
+        names = [self.frames.names[b] for b in fi]
+        if kind == "stress":
+            labels = tuple(f"{n}.stress.{e}" for n in names for e in ("1+", "1-", "2+", "2-"))
+            method = self.frames.fibre_stress
+        else:
+            labels = tuple(f"{n}.{c}" for n in names for c in ("N", "T", "My1", "Mz1", "My2", "Mz2"))
+            method = self.frames.end_forces
+
+        def fn(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            v = method(self._ext(s.q), prm)[..., fi, :]
+            return v.reshape(v.shape[:-2] + (-1,))
+        return fn, labels
