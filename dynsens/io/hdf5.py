@@ -149,15 +149,19 @@ def append_rows(path: str | Path, group: str, rows: dict[str, np.ndarray],
             if init is not None:
                 init(f)
     with h5py.File(path, "a") as f:
-        g = f.require_group(group)
-        for k, v in rows.items():
-            v = np.asarray(v)
-            if k not in g:
-                g.create_dataset(k, data=v[None], maxshape=(None,) + v.shape, chunks=True)
-            else:
-                ds = g[k]
-                ds.resize(ds.shape[0] + 1, axis=0)
-                ds[-1] = v
+        append_row(f.require_group(group), rows)
         f.flush()
+
+
+def append_row(g: h5py.Group, row: dict[str, Any]) -> None:
+    """Append ``row`` (name -> value) to the resizable datasets of ``g``, creating them on first use."""
+    for k, v in row.items():
+        v = np.asarray(v)
+        if k not in g:
+            g.create_dataset(k, data=v[None], maxshape=(None,) + v.shape, chunks=True)
+        else:
+            ds = g[k]
+            ds.resize(ds.shape[0] + 1, axis=0)
+            ds[-1] = v
 
 

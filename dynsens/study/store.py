@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 
 from ..case.load import Case
+from ..io.hdf5 import append_row as append_h5_row
 from ..io.hdf5 import atomic_h5, write_design, write_header
 from .sampling import StudyError
 
@@ -75,14 +76,7 @@ def append_row(path: Path, row: dict[str, Any]) -> None:
     data = {k: (_str(v) if isinstance(v, str) else np.asarray(v)) for k, v in row.items()
             if k != "units" and v is not None}
     with _updated(path) as f:
-        g = f.require_group(ROWS)
-        for k, v in data.items():
-            if k not in g:
-                g.create_dataset(k, data=v[None], maxshape=(None,) + v.shape, chunks=True)
-            else:
-                ds = g[k]
-                ds.resize(ds.shape[0] + 1, axis=0)
-                ds[-1] = v
+        append_h5_row(f.require_group(ROWS), data)
 
 
 def set_status(path: Path, status: str, message: str) -> None:
