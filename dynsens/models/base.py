@@ -403,6 +403,17 @@ class Model(ABC):
         """Names of the coordinates q, used in reports and the HDF5 file."""
         return [f"q{i}" for i in range(self.traits.n_q)]
 
+    def describe_equation(self, k: int) -> str:
+        """Equation k of the step unknowns z = (q̈, λ, ṗ) in the case's words: its coordinate
+        and, where the model knows them, the YAML entries acting there (for run-time errors)."""
+        tr = self.traits
+        if k < tr.n_q:
+            labels = self.dof_labels()
+            return labels[k] if k < len(labels) else f"q[{k}]"
+        if k < tr.n_q + tr.n_lam:
+            return f"constraint {k - tr.n_q}"
+        return f"first-order state p[{k - tr.n_q - tr.n_lam}]"
+
 
 def as_dense(a: Matrix) -> Array:
     """Dense ndarray view of a dense or sparse matrix."""

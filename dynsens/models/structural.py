@@ -461,3 +461,13 @@ class StructuralModel(StructuralOutputs, Model):
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
+
+    #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
+    equation_sources: list[tuple[str, list[int]]] = []
+
+    def describe_equation(self, k: int) -> str:
+        """DOF k and the elements and loads acting on it, by YAML path and name."""
+        if not 0 <= k < self.n:
+            return super().describe_equation(k)
+        acting = [entry for entry, dofs in self.equation_sources if k in dofs]
+        return f"DOF '{self.dof_names[k]}'" + (f" (acted on by {', '.join(acting)})" if acting else "")

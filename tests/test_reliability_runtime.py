@@ -1,0 +1,215 @@
+"""Run-time faults named in the case's words (README "Reliability"):
+
+* a non-finite sensitivity stops the run at the step where it appears (direct and adjoint),
+  naming the step, the time and the design variable or response, whether or not sensitivity
+  histories are stored;
+* run-time NaN/Inf messages name the YAML entries acting on the equation (elements and loads
+  of a structural model, joints and forces of a multibody model);
+* a run that grows without bound while staying finite is stopped by the runaway monitor,
+  naming the scheme's stability limit when that is the cause.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from test_reliability import make
+
+from dynsens.case.load import load_case, load_case_text
+from dynsens.errors import NonFiniteError
+from dynsens.simulation import run_case
+from dynsens.runaway import RUNAWAY_FACTOR
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
+
+
+@pytest.fixture(autouse=True)
+def _quiet():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
+def _case(mutate=None, name: str = "rt.yaml"):
+    return load_case_text(yaml.safe_dump(make(mutate)), name)
+
+
+def _nan_design_derivative_after(case, t_bad: float) -> None:
+    """The model's residual at perturbed designs turns NaN from t_bad on: a design derivative
+    that stops being finite mid-run (the primal residual is untouched)."""
+    model = case.model
+    inner = model.residual_batch_steps
+
+    def batch(ts, states, params_list):
+        F = np.array(inner(ts, states, params_list), dtype=float)
+        F[np.asarray(ts) >= t_bad] = np.nan
+        return F
+    model.residual_batch_steps = batch        # instance attribute: this case only
+
+
+def _no_event(r: dict) -> None:
+    del r["events"]
+
+
+# ---------------------------------------------------------------- 2. non-finite sensitivities
+
+
+@pytest.mark.parametrize("stored", [False, True])
+def test_direct_mode_names_the_first_non_finite_sensitivity_step(stored):
+    case = _case(lambda r: (_no_event(r), r.__setitem__("output", {"sensitivity_history": stored})))
+    _nan_design_derivative_after(case, 0.1 - 1e-9)     # dt = 5 ms: step 20
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case)
+    msg = str(info.value)
+    assert "step 20 (t = 0.1 s)" in msg and "'m'" in msg, msg
+    assert "DOF 'u'" in msg and "design derivative of the residual is not finite" in msg, msg
+    assert "failed, not completed" in msg, msg
+
+
+def test_direct_mode_passes_finite_sensitivities_of_every_shipped_structural_case():
+    # the block check reads one sum per block: a real run is untouched (same gradient)
+    case = _case(_no_event)
+    g = run_case(case).responses["q_end"].gradient
+    assert np.all(np.isfinite(g)) and np.any(g != 0)
+
+
+def test_adjoint_names_the_step_and_the_response():
+    case = _case(lambda r: (_no_event(r), r["responses"].pop(),
+                            r["sensitivity"].__setitem__("method", "adjoint")))
+    assert run_case(case).method == "adjoint"
+    _nan_design_derivative_after(case, 0.1 - 1e-9)
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case)
+    msg = str(info.value)
+    assert "adjoint of response 'q_end'" in msg and "steps" in msg and "failed, not completed" in msg, msg
+
+
+def test_adjoint_multipliers_non_finite_at_a_step(monkeypatch):
+    from dynsens.derivatives import output_seeds
+    case = _case(lambda r: (_no_event(r), r["responses"].pop(),
+                            r["sensitivity"].__setitem__("method", "adjoint")))
+    inner = output_seeds.OutputSeeds.seeds_block
+
+    def seeds(self, ts, states, weights, r):
+        out = inner(self, ts, states, weights, r)
+        return [(np.full_like(y, np.nan), x) for y, x in out]
+    monkeypatch.setattr(output_seeds.OutputSeeds, "seeds_block", seeds)
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case)
+    msg = str(info.value)
+    # q_end reads the last instant only: the sweep's first step is the last one (40)
+    assert "adjoint of response 'q_end' went non-finite at step 40 (t = 0.2 s)" in msg, msg
+
+
+# ---------------------------------------------------------------- 3. messages name the YAML entry
+
+
+def test_nan_in_the_residual_names_the_element_and_its_key_path():
+    # the residual turns NaN at t >= 0.1 s (as an element law outside its range would): the
+    # run stops naming the DOF and the YAML entries acting there, not an equation index
+    raw = make(_no_event)
+    raw["model"]["dofs"] = ["u", "w"]
+    raw["model"]["elements"] += [{"type": "mass", "name": "mw", "dof": "w", "mass": 1.0},
+                                 {"type": "spring", "name": "k_w", "dofs": ["w", "ground"], "k": 3.0}]
+    case = load_case_text(yaml.safe_dump(raw), "nan.yaml")
+    model = case.model
+    inner = model.residual
+
+    def residual(t, s, params):
+        R = np.array(inner(t, s, params))
+        if t >= 0.1 - 1e-9:
+            R[1] = np.nan
+        return R
+    model.residual = residual
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case, sensitivities=False)
+    msg = str(info.value)
+    assert "t = 0.1 s (step 20)" in msg, msg
+    assert "DOF 'w' (acted on by model.elements[3] (mass 'mw'), model.elements[4] (spring 'k_w'))" in msg, msg
+    assert "spring 'spring'" not in msg, msg
+
+
+def test_structural_equations_name_only_the_entries_acting_there():
+    raw = make(_no_event)
+    raw["model"]["dofs"] = ["u", "w"]
+    raw["model"]["elements"] += [{"type": "mass", "name": "mw", "dof": "w", "mass": 1.0},
+                                 {"type": "spring", "name": "k_uw", "dofs": ["u", "w"], "k": 3.0}]
+    model = load_case_text(yaml.safe_dump(raw), "two.yaml").model
+    w = model.describe_equation(1)
+    assert w == "DOF 'w' (acted on by model.elements[3] (mass 'mw'), model.elements[4] (spring 'k_uw'))", w
+    assert "spring 'spring'" in model.describe_equation(0)
+
+
+def test_multibody_equations_name_joints_bodies_and_forces():
+    model = load_case(CASES / "hydraulic_lever.yaml").model
+    n_q = model.traits.n_q
+    body = model.describe_equation(3)
+    assert "body 'lever' (model.bodies.lever)" in body and "model.forces[0] (point_force 'load')" in body, body
+    joint = model.describe_equation(n_q)
+    assert joint.startswith("constraint ") and "model.joints[0] (revolute " in joint, joint
+
+
+def test_nan_in_a_constraint_equation_names_the_joint_entry():
+    case = load_case(CASES / "point_pendulum.yaml")
+    model = case.model
+    n_q = model.traits.n_q
+    row = next(k for k, o in enumerate(model.eq_owner) if o.startswith("rod."))   # the YAML joint 'rod'
+    inner = model.residual
+
+    def residual(t, s, params):
+        R = np.array(inner(t, s, params))
+        if t >= 0.01 - 1e-12:
+            R[n_q + row] = np.nan
+        return R
+    model.residual = residual
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case, sensitivities=False)
+    msg = str(info.value)
+    assert "(step 10)" in msg and f"constraint {model.eq_owner[row]} of model.joints[0] (" in msg and "'rod')" in msg, msg
+    lock = model.describe_equation(n_q)      # the point mass's orientation lock: its body entry
+    assert "body 'bob' (model.bodies.bob)" in lock, lock
+
+
+# ---------------------------------------------------------------- 1. the runaway monitor
+
+
+def _runaway_message(case, x=None) -> str:
+    with pytest.raises(NonFiniteError) as info:
+        run_case(case, x)
+    return str(info.value)
+
+
+def test_runaway_growth_is_stopped_long_before_overflow_and_names_the_limit():
+    # central differences past their limit (0.4 s at x0): growth ×~3 per step, overflow would
+    # come after ~600 steps; the monitor stops it at RUNAWAY_FACTOR times the early scale
+    # (a dt past the limit at x0 is refused when the case is loaded; the optimizer asks for a
+    # design past it: k = 200 gives a limit of 0.2 s)
+    case = _case(lambda r: (_no_event(r), r["integrator"].update(beta=0.0, dt=0.35, t_end=500.0)))
+    msg = _runaway_message(case, np.array([2.0, 0.0, 200.0]))
+    assert "grows without bound" in msg and "DOF 'u'" in msg and "model.elements[1] (spring 'spring')" in msg, msg
+    assert "stability limit" in msg and "= 0.2 s" in msg and "found 0.35 s" in msg, msg
+    step = int(msg.split("(step ")[1].split(")")[0])
+    assert step < 50, msg               # growth ×~16 per step: overflow to Inf only after ~250 steps
+
+
+def test_runaway_growth_of_a_physical_instability_is_stopped_without_blaming_the_scheme():
+    # a negative spring: exp growth, unconditionally stable scheme: no stability-limit claim
+    case = _case(lambda r: (_no_event(r), r["model"]["elements"][1].__setitem__("k", "-k"),
+                            r["integrator"].update(t_end=10.0)))
+    msg = _runaway_message(case)
+    assert "grows without bound" in msg and "stability limit" not in msg, msg
+    assert f"{RUNAWAY_FACTOR:.0e}" in msg, msg
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in CASES.glob("*.yaml")))
+def test_runaway_monitor_never_trips_on_a_shipped_case_start(name):
+    # the first 0.05 s of each shipped case (the whole suite runs the rest of them in full)
+    case = load_case(CASES / f"{name}.yaml")
+    from dataclasses import replace
+    plan = case.plan
+    case.plan = replace(plan, t_end=min(plan.t_end, plan.t0 + 40 * plan.dt))
+    res = run_case(case, sensitivities=False)
+    assert res.status in ("completed", "terminated")
