@@ -5,7 +5,10 @@ unstable (a negative stiffness) grows geometrically: by the time it overflows to
 response history has long been meaningless (values of 1e223 were stored before).  The
 monitor compares, per accepted step, |q|∞ and |q̇|∞ with their largest values over the early
 part of the run: the initial state and the first quarter to half of the steps taken since the
-state first moved (the window doubles with the run: O(1) time and memory per step).  A
+state first moved (the window doubles with the run: O(1) time and memory per step), and, for
+|q|, the size the model's data imply (``Model.displacement_scale``: geometry, static
+deflection under the loads), so that a response that starts from tiny values is not mistaken
+for a runaway while it is still small against the structure.  A
 response that starts from rest grows like a power of t (a step load: t², a ramp: t³), i.e. by
 a factor 4ⁿ at most against that window; a geometric growth grows without limit.  The run is
 stopped when both |q| and |q̇| exceed RUNAWAY_FACTOR times their early scale.
@@ -28,9 +31,9 @@ def _maxabs(v: np.ndarray) -> float:
 class RunawayMonitor:
     """Watches |q|∞ and |q̇|∞ of the accepted steps of one run (see the module docstring)."""
 
-    def __init__(self, model: Model, s0: StepState):
+    def __init__(self, model: Model, s0: StepState, q_scale: float = 0.0):
         self.model = model
-        self.ref = [_maxabs(s0.q), _maxabs(s0.qd)]       # the early scale (initial state first)
+        self.ref = [max(_maxabs(s0.q), q_scale), _maxabs(s0.qd)]   # the early scale (initial state first)
         self.pending = [0.0, 0.0]                         # running max at the last window mark
         self.run = [0.0, 0.0]                             # running max since the state moved
         self.count = 0                                    # steps since the state moved

@@ -105,7 +105,7 @@ class PrimalStepper:
 
         out = self.solver.solve_step(t0, 0, pred, z0, self.params, (0.0, 0.0, 0.0), correct0)
         check_finite(out.state, t0, 0, model)
-        self.runaway = RunawayMonitor(model, out.state)
+        self.runaway = RunawayMonitor(model, out.state, model.displacement_scale(self.params, out.lin))
         self.aux = self.scheme.start(out.state)
         return StepRecord(0, t0, 0.0, out.state, out.lin, out.factor, out.iterations)
 

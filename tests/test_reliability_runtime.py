@@ -168,7 +168,8 @@ def test_nan_in_a_constraint_equation_names_the_joint_entry():
     with pytest.raises(NonFiniteError) as info:
         run_case(case, sensitivities=False)
     msg = str(info.value)
-    assert "(step 10)" in msg and f"constraint {model.eq_owner[row]} of model.joints[0] (" in msg and "'rod')" in msg, msg
+    assert "(step 10)" in msg and "'rod')" in msg, msg
+    assert f"constraint {model.eq_owner[row]} of model.joints[0] (" in msg, msg
     lock = model.describe_equation(n_q)      # the point mass's orientation lock: its body entry
     assert "body 'bob' (model.bodies.bob)" in lock, lock
 

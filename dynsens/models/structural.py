@@ -462,6 +462,19 @@ class StructuralModel(StructuralOutputs, Model):
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
 
+    def displacement_scale(self, params: dict[str, Any], lin: Linearization | None) -> float:
+        """The larger of the bar nodes' coordinates and the static deflections |f_amp|/K_dd of the
+        loads' amplitudes on their DOFs (K: the tangent stiffness at t0)."""
+        pv = np.real(params["pv"])
+        scale = float(np.max(np.abs(pv[self.bar_X]))) if np.size(self.bar_X) else 0.0
+        if lin is None or lin.R_q is None or not self.loads:
+            return scale
+        diag = np.real(lin.R_q.diagonal())
+        for dof, amp, _ in self.loads:
+            if dof < self.n and diag[dof] > 0:
+                scale = max(scale, abs(float(pv[amp])) / float(diag[dof]))
+        return scale
+
     #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
     equation_sources: list[tuple[str, list[int]]] = []
 

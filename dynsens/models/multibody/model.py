@@ -353,9 +353,9 @@ class MultibodyModel(Model):
             jt = next((j for j in self.joints if k - n_q in j.rows), None)
             name = jt.name if jt is not None else owner.rsplit(".", 1)[0]    # else: a normalization
             joint = paths.get("joints", {}).get(name)
-            body = next((b.name for b in self.bodies if name in (b.name, f"{b.name}.orientation")), None)
-            if joint is None and body is not None:     # Euler normalization, a point mass's lock
-                joint = f"body '{body}' ({paths.get('bodies', 'model.bodies')}.{body})"
+            owner_body = next((b.name for b in self.bodies if name in (b.name, f"{b.name}.orientation")), None)
+            if joint is None and owner_body is not None:     # Euler normalization, a point mass's lock
+                joint = f"body '{owner_body}' ({paths.get('bodies', 'model.bodies')}.{owner_body})"
             return f"constraint {owner}" + (f" of {joint}" if joint else "")
         return super().describe_equation(k)
 
