@@ -205,6 +205,26 @@ def test_runaway_growth_of_a_physical_instability_is_stopped_without_blaming_the
     assert f"{RUNAWAY_FACTOR:.0e}" in msg, msg
 
 
+@pytest.mark.parametrize("function", [
+    {"type": "ramp", "t1": 20.0},                               # q ~ t³ from rest
+    {"type": "pulse", "t0": 15.0, "duration": 0.05},            # at rest, then a short kick
+    {"type": "smoothstep", "t0": 10.0, "t1": 10.5},             # at rest, then ~ (t - t0)^4
+], ids=["ramp", "late_pulse", "late_smoothstep"])
+def test_growth_from_rest_is_not_a_runaway(function):
+    # undamped, stiff against the load: responses grow from exact zeros by powers of t
+    # (orders of magnitude within a few steps), which is not growth without bound
+    def mutate(r):
+        _no_event(r)
+        r["model"]["loads"][0]["function"] = function
+        r["model"]["elements"].pop(2)
+        r["integrator"].update(t_end=30.0, dt=5e-3)
+        r["responses"].pop()
+    case = _case(mutate)
+    res = run_case(case, sensitivities=False)
+    q = res.history["q"][:, 0]
+    assert res.status == "completed" and np.max(np.abs(q)) > 1e6 * np.min(np.abs(q[q != 0])), res.message
+
+
 @pytest.mark.parametrize("name", sorted(p.stem for p in CASES.glob("*.yaml")))
 def test_runaway_monitor_never_trips_on_a_shipped_case_start(name):
     # the first 0.05 s of each shipped case (the whole suite runs the rest of them in full)
