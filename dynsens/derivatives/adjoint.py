@@ -133,8 +133,12 @@ class AdjointMode:
                 xbar += self.partials.residual_partials_transposed_steps(
                     np.array([q[0] for q in queue]), [q[1] for q in queue], np.stack([q[2] for q in queue]))
                 self.counters.backward_residual_evaluations += self.partials.evaluations_per_call * len(queue)
-                check_adjoint_gradient(xbar, names, f"in the design derivative of the residual at steps "
-                                                    f"{queue[-1][3]} to {queue[0][3]}")
+                if not np.all(np.isfinite(xbar)):     # find the first step of the block to blame
+                    t, _, _, step = next((q for q in reversed(queue) if not np.all(np.isfinite(
+                        self.partials.residual_partials_transposed_steps(
+                            np.array([q[0]]), [q[1]], q[2][None])))), queue[-1])
+                    check_adjoint_gradient(xbar, names, f"at step {step} (t = {t:.6g} s), in the design "
+                                                        "derivative of the residual")
                 queue.clear()
 
         def sweep(block: list[tuple[int, StepRecord, int | None]]) -> None:
