@@ -57,16 +57,21 @@ def _no_event(r: dict) -> None:
 # ---------------------------------------------------------------- 2. non-finite sensitivities
 
 
-@pytest.mark.parametrize("stored", [False, True])
-def test_direct_mode_names_the_first_non_finite_sensitivity_step(stored):
+@pytest.mark.parametrize("stored, t_bad, where", [
+    (False, 0.1 - 1e-9, "step 20 (t = 0.1 s)"),       # dt = 5 ms: mid-run, inside a trail block
+    (True, 0.1 - 1e-9, "step 20 (t = 0.1 s)"),
+    (False, -1.0, "step 0 (t = 0 s)"),                  # at the initial solve
+])
+def test_direct_mode_names_the_first_non_finite_sensitivity_step(stored, t_bad, where):
     case = _case(lambda r: (_no_event(r), r.__setitem__("output", {"sensitivity_history": stored})))
-    _nan_design_derivative_after(case, 0.1 - 1e-9)     # dt = 5 ms: step 20
+    _nan_design_derivative_after(case, t_bad)
     with pytest.raises(NonFiniteError) as info:
         run_case(case)
     msg = str(info.value)
-    assert "step 20 (t = 0.1 s)" in msg and "'m'" in msg, msg
-    assert "DOF 'u'" in msg and "design derivative of the residual is not finite" in msg, msg
-    assert "failed, not completed" in msg, msg
+    assert where in msg and "with respect to 'm'" in msg, msg
+    assert "DOF 'u'" in msg and "failed, not completed" in msg, msg
+    if t_bad > 0:
+        assert "design derivative of the residual is not finite at this step" in msg, msg
 
 
 def test_direct_mode_passes_finite_sensitivities_of_every_shipped_structural_case():
