@@ -119,6 +119,7 @@ class PrimalStepper:
         """Return to a :meth:`snapshot`; the state to advance from."""
         s, self.aux, snap = checkpoint
         self.solver.restore(snap)
+        self.runaway = None     # a segment taken again repeats steps the forward run has watched
         return s
 
     def advance(self, i: int, t_prev: float, h: float, s: StepState) -> list[StepRecord]:
