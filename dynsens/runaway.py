@@ -25,6 +25,10 @@ RUNAWAY_FACTOR = 1e6
 #: every STRIDE-th accepted step is looked at (a runaway takes hundreds of steps from 1e6 times
 #: its scale to overflow; a look costs a few µs, a small model's step ~100 µs)
 STRIDE = 4
+#: looks after the state first moved before the first verdict: the window then holds at least
+#: four looks, so one value at round-off (a load switched on between grid points, ~1e-31)
+#: cannot be the whole scale
+MIN_LOOKS = 8
 
 
 def _maxabs(v: np.ndarray) -> float:
@@ -63,7 +67,8 @@ class RunawayMonitor:
             ref[0], ref[1] = max(ref[0], self.pending[0]), max(ref[1], self.pending[1])
             self.pending = [run[0], run[1]]               # the first quarter to half of the run
             self.mark *= 2
-        if ref[0] > 0.0 and ref[1] > 0.0 and q > RUNAWAY_FACTOR * ref[0] and qd > RUNAWAY_FACTOR * ref[1]:
+        if self.count >= MIN_LOOKS and q > RUNAWAY_FACTOR * ref[0] and qd > RUNAWAY_FACTOR * ref[1] \
+                and ref[0] > 0.0 and ref[1] > 0.0:
             k = int(np.argmax(abs(s.q)))
             raise NonFiniteError(
                 f"the solution grows without bound: |q| = {q:.3g} at {self.model.describe_equation(k)} "
