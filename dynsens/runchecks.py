@@ -175,12 +175,13 @@ def stability_problem(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray) -> 
             "bound. Reduce dt, or use beta = 1/4 (unconditionally stable)")
 
 
-def unstable_scheme_note(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray) -> str | None:
-    """Why a run that grew without bound may owe it to the scheme: past the stability limit
-    (:func:`stability_problem`), or, where no limit is computed (constraints, first-order
-    states), a conditionally stable scheme (2β < γ) as such; None for a stable scheme."""
+def unstable_scheme_note(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray, growth: bool) -> str | None:
+    """Why a run that went non-finite may owe it to the scheme: past the stability limit
+    (:func:`stability_problem`), or, for a run that grew without bound (``growth``) where no
+    limit is computed (constraints, first-order states), a conditionally stable scheme
+    (2β < γ) as such; None otherwise."""
     why = stability_problem(model, scheme, plan, x)
-    if why is not None:
+    if why is not None or not growth:
         return why
     if scheme.beta < scheme.gamma / 2 and stability_limit(model, scheme, plan.t0, x) is None:
         return (f"newmark with beta = {scheme.beta:g} < gamma/2 = {scheme.gamma / 2:g} is only conditionally "

@@ -79,7 +79,8 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
             raise
         raise CaseError(exc.problems, case.source) from None
     except NonFiniteError as exc:  # name the stability limit when the scheme's is the cause
-        why = unstable_scheme_note(case.model, case.scheme, plan, np.real(x))
+        growth = any(w in str(exc) for w in ("grows without bound", "diverges"))
+        why = unstable_scheme_note(case.model, case.scheme, plan, np.real(x), growth)
         if why is None:
             raise
         raise NonFiniteError(f"{exc}. Cause: integrator.dt: {why}") from None

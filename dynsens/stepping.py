@@ -52,6 +52,12 @@ def split_unknowns(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.
     return z[:n_q], z[n_q:n_q + n_lam], z[n_q + n_lam:]
 
 
+def equation_offsets(model: Model) -> dict[str, int]:
+    """Where each field of a StepState starts among the step equations z = (q̈, λ, ṗ)."""
+    tr = model.traits
+    return {"q": 0, "qd": 0, "qdd": 0, "lam": tr.n_q, "p": tr.n_q + tr.n_lam, "pd": tr.n_q + tr.n_lam}
+
+
 def check_finite(s: StepState, t: float, step: int, model: Model) -> None:
     """Raise NonFiniteError naming the first non-finite entry of s (at time t, s), by its
     equation's coordinate and YAML entries (:meth:`Model.describe_equation`)."""
@@ -59,8 +65,7 @@ def check_finite(s: StepState, t: float, step: int, model: Model) -> None:
     # sum of finite entries finds none and passes)
     if np.isfinite(np.concatenate(s).sum()):
         return
-    tr = model.traits
-    offset = {"q": 0, "qd": 0, "qdd": 0, "lam": tr.n_q, "p": tr.n_q + tr.n_lam, "pd": tr.n_q + tr.n_lam}
+    offset = equation_offsets(model)
     for name, v in zip(HISTORY_FIELDS, s):
         if v.size and not np.all(np.isfinite(v)):
             k = int(np.flatnonzero(~np.isfinite(v))[0])

@@ -245,3 +245,17 @@ def test_runaway_monitor_never_trips_on_a_shipped_case_start(name):
     case.plan = replace(plan, t_end=min(plan.t_end, plan.t0 + 40 * plan.dt))
     res = run_case(case, sensitivities=False)
     assert res.status in ("completed", "terminated")
+
+
+def test_a_conditionally_stable_scheme_without_a_computed_limit_is_named_for_growth_only():
+    # a mechanism (constraints): no plain stability limit; a runaway still names the scheme
+    from dynsens.runchecks import unstable_scheme_note
+    raw = yaml.safe_load((CASES / "point_pendulum.yaml").read_text())
+    raw["integrator"]["beta"] = 0.0
+    case = load_case_text(yaml.safe_dump(raw), "pp.yaml")
+    x = np.real(case.x0)
+    note = unstable_scheme_note(case.model, case.scheme, case.plan, x, growth=True)
+    assert note is not None and "beta = 0 < gamma/2 = 0.25 is only conditionally stable" in note, note
+    assert unstable_scheme_note(case.model, case.scheme, case.plan, x, growth=False) is None
+    stable = load_case(CASES / "point_pendulum.yaml")
+    assert unstable_scheme_note(stable.model, stable.scheme, stable.plan, x, growth=True) is None

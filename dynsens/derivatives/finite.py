@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import NonFiniteError
 from ..models.base import Model, StepState
-from ..stepping import HISTORY_FIELDS, StepRecord
+from ..stepping import HISTORY_FIELDS, StepRecord, equation_offsets
 
 _WHY = ("the design derivative of the model is not finite there (an entry's derivative at this design "
         "or state, e.g. sqrt or a power of a variable at 0); the run is failed, not completed")
@@ -24,11 +24,6 @@ def all_finite(*arrays: np.ndarray) -> bool:
     """True when the arrays hold no NaN or Inf (one sum each; an overflowing sum of finite
     entries also reads as non-finite, and :func:`first_nonfinite` then finds nothing)."""
     return all(bool(np.isfinite(np.sum(a))) for a in arrays if a.size)
-
-
-def _offsets(model: Model) -> dict[str, int]:
-    tr = model.traits
-    return {"q": 0, "qd": 0, "qdd": 0, "lam": tr.n_q, "p": tr.n_q + tr.n_lam, "pd": tr.n_q + tr.n_lam}
 
 
 def _variable(names: Sequence[str], j: int) -> str:
@@ -41,7 +36,7 @@ def first_nonfinite(model: Model, trail: Sequence[StepRecord], ds_of: Sequence[S
     has a NaN or Inf: its step, time, field, equation (:meth:`Model.describe_equation`) and
     design variable; ``design_part`` (records, n_z, m) says whether the model's design
     derivative there is the cause.  Returns when every entry is finite."""
-    offsets = _offsets(model)
+    offsets = equation_offsets(model)
     for k, (rec, ds) in enumerate(zip(trail, ds_of)):
         if ds is None:
             continue
