@@ -27,6 +27,7 @@ from .base import Linearization, Model, ParameterTable, StepState, Traits
 from .beams import BeamSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
+from .structural_diagnostics import StructuralDiagnostics
 from .structural_outputs import StructuralOutputs
 from .timefunctions import TimeFunction
 
@@ -54,7 +55,7 @@ class _Group:
         return idx, {k: np.array(v, dtype=int) for k, v in self.params.items()}
 
 
-class StructuralModel(StructuralOutputs, Model):
+class StructuralModel(StructuralOutputs, StructuralDiagnostics, Model):
     """Assembled structural model; built from a case by :func:`build_structural`."""
 
     def __init__(self, *, dof_names: list[str], table: ParameterTable, mass_terms: list[tuple[int, int]],
@@ -461,26 +462,3 @@ class StructuralModel(StructuralOutputs, Model):
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
-
-    def displacement_scale(self, params: dict[str, Any], lin: Linearization | None) -> float:
-        """The larger of the bar nodes' coordinates and the static deflections |f_amp|/K_dd of the
-        loads' amplitudes on their DOFs (K: the tangent stiffness at t0)."""
-        pv = np.real(params["pv"])
-        scale = float(np.max(np.abs(pv[self.bar_X]))) if np.size(self.bar_X) else 0.0
-        if lin is None or lin.R_q is None or not self.loads:
-            return scale
-        diag = np.real(lin.R_q.diagonal())
-        for dof, amp, _ in self.loads:
-            if dof < self.n and diag[dof] > 0:
-                scale = max(scale, abs(float(pv[amp])) / float(diag[dof]))
-        return scale
-
-    #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
-    equation_sources: list[tuple[str, list[int]]] = []
-
-    def describe_equation(self, k: int) -> str:
-        """DOF k and the elements and loads acting on it, by YAML path and name."""
-        if not 0 <= k < self.n:
-            return super().describe_equation(k)
-        acting = [entry for entry, dofs in self.equation_sources if k in dofs]
-        return f"DOF '{self.dof_names[k]}'" + (f" (acted on by {', '.join(acting)})" if acting else "")
