@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from test_reliability import make
+from click.testing import CliRunner
+from test_reliability import make, simulate_refused
 
 from dynsens.case.load import load_case, load_case_text
 from dynsens.errors import NonFiniteError
@@ -259,3 +260,10 @@ def test_a_conditionally_stable_scheme_without_a_computed_limit_is_named_for_gro
     assert unstable_scheme_note(case.model, case.scheme, case.plan, x, growth=False) is None
     stable = load_case(CASES / "point_pendulum.yaml")
     assert unstable_scheme_note(stable.model, stable.scheme, stable.plan, x, growth=True) is None
+
+
+def test_simulate_of_a_runaway_exits_2_and_writes_nothing(tmp_path):
+    raw = make(lambda r: (_no_event(r), r["model"]["elements"][1].__setitem__("k", "-k"),
+                          r["integrator"].update(t_end=10.0)))
+    simulate_refused(CliRunner(), tmp_path, raw, "grows without bound", "DOF 'u'",
+                     "model.elements[1] (spring 'spring')")
