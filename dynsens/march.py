@@ -251,12 +251,12 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
 
 def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
           partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet,
-          counters: Counters) -> DirectMode | AdjointMode | None:
+          counters: Counters, design_names: tuple[str, ...] = ()) -> DirectMode | AdjointMode | None:
     """The derivative mode that consumes the step records (None without sensitivities)."""
     if partials is None:
         return None
     if method == "direct":
-        return DirectMode(model, scheme, solver, partials, counters)
+        return DirectMode(model, scheme, solver, partials, counters, design_names)
 
     def grid(i: int) -> tuple[float, float]:
         """(t_prev, h) of grid step i exactly as the loop of :func:`integrate` forms them."""
@@ -286,7 +286,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     solver = _solver(model, plan, counters, partials)
     stepper = PrimalStepper(model, scheme, solver, params, plan.max_step_cuts, counters)
     method, reason = choose_method(plan, responses, m) if partials is not None else ("", "")
-    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters)
+    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters, design_names)
 
     rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
     ds = mode.start(rec) if mode is not None else None

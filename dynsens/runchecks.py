@@ -173,3 +173,19 @@ def stability_problem(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray) -> 
             f"natural frequency of the model linearized at t0 at this design), found {plan.dt:g} s; past it the "
             "solution grows without "
             "bound. Reduce dt, or use beta = 1/4 (unconditionally stable)")
+
+
+def unstable_scheme_note(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray, growth: bool) -> str | None:
+    """Why a run that went non-finite may owe it to the scheme: past the stability limit
+    (:func:`stability_problem`), or, for a run that grew without bound (``growth``) where no
+    limit is computed (constraints, first-order states), a conditionally stable scheme
+    (2β < γ) as such; None otherwise."""
+    why = stability_problem(model, scheme, plan, x)
+    if why is not None or not growth:
+        return why
+    if scheme.beta < scheme.gamma / 2 and stability_limit(model, scheme, plan.t0, x) is None:
+        return (f"newmark with beta = {scheme.beta:g} < gamma/2 = {scheme.gamma / 2:g} is only conditionally "
+                "stable (dt <= Omega_crit/omega_max, Omega_crit = 1/sqrt(gamma/2 - beta)), and its limit is not "
+                "computed for a model with constraints or first-order states: reduce dt, or use beta = 1/4 "
+                "(unconditionally stable)")
+    return None

@@ -11,7 +11,7 @@ from .case.load import Case
 from .errors import CaseError, NonFiniteError
 from .march import RunResult, integrate
 from .records import RecordedQuantity, Recorder, quantities_read_by
-from .runchecks import check_design, check_result, check_run_size, stability_problem
+from .runchecks import check_design, check_result, check_run_size, unstable_scheme_note
 from .sensitivity_drift import sensitivity_constraint_residual
 
 log = logging.getLogger(__name__)
@@ -79,7 +79,8 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
             raise
         raise CaseError(exc.problems, case.source) from None
     except NonFiniteError as exc:  # name the stability limit when the scheme's is the cause
-        why = stability_problem(case.model, case.scheme, plan, np.real(x))
+        growth = any(w in str(exc) for w in ("grows without bound", "diverges"))
+        why = unstable_scheme_note(case.model, case.scheme, plan, np.real(x), growth)
         if why is None:
             raise
         raise NonFiniteError(f"{exc}. Cause: integrator.dt: {why}") from None

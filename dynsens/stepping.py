@@ -17,6 +17,7 @@ import numpy as np
 from .errors import ConvergenceError, NonFiniteError
 from .integrators.newmark import Aux, Newmark, Prediction
 from .models.base import Model, StepState
+from .runaway import RunawayMonitor
 from .solver.newton import StepSolver
 
 HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
@@ -51,16 +52,24 @@ def split_unknowns(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.
     return z[:n_q], z[n_q:n_q + n_lam], z[n_q + n_lam:]
 
 
-def check_finite(s: StepState, t: float, step: int, labels: list[str]) -> None:
-    """Raise NonFiniteError naming the first non-finite entry of s (at time t, s)."""
+def equation_offsets(model: Model) -> dict[str, int]:
+    """Where each field of a StepState starts among the step equations z = (q̈, λ, ṗ)."""
+    tr = model.traits
+    return {"q": 0, "qd": 0, "qdd": 0, "lam": tr.n_q, "p": tr.n_q + tr.n_lam, "pd": tr.n_q + tr.n_lam}
+
+
+def check_finite(s: StepState, t: float, step: int, model: Model) -> None:
+    """Raise NonFiniteError naming the first non-finite entry of s (at time t, s), by its
+    equation's coordinate and YAML entries (:meth:`Model.describe_equation`)."""
     # one sum: NaN or Inf anywhere makes it non-finite; then find the entry (an overflowing
     # sum of finite entries finds none and passes)
     if np.isfinite(np.concatenate(s).sum()):
         return
+    offset = equation_offsets(model)
     for name, v in zip(HISTORY_FIELDS, s):
         if v.size and not np.all(np.isfinite(v)):
             k = int(np.flatnonzero(~np.isfinite(v))[0])
-            where = labels[k] if name in ("q", "qd", "qdd") and k < len(labels) else f"{name}[{k}]"
+            where = model.describe_equation(offset[name] + k)
             raise NonFiniteError(
                 f"NaN/Inf first appeared in {name} of {where} at t = {t:.6g} s (step {step}): "
                 "reduce the time step or check parameters and loads")
@@ -84,6 +93,7 @@ class PrimalStepper:
         self.counters = counters
         self.labels = model.dof_labels()
         self.aux: Aux | None = None
+        self.runaway: RunawayMonitor | None = None
 
     def initial(self, t0: float) -> StepRecord:
         """The initial state and its consistent accelerations (coefficients 0: S0 = ∂F_R/∂z)."""
@@ -99,7 +109,8 @@ class PrimalStepper:
             return StepState(pr.q, pr.qd, qdd, lam, pr.p, pd)
 
         out = self.solver.solve_step(t0, 0, pred, z0, self.params, (0.0, 0.0, 0.0), correct0)
-        check_finite(out.state, t0, 0, self.labels)
+        check_finite(out.state, t0, 0, model)
+        self.runaway = RunawayMonitor(model, out.state, model.displacement_scale(self.params, out.lin))
         self.aux = self.scheme.start(out.state)
         return StepRecord(0, t0, 0.0, out.state, out.lin, out.factor, out.iterations)
 
@@ -113,6 +124,7 @@ class PrimalStepper:
         """Return to a :meth:`snapshot`; the state to advance from."""
         s, self.aux, snap = checkpoint
         self.solver.restore(snap)
+        self.runaway = None     # a segment taken again repeats steps the forward run has watched
         return s
 
     def advance(self, i: int, t_prev: float, h: float, s: StepState) -> list[StepRecord]:
@@ -146,7 +158,9 @@ class PrimalStepper:
             aux = self._take(i, t_prev, half, cuts + 1, s, aux, records)
             return self._take(i, t_prev + half, half, cuts + 1, records[-1].state, aux, records)
         s_new = out.state
-        check_finite(s_new, t, i, self.labels)
+        check_finite(s_new, t, i, self.model)
+        if self.runaway is not None:
+            self.runaway.observe(t, i, s_new)
         self.model.check_state(t, s_new, self.params)
         records.append(StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations))
         return scheme.advance(pred, s_new)

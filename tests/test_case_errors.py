@@ -455,7 +455,9 @@ def test_blow_up_stops_with_time_and_step():
     assert isinstance(err, DynsensError) and isinstance(err, FloatingPointError)
     assert "NaN" in msg
     t = _time_in(msg)
-    assert 0.05 < t <= 1.0
+    # the runaway monitor stops the growth (×1e6 beyond its early scale) at ~0.03 s, long
+    # before it would overflow (~0.97 s)
+    assert 0.0 < t <= 1.0
     assert re.search(r"step \d+", msg), msg
 
 

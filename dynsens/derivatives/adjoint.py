@@ -33,6 +33,7 @@ from ..solver.linalg import Counters
 from ..stepping import StepRecord
 from .checkpoints import RecordStore
 from .direct import trail_length
+from .finite import check_adjoint_gradient, check_adjoint_step
 from .output_seeds import OutputSeeds
 
 
@@ -106,23 +107,25 @@ class AdjointMode:
                 xbar += xpart
             return {k: ybar for k, (ybar, _) in zip(ks, found)}
 
-        xbar += self._sweep(seeds, r)
+        xbar += self._sweep(seeds, names)
         self.counters.backward_output_evaluations += self.seeds.evaluations
         # (the forward run's peak; a recomputed segment holds at most half the budget again)
         self.counters.extra["adjoint_records_peak_bytes"] = self.store.peak
         return {name: xbar[:, col] for col, name in enumerate(names)}
 
-    def _sweep(self, seeds: Callable[[list[tuple[int, StepRecord]]], dict[int, np.ndarray]], r: int
-               ) -> np.ndarray:
-        """Σ over the records of ∂_xF_Rᵀ μ, plus the initial state's term: x̄ (m, r).  The records
-        come in blocks (their seeds take a few batched output calls per block)."""
+    def _sweep(self, seeds: Callable[[list[tuple[int, StepRecord]]], dict[int, np.ndarray]],
+               names: list[str]) -> np.ndarray:
+        """Σ over the records of ∂_xF_Rᵀ μ, plus the initial state's term: x̄ (m, r), one column
+        per response of ``names``.  The records come in blocks (their seeds take a few batched
+        output calls per block).  A non-finite μ stops the sweep at its step."""
+        r = len(names)
         sizes = [self.n_q] * 3 + [self.n_lam] + [self.n_p] * 2
         ends = np.cumsum(sizes).tolist()
         fields = list(zip([0] + ends[:-1], ends))
         bar = [np.zeros((n, r)) for n in sizes]                   # q, q̇, q̈, λ, p, ṗ
         aux = [np.zeros((self.n_q, r)), np.zeros((self.n_p, r))]  # a, b
         xbar = np.zeros((self.partials.m, r))
-        queue: list[tuple[float, Any, np.ndarray]] = []
+        queue: list[tuple[float, Any, np.ndarray, int]] = []
 
         def flush() -> None:
             nonlocal xbar
@@ -130,6 +133,12 @@ class AdjointMode:
                 xbar += self.partials.residual_partials_transposed_steps(
                     np.array([q[0] for q in queue]), [q[1] for q in queue], np.stack([q[2] for q in queue]))
                 self.counters.backward_residual_evaluations += self.partials.evaluations_per_call * len(queue)
+                if not np.all(np.isfinite(xbar)):     # find the first step of the block to blame
+                    t, _, _, step = next((q for q in reversed(queue) if not np.all(np.isfinite(
+                        self.partials.residual_partials_transposed_steps(
+                            np.array([q[0]]), [q[1]], q[2][None])))), queue[-1])
+                    check_adjoint_gradient(xbar, names, f"at step {step} (t = {t:.6g} s), in the design "
+                                                        "derivative of the residual")
                 queue.clear()
 
         def sweep(block: list[tuple[int, StepRecord, int | None]]) -> None:
@@ -140,7 +149,8 @@ class AdjointMode:
                     for f, (a, b) in enumerate(fields):
                         bar[f] += ybar[a:b]
                 mu = self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux)
-                queue.append((rec.t, rec.state, mu))
+                check_adjoint_step(rec, mu, names)
+                queue.append((rec.t, rec.state, mu, rec.step))
                 if len(queue) >= self.block:
                     flush()
 
@@ -152,7 +162,9 @@ class AdjointMode:
                 block = []
         flush()
         dq0, dqd0, dp0 = initial_state_gradient(self.model, self.partials)
-        return xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]
+        xbar = xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]
+        check_adjoint_gradient(xbar, names, "in the design derivative of the initial state (step 0)")
+        return xbar
 
     def _solve(self, rec: StepRecord, zbar: np.ndarray) -> np.ndarray:
         """μ = −S⁻ᵀ z̄ with the record's factor."""

@@ -21,6 +21,7 @@ from ..sensitivity import DesignPartials, initial_state_gradient, pseudo_load, p
 from ..solver.linalg import Counters
 from ..solver.newton import StepSolver
 from ..stepping import StepRecord, split_unknowns
+from .finite import check_block
 
 TRAIL_STEPS = 128
 TRAIL_BYTES = 32 * 2**20
@@ -44,9 +45,10 @@ class DirectMode:
     """The sensitivity state ∇s (n, m per leaf) carried forward over the step records."""
 
     def __init__(self, model: Model, scheme: Newmark, solver: StepSolver, partials: DesignPartials,
-                 counters: Counters):
+                 counters: Counters, design_names: tuple[str, ...] = ()):
         self.model, self.scheme, self.solver, self.partials = model, scheme, solver, partials
         self.counters = counters
+        self.design_names = design_names   # named in the message of a non-finite sensitivity
         tr = model.traits
         self.n_q, self.n_lam, self.n_z = tr.n_q, tr.n_lam, tr.n_z
         self.trail_length = trail_length(tr, partials.m)
@@ -70,6 +72,7 @@ class DirectMode:
         dqdd, dlam, dpd = split_unknowns(self.solver.solve_sensitivity(rec.factor, P), self.n_q, self.n_lam)
         self.ds = StepState(dq0, dqd0, dqdd, dlam, dp0, dpd)
         self.daux = self.scheme.start(self.ds)
+        check_block(self.model, [rec], [self.ds], self.ds, None, self.design_names)
         return self.ds
 
     def take_step(self, records: list[StepRecord]) -> None:
@@ -106,6 +109,7 @@ class DirectMode:
                     ds_of[k + j] = self._unpack(X)[0]
                 ds, daux = self._unpack(X)
             k = end
+        check_block(self.model, trail, ds_of, [*ds, *daux], design_part, self.design_names)
         self.ds, self.daux = ds, daux
         return ds_of
 

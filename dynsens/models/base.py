@@ -403,6 +403,23 @@ class Model(ABC):
         """Names of the coordinates q, used in reports and the HDF5 file."""
         return [f"q{i}" for i in range(self.traits.n_q)]
 
+    def displacement_scale(self, params: Any, lin: Linearization | None) -> float:
+        """A size of the coordinates q that the model's data imply (its geometry, the static
+        deflection under its loads; 0 when unknown): growth is judged against it as well as
+        against the run's early values (:mod:`dynsens.runaway`).  ``lin``: at t0."""
+        return 0.0
+
+    def describe_equation(self, k: int) -> str:
+        """Equation k of the step unknowns z = (q̈, λ, ṗ) in the case's words: its coordinate
+        and, where the model knows them, the YAML entries acting there (for run-time errors)."""
+        tr = self.traits
+        if k < tr.n_q:
+            labels = self.dof_labels()
+            return labels[k] if k < len(labels) else f"q[{k}]"
+        if k < tr.n_q + tr.n_lam:
+            return f"constraint {k - tr.n_q}"
+        return f"first-order state p[{k - tr.n_q - tr.n_lam}]"
+
 
 def as_dense(a: Matrix) -> Array:
     """Dense ndarray view of a dense or sparse matrix."""

@@ -29,6 +29,7 @@ from .beams3d import Beam3DSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
+from .structural_diagnostics import StructuralDiagnostics
 from .structural_outputs import StructuralOutputs
 from .timefunctions import TimeFunction
 
@@ -56,7 +57,7 @@ class _Group:
         return idx, {k: np.array(v, dtype=int) for k, v in self.params.items()}
 
 
-class StructuralModel(StructuralOutputs, Model):
+class StructuralModel(StructuralOutputs, StructuralDiagnostics, Model):
     """Assembled structural model; built from a case by :func:`build_structural`."""
 
     def __init__(self, *, dof_names: list[str], table: ParameterTable, mass_terms: list[tuple[int, int]],

@@ -100,6 +100,20 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         problems.add(f"{path}.elements", "expected a list")
         elements = []
     kinds = STRUCTURAL_ELEMENT_TYPES
+    # which YAML entries act on each DOF: run-time errors name them (Model.describe_equation)
+    sources: list[tuple[str, list[int]]] = []
+
+    def touched(entry: dict) -> list[int]:
+        """DOFs an element or load names (silently: its own checks report bad names)."""
+        names: list[str] = []
+        for key in ("dof", "dofs", "node", "nodes"):
+            v = entry.get(key)
+            for item in (v if isinstance(v, list) else [v]):
+                if isinstance(item, str):
+                    names += [f"{item}.{a}" for a in (*AXES[:dim], "rx", "ry", "rz")] if key.startswith("node") \
+                        else [item]      # (rotations a node does not carry are not in the index)
+        return [index[d] for d in names if d in index]
+
     for k, el in enumerate(elements):
         ep = f"{path}.elements[{k}]"
         if not isinstance(el, dict):
@@ -107,6 +121,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             continue
         kind = el.get("type")
         name = str(el.get("name", f"{kind}{k}"))
+        sources.append((f"{ep} ({kind} '{name}')", touched(el)))
         if name in names_seen:
             problems.add(f"{ep}.name", f"duplicate element name {name!r}")
         names_seen.add(name)
@@ -186,6 +201,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         if ld.get("follower", False) is not False and dim == 3:
             problems.add(f"{lp}.follower", "follower loads act in plane models (dim: 2) only, so far")
             continue
+        sources.append((f"{lp} (load)", touched(ld)))
         if ld.get("follower", False) is not False:
             _follower(ld, lp, rotating, beam_dofs, table, followers, problems)
             continue
@@ -245,6 +261,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         if len(problems.problems) > n_before:
             return None  # the problems already listed explain why it cannot be assembled
         raise
+    model.equation_sources = sources
     # with problems listed, the model is still returned so that the responses can be checked
     # against its DOFs and elements; the loader raises before anything runs
     return model

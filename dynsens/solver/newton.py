@@ -206,24 +206,14 @@ class StepSolver:
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
         """Say where a non-finite residual comes from: an overflowing (diverging) coordinate,
         or, when the state is still moderate, the equation that produced NaN (parameters)."""
-        labels = self.model.dof_labels()
         head = f"NaN/Inf appeared at t = {t:.6g} s (step {step}), Newton iteration {it}"
         q = np.abs(s.q.real)
         if q.size and np.all(np.isfinite(q)) and np.max(q) > 1e100:
             k = int(np.argmax(q))
-            return (f"{head}: the solution diverges at {labels[k]} (|q| = {q[k]:.3g}); reduce the time "
-                    "step, check the stiffness signs and the load magnitudes")
+            return (f"{head}: the solution diverges at {self.model.describe_equation(k)} (|q| = {q[k]:.3g}); "
+                    "reduce the time step, check the stiffness signs and the load magnitudes")
         k = int(np.flatnonzero(~np.isfinite(R))[0])
-        n_q, n_lam = self.model.traits.n_q, self.model.traits.n_lam
-        owners = list(getattr(self.model, "eq_owner", []))    # constraint rows' joints, where known
-        if k < len(labels):
-            where = labels[k]
-        elif n_q <= k < n_q + n_lam and k - n_q < len(owners):
-            where = f"constraint {owners[k - n_q]}"
-        elif k >= n_q + n_lam:
-            where = f"first-order state p[{k - n_q - n_lam}]"
-        else:
-            where = f"equation {k}"
+        where = self.model.describe_equation(k)   # the DOF and the YAML entries acting there
         return (f"{head}: first in the equation of {where}; check the parameters of the elements "
                 "acting there, the initial conditions and the time step")
 

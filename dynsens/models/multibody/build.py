@@ -77,6 +77,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
         m.drift_limit = None if drift_limit is None else float(drift_limit)
         m.point_mass_attachments = list(rd.point_mass_attachments)
+        m.entry_paths = _entry_paths(spec, path)
         return m
     model = make()
     if table.nominal is None or problems.problems:   # outside a case, or the design has problems:
@@ -189,6 +190,27 @@ def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
 def _point(rd: Reader, body: BodyDef, spec: Any, path: str, key: str) -> Point | None:
     k = rd.point_on(body, spec, path, key)
     return None if k is None else Point(body.index, k)
+
+
+def _entry_paths(spec: dict, path: str) -> dict[str, Any]:
+    """YAML entries by name, for run-time errors (MultibodyModel.describe_equation): joints
+    {name: 'model.joints[2] (revolute 'J1')'}, and per body the forces that name it."""
+    joints: dict[str, str] = {}
+    forces: dict[str, list[str]] = {}
+    for key, out in (("joints", joints), ("forces", None)):
+        items = spec.get(key)
+        for i, item in enumerate(items if isinstance(items, list) else []):
+            if not isinstance(item, dict):
+                continue
+            entry = f"{path}.{key}[{i}] ({item.get('type')} '{item.get('name', '')}')"
+            if out is not None:
+                out[str(item.get("name"))] = entry
+                continue
+            for v in item.values():
+                for b in (v if isinstance(v, list) else [v]):
+                    if isinstance(b, str) and entry not in forces.setdefault(b, []):
+                        forces[b].append(entry)
+    return {"joints": joints, "forces": forces, "bodies": f"{path}.bodies"}
 
 
 def _forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, springs: list) -> None:

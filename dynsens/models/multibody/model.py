@@ -335,6 +335,30 @@ class MultibodyModel(Model):
         """'body.x', 'body.y', 'body.z', 'body.e0' ... 'body.e3' per moving body."""
         return [f"{b.name}.{c}" for b in self.bodies for c in ("x", "y", "z", "e0", "e1", "e2", "e3")]
 
+    #: YAML entries by name (set by the builder): joints, forces per body, the bodies' section
+    entry_paths: dict[str, Any] = {}
+
+    def describe_equation(self, k: int) -> str:
+        """A body coordinate with its body's YAML entry and the forces naming it, or a
+        constraint equation with its joint's YAML entry."""
+        n_q, n_lam = self.traits.n_q, self.traits.n_lam
+        paths = self.entry_paths
+        if 0 <= k < n_q:
+            body = self.bodies[k // 7].name
+            forces = paths.get("forces", {}).get(body, [])
+            return (f"coordinate {self.dof_labels()[k]} of body '{body}' ({paths.get('bodies', 'model.bodies')}.{body})"
+                    + (f", acted on by {', '.join(forces)}" if forces else ""))
+        if n_q <= k < n_q + n_lam:
+            owner = self.eq_owner[k - n_q]
+            jt = next((j for j in self.joints if k - n_q in j.rows), None)
+            name = jt.name if jt is not None else owner.rsplit(".", 1)[0]    # else: a normalization
+            joint = paths.get("joints", {}).get(name)
+            owner_body = next((b.name for b in self.bodies if name in (b.name, f"{b.name}.orientation")), None)
+            if joint is None and owner_body is not None:     # Euler normalization, a point mass's lock
+                joint = f"body '{owner_body}' ({paths.get('bodies', 'model.bodies')}.{owner_body})"
+            return f"constraint {owner}" + (f" of {joint}" if joint else "")
+        return super().describe_equation(k)
+
     def multiplier_labels(self) -> list[str]:
         """Names of the constraint equations / multipliers, in λ order."""
         return list(self.eq_owner)
