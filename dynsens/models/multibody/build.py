@@ -135,12 +135,10 @@ def _joints(rd: Reader, spec: Any, path: str) -> list[Joint]:
 
 def _joint(rd: Reader, j: dict, jp: str, name: str, kind: str) -> Joint | None:
     check_keys(j, jp, JOINT_KEYS, rd.problems, required=("type", "body_1", "body_2"))
-    b1, b2 = rd.body(j.get("body_1"), f"{jp}.body_1"), rd.body(j.get("body_2"), f"{jp}.body_2")
-    if b1 is None or b2 is None:
+    pair = rd.two_bodies(j, jp)
+    if pair is None:
         return None
-    if b1 is b2:
-        rd.problems.add(f"{jp}.body_2", "a joint needs two different bodies")
-        return None
+    b1, b2 = pair
     for role, b in (("body_1", b1), ("body_2", b2)):
         why = attachment_problem(kind, role, b)
         if why is not None:

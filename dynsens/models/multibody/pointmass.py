@@ -54,12 +54,10 @@ def read_distance_joint(rd: Reader, j: dict, jp: str, name: str) -> Joint | None
     if not check_keys(j, jp, DISTANCE_KEYS, rd.problems,
                       required=("body_1", "body_2", "marker_1", "marker_2", "length")):
         return None
-    b1, b2 = rd.body(j.get("body_1"), f"{jp}.body_1"), rd.body(j.get("body_2"), f"{jp}.body_2")
-    if b1 is None or b2 is None:
+    pair = rd.two_bodies(j, jp)
+    if pair is None:
         return None
-    if b1 is b2:
-        rd.problems.add(f"{jp}.body_2", "a joint needs two different bodies")
-        return None
+    b1, b2 = pair
     k1, k2 = rd.marker(b1, j.get("marker_1"), f"{jp}.marker_1"), rd.marker(b2, j.get("marker_2"), f"{jp}.marker_2")
     il = rd.num(j.get("length"), f"{jp}.length", positive=True)
     if k1 is None or k2 is None or il < 0:

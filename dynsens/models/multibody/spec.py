@@ -153,6 +153,17 @@ class Reader:
         return fn
 
     # -------------------------------------------------------------- lookups
+    def two_bodies(self, j: dict, jp: str) -> tuple[BodyDef, BodyDef] | None:
+        """The bodies ``body_1`` and ``body_2`` of the joint entry ``j`` at ``jp``, which must
+        differ (None once a problem is reported)."""
+        b1, b2 = self.body(j.get("body_1"), f"{jp}.body_1"), self.body(j.get("body_2"), f"{jp}.body_2")
+        if b1 is None or b2 is None:
+            return None
+        if b1 is b2:
+            self.problems.add(f"{jp}.body_2", "a joint needs two different bodies")
+            return None
+        return b1, b2
+
     def body(self, name: Any, path: str) -> BodyDef | None:
         if name not in self.by_name:
             self.problems.add(path, f"unknown body {name!r}{did_you_mean(name, self.by_name)} "
