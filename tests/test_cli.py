@@ -26,35 +26,13 @@ import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
 import dynsens.cli.simulate  # noqa: F401  (registers the command)
 from dynsens.cli.main import cli, main  # noqa: F401
 from conftest import CASES
+from helpers import SDOF_RUN
 from dynsens.errors import ModelError
 
 REPO = Path(__file__).resolve().parents[1]
 SDOF = REPO / "cases" / "sdof_step.yaml"
 
-CASE = {
-    "name": "sdof_cli",
-    "design": {"variables": [
-        {"name": "m", "value": 2.0, "lower": 0.5, "upper": 10.0},
-        {"name": "c", "value": 0.8, "lower": 0.0, "upper": 5.0},
-        {"name": "k", "value": 50.0, "lower": 10.0, "upper": 200.0},
-    ]},
-    "model": {
-        "type": "structural",
-        "dofs": ["u"],
-        "elements": [
-            {"type": "mass", "name": "body", "dof": "u", "mass": "m"},
-            {"type": "spring", "name": "spring", "dofs": ["u", "ground"], "k": "k"},
-            {"type": "damper", "name": "damper", "dofs": ["u", "ground"], "c": "c"},
-        ],
-        "loads": [{"dof": "u", "value": 10.0, "function": "constant"}],
-    },
-    "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 2.0e-3, "t_end": 0.5},
-    "sensitivity": {"enabled": True, "partials": "forward"},
-    "responses": [
-        {"name": "q_end", "type": "value", "quantity": {"dof": "u", "kind": "displacement"}},
-        {"name": "q_ks", "type": "ks", "quantity": {"dof": "u", "kind": "displacement"}, "rho": 100.0},
-    ],
-}
+CASE = SDOF_RUN
 N_STEPS = 250  # t_end / dt
 
 

@@ -26,35 +26,14 @@ from dynsens.cli.main import cli
 from dynsens.errors import CaseError, DesignError, NonFiniteError
 from dynsens.runchecks import check_result
 from dynsens.simulation import run_case
+from helpers import SDOF_RUN
 
 REPO = Path(__file__).resolve().parents[1]
 CASES = REPO / "cases"
 
-BASE = {
-    "name": "sdof_rel",
-    "design": {"variables": [
-        {"name": "m", "value": 2.0, "lower": 0.5, "upper": 10.0},
-        {"name": "c", "value": 0.8, "lower": 0.0, "upper": 5.0},
-        {"name": "k", "value": 50.0, "lower": 10.0, "upper": 200.0},
-    ]},
-    "model": {
-        "type": "structural",
-        "dofs": ["u"],
-        "elements": [
-            {"type": "mass", "name": "body", "dof": "u", "mass": "m"},
-            {"type": "spring", "name": "spring", "dofs": ["u", "ground"], "k": "k"},
-            {"type": "damper", "name": "damper", "dofs": ["u", "ground"], "c": "c"},
-        ],
-        "loads": [{"dof": "u", "value": 10.0, "function": "constant"}],
-    },
-    "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 5.0e-3, "t_end": 0.2},
-    "sensitivity": {"enabled": True, "partials": "forward"},
-    "events": [{"name": "crossing", "quantity": {"dof": "u", "kind": "displacement"}, "value": 10.0}],
-    "responses": [
-        {"name": "q_end", "type": "value", "quantity": {"dof": "u", "kind": "displacement"}},
-        {"name": "q_ks", "type": "ks", "quantity": {"dof": "u", "kind": "displacement"}, "rho": 100.0},
-    ],
-}
+BASE = {**copy.deepcopy(SDOF_RUN), "name": "sdof_rel",
+        "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 5.0e-3, "t_end": 0.2},
+        "events": [{"name": "crossing", "quantity": {"dof": "u", "kind": "displacement"}, "value": 10.0}]}
 
 
 def make(mutate=None) -> dict:
