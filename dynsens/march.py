@@ -272,7 +272,7 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
 def step_sequence(plan: RunPlan, scheme: Newmark, counters: Counters) -> StepSequence:
     """The steps a run takes: replayed, adaptive or the fixed grid of dt."""
     if plan.replay_times is not None:
-        return ReplayedSteps(plan.replay_times)
+        return ReplayedSteps(plan.replay_times, plan.t_end)
     if plan.adaptive is not None:
         return AdaptiveSteps(plan.t0, plan.t_end, plan.dt, plan.adaptive, scheme, counters)
     return FixedGrid(plan.t0, plan.t_end, plan.dt, plan.n_steps, plan.step_size)

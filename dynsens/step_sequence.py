@@ -26,8 +26,8 @@ fixed as the design varies (the error estimate and the controller are not differ
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, Callable
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from .errors import ConvergenceError, NonFiniteError, StepSizeError
 from .integrators.newmark import Newmark
 from .models.base import StepState
 from .stepping import PrimalStepper, StepRecord, Trial
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .march import RunPlan
 
 SAFETY = 0.9          # of the step the estimate predicts
 GROW = 2.0            # largest growth of the step from one step to the next
@@ -153,19 +156,26 @@ class ReplayedSteps(StepSequence):
     """The accepted grid times of another run (``times[0]`` = t0), taken again as they are: the
     step sizes are their differences.  A run replaying an adaptive run's ``time`` takes the
     very same steps; its finite differences or complex step are those of the procedure along
-    that sequence."""
+    that sequence.  Past the last time given (a run that an event ended) it goes on with the
+    last step size up to t_end, so that a perturbed run still finds its event."""
 
-    def __init__(self, times: tuple[float, ...]):
-        super().__init__(times[0], times[-1])
+    def __init__(self, times: tuple[float, ...], t_end: float):
+        super().__init__(times[0], max(t_end, times[-1]))
         self.times = times
+        self.done = len(times) < 2
 
     def finished(self) -> bool:
-        return len(self.log) >= len(self.times) - 1
+        return self.done
 
     def take(self, stepper: PrimalStepper, i: int, t_prev: float, s: StepState) -> list[StepRecord]:
-        h = self.times[i] - self.times[i - 1]
+        n = len(self.times) - 1
+        if i <= n:
+            h = self.times[i] - self.times[i - 1]
+        else:
+            h = min(self.times[n] - self.times[n - 1], self.t_end - t_prev)
         records = stepper.advance(i, t_prev, h, s)
         self.log.append((t_prev, h, records[-1].t))
+        self.done = i >= n and self.t_end - records[-1].t <= 1e-12 * max(abs(self.t_end), 1.0)
         return records
 
     def progress(self) -> tuple[int, int]:
@@ -174,6 +184,12 @@ class ReplayedSteps(StepSequence):
     @property
     def expected_steps(self) -> int:
         return len(self.times) - 1
+
+
+def replaying(plan: RunPlan, times: np.ndarray) -> RunPlan:
+    """``plan`` stepping through the grid ``times`` (s) of another run instead of its own steps:
+    finite differences or complex step of such runs differentiate along that sequence."""
+    return replace(plan, replay_times=tuple(float(t) for t in np.real(times)))
 
 
 class AdaptiveSteps(StepSequence):
