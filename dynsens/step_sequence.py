@@ -5,7 +5,7 @@ Every grid step the loop of :func:`dynsens.march.integrate` takes is logged as (
 the adjoint's recomputed segments and its output instants read them back from the log, so the
 three sequences look alike to the derivative modes.
 
-Adaptive steps (method.md §8).  The local error of the Newmark displacement update, for exact
+Adaptive steps (method.md §6).  The local error of the Newmark displacement update, for exact
 values at the start of the step, is C_q h³ q⃛ + O(h⁴); with q⃛ h ≈ a_{n+1} − a_n this gives the
 estimate of Zienkiewicz & Xie (1991), generalized to the α-family:
 
