@@ -44,6 +44,7 @@ GROW = 2.0            # largest growth of the step from one step to the next
 SHRINK = 0.2          # largest reduction after a rejection by the error estimate
 NEWTON_SHRINK = 0.25  # reduction after a failed Newton iteration
 MIN_COEFFICIENT = 1e-3   # |C_q| below this: the estimate does not measure the step's error
+INITIAL_ROOM = 4096      # grid steps the histories of an adaptive run are first sized for
 
 
 @dataclass(frozen=True)
@@ -261,4 +262,5 @@ class AdaptiveSteps(StepSequence):
 
     @property
     def expected_steps(self) -> int:
-        return self.nominal
+        # the count is not known beforehand (dt is only the first trial): start small and grow
+        return min(self.nominal, INITIAL_ROOM)

@@ -273,3 +273,18 @@ def test_simulate_summary_counts_accepted_and_rejected_steps(tmp_path):
     with h5py.File(tmp_path / "a.h5") as f:
         n, rejected = len(f["time"]) - 1, f["stats"].attrs["rejected_steps"]
     assert f"adaptive steps: {n} accepted, {rejected} rejected, step sizes" in out.output
+
+
+def test_storage_grows_with_the_steps_and_a_tiny_first_step_is_no_huge_run():
+    # dt = 1e-9 s is only the first trial: no 3e9-step run is sized or refused
+    res = dynsens.run_case(sdof(1e-9, "integrator.dt=1e-9", "integrator.adaptive.dt_min=1e-12"), sensitivities=False)
+    assert len(res.time) > 4097                      # past the first room of the histories
+    assert res.history["q"].shape[0] == len(res.time) == res.quantities["displacement"].value.shape[0]
+    assert np.all(np.diff(res.time) > 0) and np.diff(res.time)[0] == pytest.approx(1e-9)
+    assert np.max(np.abs(res.history["q"][:, 0] - exact_u(res.time))) < 5e-5
+
+
+def test_convergence_study_refuses_adaptive_steps():
+    from dynsens.convergence import work_precision
+    with pytest.raises(CaseError, match=r"integrator.adaptive: the convergence study varies integrator.dt"):
+        work_precision(sdof(1e-5), [1e-3, 5e-4], ["ddm-forward"])
