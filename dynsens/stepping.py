@@ -5,7 +5,10 @@ corrects.  When Newton fails, the step is halved (up to ``max_step_cuts`` times)
 halves are taken in turn; every accepted sub-step is a record of its own.  A record holds what
 the derivative modes need of the step — time, step size, converged state, the linearization
 and factor that the sensitivity solve uses — so the direct mode can trail the state and the
-adjoint mode can sweep back over the records without touching the Newton loop.
+adjoint mode can sweep back over the records without touching the Newton loop.  With adaptive
+steps (:mod:`.step_sequence`) a step is first a :class:`Trial` that the step controller accepts
+(:meth:`PrimalStepper.commit`) or rejects (:meth:`PrimalStepper.discard`: no record, the Newton
+solver's memory as before it).
 """
 from __future__ import annotations
 

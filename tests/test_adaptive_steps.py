@@ -288,3 +288,10 @@ def test_convergence_study_refuses_adaptive_steps():
     from dynsens.convergence import work_precision
     with pytest.raises(CaseError, match=r"integrator.adaptive: the convergence study varies integrator.dt"):
         work_precision(sdof(1e-5), [1e-3, 5e-4], ["ddm-forward"])
+
+
+def test_check_gradients_replays_the_accepted_steps():
+    from dynsens.gradcheck import check_gradients, to_markdown
+    rep = check_gradients(sdof(1e-6, t_end=2.0), [1e-5], "central", workers=1)
+    assert rep.replayed and rep.passes(1e-8), {n: rep.best_rel_diff(n) for n in rep.responses}
+    assert "replay the accepted steps" in to_markdown(rep)
