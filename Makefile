@@ -75,6 +75,7 @@ report: $(STAMP)
 	$(VENV)/bin/dynsens convergence cases/truss_impact.yaml --dt 4e-4,2e-4,1e-4,5e-5 -o results/convergence
 	$(VENV)/bin/dynsens convergence cases/hydraulic_lever.yaml --dt 0.008,0.004,0.002,0.001 -o results/convergence
 	$(VENV)/bin/dynsens convergence cases/tyrolean_weir.yaml --dt 0.004,0.002,0.001 --methods ddm-forward,fd-forward -o results/convergence
+	$(PY) scripts/adaptive_report.py -o results/convergence   # a mechanism on adaptive steps beside fixed ones
 	$(PY) scripts/extreme_report.py > results/extreme.md
 
 bench: $(STAMP)

@@ -150,7 +150,20 @@ SECTIONS: dict[str, Section] = {
            values=("interpolate", "step"), default="interpolate"),
         _k("max_step_cuts", "integer", "how often a step whose Newton iteration fails is halved (0..30)",
            default=6),
+        _k("adaptive", "section", "adaptive steps by a local error estimate (dt: the first step)",
+           item="integrator.adaptive"),
     )),
+    "integrator.adaptive": Section(
+        "integrator.adaptive", "Step sizes chosen by the local error estimate of the Newmark family (see the "
+        "README, Adaptive time steps); the gradient is exact along the accepted steps.", (
+            _k("rtol", "number", "relative tolerance of the local error per step (> 0)", default=1e-4),
+            _k("atol", "number", "absolute tolerance of the local error per step, in each coordinate's unit (> 0)",
+               default=1e-8),
+            _k("dt_min", "number", "smallest step (s); a step that still fails there stops the run with an error",
+               default="1e-6 dt"),
+            _k("dt_max", "number", "largest step (s); it also bounds the spacing of the output samples",
+               default="t_end - t0"),
+        )),
     "integrator.solver": Section("integrator.solver", "Newton–Raphson convergence test per block of z.", (
         _k("rtol", "number", "relative tolerance on the correction", default=1e-10),
         _k("atol", "number", "absolute tolerance on the correction", default=0.0),

@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from .case.load import Case, load_case_dict
+from .errors import CaseError, Problem
 from .io.paths import atomic_path, atomic_write_text, safe_stem
 from .executor import cached_case, make_executor, remember_case
 from .simulation import run_case
@@ -112,6 +113,11 @@ def work_precision(case: Case, dts: list[float], methods: list[str], *, workers:
     ``progress(done, total, note)`` is called after every (Δt, method) run with the work done so
     far in estimated simulation-step units (a run costs ∝ 1/Δt).
     """
+    if case.plan.adaptive is not None:
+        raise CaseError([Problem("integrator.adaptive", "the convergence study varies integrator.dt, which with "
+                                 "adaptive steps is only the first trial step: run it on the fixed grid "
+                                 "(--set integrator.adaptive=null), or compare rtols as "
+                                 "scripts/adaptive_report.py does")], case.source)
     dts = sorted(dts, reverse=True)
     from .warmup import warm_case
     warm_case(case)  # compile first: no reported wall time includes numba compilation

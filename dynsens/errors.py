@@ -69,6 +69,17 @@ class ConvergenceError(DynsensError, RuntimeError):
         )
 
 
+class StepSizeError(ConvergenceError):
+    """Adaptive steps (``integrator.adaptive``) needed a step below ``dt_min``: the local error
+    estimate (or Newton) still failed at the smallest step allowed.  A ConvergenceError, so
+    that every caller that treats a failed run treats this one alike."""
+
+    def __init__(self, message: str, *, t: float, step: int):
+        self.t, self.step, self.iterations, self.residual_history = t, step, 0, []
+        self.hint = ""
+        RuntimeError.__init__(self, message)
+
+
 class DesignError(ModelError):
     """A design at which an entry of the case has no finite value or breaks its range
     (e.g. a mass expression that is negative there): a failed evaluation, never a result."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from .case.load import Case
 from .executor import Executor, cached_case, make_executor, remember_case
 from .simulation import run_case
+from .step_sequence import replaying
 
 SCHEMES = ("forward", "central", "complex")
 log = logging.getLogger(__name__)
@@ -50,6 +51,7 @@ class GradientReport:
     columns: list[FDColumn]
     missing: dict[str, str]
     fixed_time: tuple[str, ...] = ()
+    replayed: bool = False     # the finite-difference runs replayed the accepted adaptive steps
 
     def best_rel_diff(self, name: str) -> float:
         """Smallest relative difference over the finite-difference columns."""
@@ -73,16 +75,20 @@ class GradientReport:
         return not self.failing(rtol)
 
 
-def _values(case: Case, x: np.ndarray) -> tuple[dict[str, Any], float]:
+def _values(case: Case, x: np.ndarray, times: np.ndarray | None = None) -> tuple[dict[str, Any], float]:
+    """Response values at x and the run's wall time (s); ``times``: replay these grid times."""
+    if times is not None:
+        case = replace(case, plan=replaying(case.plan, times))
     t0 = time.perf_counter()
     res = run_case(case, x, sensitivities=False, history=())
     return {k: v.value for k, v in res.responses.items()}, time.perf_counter() - t0
 
 
-def _values_task(job: tuple[str, str, np.ndarray]) -> tuple[dict[str, Any], float]:
-    """One finite-difference run on a worker: (case text, case source, design) -> values, wall time."""
-    text, source, x = job
-    return _values(cached_case(text, source), x)
+def _values_task(job: tuple[str, str, np.ndarray, np.ndarray | None]) -> tuple[dict[str, Any], float]:
+    """One finite-difference run on a worker: (case text, case source, design, grid times to
+    replay or None) -> values, wall time."""
+    text, source, x, times = job
+    return _values(cached_case(text, source), x, times)
 
 
 def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
@@ -121,11 +127,14 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
         if progress is not None:
             progress(done[0], n_runs)
     tick(f"semi-analytical run ({sa_time:.2f} s)")
+    # adaptive steps: the gradient is that of the procedure along the accepted steps (held fixed
+    # as the design varies), so the finite-difference runs replay them
+    times = sa_run.time if case.plan.adaptive is not None else None
     names = tuple(sa_run.responses)
     missing = {n: r.missing for n, r in sa_run.responses.items() if r.missing}
     sa = {n: np.real(r.gradient) if r.gradient is not None else np.full(m, np.nan)
           for n, r in sa_run.responses.items()}
-    base_vals, primal_time = _values(case, x)
+    base_vals, primal_time = _values(case, x, times)
     tick(f"primal run ({primal_time:.2f} s)")
     ref = np.where(np.abs(x) > 0, np.abs(x), case.scale)
     jobs: list[np.ndarray] = []
@@ -137,7 +146,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
             if scheme == "central":
                 jobs.append(x - dx)
     remember_case(case)                       # in-process runs reuse the loaded case
-    tasks = [(case.text, case.source, xj) for xj in jobs]
+    tasks = [(case.text, case.source, xj, times) for xj in jobs]
 
     def fd_done(k: int) -> None:
         tick(f"finite-difference run {k + 1}")
@@ -172,7 +181,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     fixed = tuple(n for n, r in sa_run.responses.items() if r.kind == "fixed_time")
     return GradientReport(case.name, case.design_names, x, names,
                           {n: float(np.real(sa_run.responses[n].value)) for n in names}, sa, sa_time,
-                          primal_time, columns, missing, fixed)
+                          primal_time, columns, missing, fixed, times is not None)
 
 
 def _vec(v: np.ndarray) -> str:
@@ -197,6 +206,11 @@ def to_markdown(rep: GradientReport) -> str:
                   "Finite-difference wall times are serial-equivalent (sum over the runs each column needs)."]
     for n, why in rep.missing.items():
         lines.append(f"- `{n}` is missing: {why}")
+    if rep.replayed:
+        lines.append("- Adaptive steps: the finite-difference runs replay the accepted steps of the "
+                     "semi-analytical run, whose gradient is exact along that sequence (step sizes held "
+                     "fixed as the design varies); runs that chose their own steps would add the "
+                     "step-selection effect, of the size of the local error tolerance.")
     for n in rep.fixed_time:
         lines.append(f"- `∇{n}` holds the event time fixed (as the paper's Table 1 does for the stroke); "
                      "finite differences of the whole run move the event, so they measure the total "
@@ -213,5 +227,5 @@ def to_json(rep: GradientReport) -> dict[str, Any]:
         "columns": [{"step": c.step, "scheme": c.scheme, "wall_time_s": c.wall_time,
                      "gradients": {n: v.tolist() for n, v in c.gradients.items()},
                      "rel_diff": c.rel_diff} for c in rep.columns],
-        "missing": rep.missing, "fixed_time": list(rep.fixed_time),
+        "missing": rep.missing, "fixed_time": list(rep.fixed_time), "replayed_adaptive_steps": rep.replayed,
     }

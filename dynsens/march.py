@@ -28,6 +28,7 @@ from .responses import EventHit, EventTime, ResponseValue
 from .sensitivity import DesignPartials
 from .solver.linalg import Counters
 from .solver.newton import NewtonSettings, StepSolver
+from .step_sequence import AdaptiveSettings, AdaptiveSteps, FixedGrid, ReplayedSteps, StepSequence
 from .stepping import HISTORY_FIELDS, PrimalStepper, StepRecord
 
 
@@ -56,6 +57,10 @@ class RunPlan:
         (:func:`choose_method` decides ``auto``).
     memory_budget : bytes of step records the adjoint keeps; beyond it, checkpoints and
         recomputed segments.
+    adaptive : adaptive steps (``integrator.adaptive``; dt is the first trial step), or None for
+        the fixed grid of dt.
+    replay_times : the grid times of another run (t0 first) to step through as they are
+        (:class:`~dynsens.step_sequence.ReplayedSteps`), or None.
     """
 
     t0: float
@@ -71,10 +76,13 @@ class RunPlan:
     max_step_cuts: int = 6
     method: str = "direct"
     memory_budget: float = DEFAULT_MEMORY_BUDGET
+    adaptive: AdaptiveSettings | None = None
+    replay_times: tuple[float, ...] | None = None
 
     @property
     def n_steps(self) -> int:
-        """Number of steps (the last one is shortened to land on t_end)."""
+        """Number of steps of the fixed grid (the last one is shortened to land on t_end); the
+        nominal count of an adaptive run."""
         return max(1, int(np.ceil((self.t_end - self.t0) / self.dt - 1e-9)))
 
     def step_size(self, i: int) -> float:
@@ -105,11 +113,12 @@ class RunResult:
 
 
 class RunStore:
-    """The histories and monitors of a run at the grid steps, in arrays sized once."""
+    """The histories and monitors of a run at the grid steps, in arrays sized for the steps
+    expected (doubled when an adaptive run takes more)."""
 
     def __init__(self, plan: RunPlan, model: Model, params: Any, s0: StepState, m: int,
-                 sensitivities: bool):
-        n = plan.n_steps + 1
+                 sensitivities: bool, n_steps: int):
+        n = n_steps + 1
         self.model, self.params = model, params
         self.fields = [f for f in plan.history if f in HISTORY_FIELDS]
         self.times = np.empty(n)
@@ -122,8 +131,19 @@ class RunStore:
         self.mons = {k: np.empty(n) for k in self.monitor_names}
         self.last = 0
 
+    def _grow(self) -> None:
+        """Twice the room (an adaptive run past its expected step count)."""
+        def double(a: np.ndarray) -> np.ndarray:
+            return np.concatenate([a, np.empty_like(a)])
+        self.times = double(self.times)
+        for d in (self.hist, self.shist, self.mons):
+            for f in d:
+                d[f] = double(d[f])
+
     def record(self, k: int, t: float, s: StepState) -> None:
         """The state s of grid step k at time t (s)."""
+        if k >= self.times.shape[0]:
+            self._grow()
         self.times[k] = t
         self.last = k
         for f in self.fields:
@@ -249,22 +269,26 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
     return "direct", f"auto: {r} functions against {m} design variables (m < 4(r + 1))"
 
 
+def step_sequence(plan: RunPlan, scheme: Newmark, counters: Counters) -> StepSequence:
+    """The steps a run takes: replayed, adaptive or the fixed grid of dt."""
+    if plan.replay_times is not None:
+        return ReplayedSteps(plan.replay_times, plan.t_end)
+    if plan.adaptive is not None:
+        return AdaptiveSteps(plan.t0, plan.t_end, plan.dt, plan.adaptive, scheme, counters)
+    return FixedGrid(plan.t0, plan.t_end, plan.dt, plan.n_steps, plan.step_size)
+
+
 def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
-          partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet,
-          counters: Counters, design_names: tuple[str, ...] = ()) -> DirectMode | AdjointMode | None:
-    """The derivative mode that consumes the step records (None without sensitivities)."""
+          partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet, counters: Counters,
+          steps: StepSequence, design_names: tuple[str, ...] = ()) -> DirectMode | AdjointMode | None:
+    """The derivative mode that consumes the step records (None without sensitivities); the
+    adjoint recomputes segments and places its seeds by the steps as they were taken."""
     if partials is None:
         return None
     if method == "direct":
         return DirectMode(model, scheme, solver, partials, counters, design_names)
-
-    def grid(i: int) -> tuple[float, float]:
-        """(t_prev, h) of grid step i exactly as the loop of :func:`integrate` forms them."""
-        t_prev = plan.t0 if i == 1 else plan.t0 + (i - 2) * plan.dt + plan.step_size(i - 1)
-        return t_prev, plan.step_size(i)
-    records = RecordStore(stepper, grid, plan.memory_budget, counters)
-    return AdjointMode(model, scheme, partials, counters, responses.outputs, records,
-                       lambda k: plan.t0 + (k - 1) * plan.dt + plan.step_size(k) if k else plan.t0)
+    records = RecordStore(stepper, steps.grid, plan.memory_budget, counters)
+    return AdjointMode(model, scheme, partials, counters, responses.outputs, records, steps.time)
 
 
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
@@ -286,11 +310,13 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     solver = _solver(model, plan, counters, partials)
     stepper = PrimalStepper(model, scheme, solver, params, plan.max_step_cuts, counters)
     method, reason = choose_method(plan, responses, m) if partials is not None else ("", "")
-    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters, design_names)
+    steps = step_sequence(plan, scheme, counters)
+    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters, steps,
+                 design_names)
 
     rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
     ds = mode.start(rec) if mode is not None else None
-    store = RunStore(plan, model, params, rec.state, m, ds is not None)
+    store = RunStore(plan, model, params, rec.state, m, ds is not None, steps.expected_steps)
     responses.start(params, partials if method == "direct" else None,
                     None if method == "direct" else model.stack_parameters([params]),
                     model.traits.n_z, trace=method == "adjoint")
@@ -298,11 +324,11 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     feed.start(plan.t0, rec.state, ds)
     counters.output_evaluations += 1
     status, message = "completed", f"reached t_end = {plan.t_end:g} s"
-    s, t = rec.state, plan.t0
-    for i in range(1, plan.n_steps + 1):                            # predict, Newton, correct
-        h = plan.step_size(i)
-        t_prev, t = t, plan.t0 + (i - 1) * plan.dt + h
-        records = stepper.advance(i, t_prev, h, s)
+    s, t, i = rec.state, plan.t0, 0
+    while not steps.finished():                                     # predict, Newton, correct
+        i += 1
+        records = steps.take(stepper, i, t, s)
+        _, h, t = steps.log[-1]
         s = records[-1].state
         counters.steps += 1
         store.record(i, t, s)
@@ -315,7 +341,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
             message = f"event '{ev}' at t = {float(np.real(responses.fired[ev].t)):.6g} s"
             break
         if progress is not None:
-            progress(i, plan.n_steps)
+            progress(*steps.progress())
     feed.catch_up()
     responses.close(t, m)                                             # responses, gradients
     values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0,

@@ -52,7 +52,15 @@ def run_bytes(traits: Traits, plan: RunPlan, m: int, history: tuple[str, ...] | 
     per_step = 8 * (1 + sum(getattr(traits, _FIELD_SIZE[f]) for f in fields if f in _FIELD_SIZE))
     if plan.sensitivity_history and plan.sensitivities:
         per_step += 8 * m * sum(getattr(traits, _FIELD_SIZE[f]) for f in fields if f in _FIELD_SIZE)
-    return (plan.n_steps + 1) * per_step
+    return (_steps(plan) + 1) * per_step
+
+
+def _steps(plan: RunPlan) -> int:
+    """Steps of the run: those of the grid of dt, or, with adaptive steps, the fewest it can take
+    (every step dt_max long; it may take many more)."""
+    if plan.adaptive is None:
+        return plan.n_steps
+    return max(1, int(np.ceil((plan.t_end - plan.t0) / plan.adaptive.dt_max - 1e-9)))
 
 
 def _gib(b: float) -> str:
@@ -61,7 +69,7 @@ def _gib(b: float) -> str:
 
 def size_problem(traits: Traits, plan: RunPlan, m: int, history: tuple[str, ...] | None = None) -> str | None:
     """Why a run of this size is refused (steps, estimate, what to change), or None."""
-    n = plan.n_steps
+    n = _steps(plan)
     if n > MAX_STEPS:
         return (f"expected at most {MAX_STEPS:.0e} steps, found (t_end - t0)/dt = {n:.3e}: increase dt or "
                 "shorten the interval")

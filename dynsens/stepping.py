@@ -5,7 +5,10 @@ corrects.  When Newton fails, the step is halved (up to ``max_step_cuts`` times)
 halves are taken in turn; every accepted sub-step is a record of its own.  A record holds what
 the derivative modes need of the step — time, step size, converged state, the linearization
 and factor that the sensitivity solve uses — so the direct mode can trail the state and the
-adjoint mode can sweep back over the records without touching the Newton loop.
+adjoint mode can sweep back over the records without touching the Newton loop.  With adaptive
+steps (:mod:`.step_sequence`) a step is first a :class:`Trial` that the step controller accepts
+(:meth:`PrimalStepper.commit`) or rejects (:meth:`PrimalStepper.discard`: no record, the Newton
+solver's memory as before it).
 """
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ from .errors import ConvergenceError, NonFiniteError
 from .integrators.newmark import Aux, Newmark, Prediction
 from .models.base import Model, StepState
 from .runaway import RunawayMonitor
-from .solver.newton import StepSolver
+from .solver.newton import StepOutcome, StepSolver
 
 HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 
@@ -138,16 +141,8 @@ class PrimalStepper:
     def _take(self, i: int, t_prev: float, h: float, cuts: int, s: StepState, aux: Aux,
               records: list[StepRecord]) -> Aux:
         """One step; on Newton failure, its two halves (recursively)."""
-        scheme = self.scheme
-        t = t_prev + h
-        pred = scheme.predict(s, aux, h)
-        z_guess = np.concatenate([s.qdd, s.lam, s.pd])
-
-        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
-            return scheme.correct(pr, qdd, lam, pd, h)
-
         try:
-            out = self.solver.solve_step(t, i, pred, z_guess, self.params, scheme.coefficients(h), correct)
+            out, pred = self._solve(i, t_prev, h, s, aux)
         except ConvergenceError as exc:
             if cuts >= self.max_step_cuts:
                 if self.max_step_cuts:
@@ -157,10 +152,67 @@ class PrimalStepper:
             half = 0.5 * h
             aux = self._take(i, t_prev, half, cuts + 1, s, aux, records)
             return self._take(i, t_prev + half, half, cuts + 1, records[-1].state, aux, records)
+        records.append(self._accept(i, t_prev + h, h, out))
+        return self.scheme.advance(pred, out.state)
+
+    def _solve(self, i: int, t_prev: float, h: float, s: StepState, aux: Aux) -> tuple[StepOutcome, Prediction]:
+        """Predict, solve F_R(z) = 0 by Newton and correct: the step from t_prev by h (s)."""
+        scheme = self.scheme
+        t = t_prev + h
+        pred = scheme.predict(s, aux, h)
+        z_guess = np.concatenate([s.qdd, s.lam, s.pd])
+
+        def correct(pr: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray) -> StepState:
+            return scheme.correct(pr, qdd, lam, pd, h)
+
+        out = self.solver.solve_step(t, i, pred, z_guess, self.params, scheme.coefficients(h), correct)
+        check_finite(out.state, t, i, self.model)
+        return out, pred
+
+    def _accept(self, i: int, t: float, h: float, out: StepOutcome) -> StepRecord:
+        """The record of a step taken (the model's range and the runaway monitor checked)."""
         s_new = out.state
-        check_finite(s_new, t, i, self.model)
         if self.runaway is not None:
             self.runaway.observe(t, i, s_new)
         self.model.check_state(t, s_new, self.params)
-        records.append(StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations))
-        return scheme.advance(pred, s_new)
+        return StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations)
+
+    # ------------------------------------------------------------------ adaptive steps
+    def trial(self, i: int, t_prev: float, h: float, s: StepState) -> Trial:
+        """A trial of grid step i from the state s at t_prev by h (s), not yet accepted: the
+        step controller judges its local error, then :meth:`commit` or :meth:`discard`.  A
+        failing Newton iteration (or a non-finite state) raises with the solver as before."""
+        assert self.aux is not None, "initial() first"
+        snap = self.solver.snapshot()
+        try:
+            out, pred = self._solve(i, t_prev, h, s, self.aux)
+        except (ConvergenceError, NonFiniteError):
+            self.solver.restore(snap)
+            raise
+        return Trial(i, t_prev + h, h, out, self.aux, self.scheme.advance(pred, out.state), snap)
+
+    def commit(self, trial: Trial) -> StepRecord:
+        """Accept a trial: its record, and the scheme moves on from it."""
+        rec = self._accept(trial.step, trial.t, trial.h, trial.out)
+        self.aux = trial.aux_new
+        return rec
+
+    def discard(self, trial: Trial) -> None:
+        """Reject a trial: no record, and the Newton solver's memory returns to before it (so a
+        run replaying the accepted steps repeats them bit for bit)."""
+        self.solver.restore(trial.solver_snapshot)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """A solved step awaiting the step controller's verdict: grid step, end time t and size h
+    (s), the solver's outcome, the scheme's algorithmic accelerations before and after it and
+    the solver's memory before it."""
+
+    step: int
+    t: float
+    h: float
+    out: StepOutcome
+    aux_prev: Aux
+    aux_new: Aux
+    solver_snapshot: Any

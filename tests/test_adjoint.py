@@ -312,9 +312,9 @@ def test_event_time_responses_with_the_dissipative_schemes(scheme):
 
 
 # mechanisms with redundant joints (Bricard), drivers given as expressions (rheonomic), rotational
-# spring-dampers (torsional pair) and point masses with distance joints (point pendulum): whole
-# runs, their events included
-MECHANISMS = ["bricard", "rheonomic", "torsional_pair", "point_pendulum"]
+# spring-dampers (torsional pair), point masses with distance joints (point pendulum) and adaptive
+# steps (cart pole): whole runs, their events included
+MECHANISMS = ["bricard", "rheonomic", "torsional_pair", "point_pendulum", "cart_pole"]
 
 
 @pytest.mark.parametrize("name", MECHANISMS)

@@ -29,6 +29,7 @@ from ..records import QuantitySpec, Recorder
 from ..response_set import ResponseSet
 from ..sensitivity import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
+from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings
 from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
 from .families import design_with_families
@@ -345,10 +346,12 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     if loc not in ("interpolate", "step"):
         pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
     derivative = derivative_settings(sens, pc)
+    adaptive = adaptive_settings(spec.get("adaptive"), dt, t0, t_end, scheme, pc)
     if None in (dt, t0, t_end) or pc.problems:
         return scheme, None, str(loc)
     assert t0 is not None and t_end is not None and dt is not None  # checked above
     plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
                    partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
-                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts, **derivative)
+                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts,
+                   adaptive=adaptive, **derivative)
     return scheme, plan, str(loc)

@@ -22,9 +22,14 @@ log = logging.getLogger("dynsens.cli")
 def format_run_notes(result: Any) -> list[str]:
     """Step cuts and constraint drift (the per-step monitors), one line each when there are any."""
     lines = []
-    cuts = result.counters.get("step_cuts", 0)
-    lines.append(f"step cuts: {cuts}" + (" (Newton failed on these steps; each was halved and retried)"
-                                          if cuts else ""))
+    if "rejected_steps" in result.counters:      # adaptive steps
+        dt = np.diff(result.time)
+        lines.append(f"adaptive steps: {dt.size} accepted, {result.counters['rejected_steps']} rejected, "
+                     f"step sizes {dt.min():.3g} .. {dt.max():.3g} s" if dt.size else "adaptive steps: none")
+    else:
+        cuts = result.counters.get("step_cuts", 0)
+        lines.append(f"step cuts: {cuts}" + (" (Newton failed on these steps; each was halved and retried)"
+                                              if cuts else ""))
     for name, v in result.monitors.items():
         if len(v):
             lines.append(f"{name.replace('_', ' ')} drift: max {float(np.max(np.abs(v))):.3g}, "

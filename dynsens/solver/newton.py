@@ -28,6 +28,8 @@ from .linalg import Counters, Factor, SingularMatrixError
 ROUNDOFF = 1e-13
 # σ_min/σ_max of the constraint Jacobian below which a failing step is reported as a lock-up
 LOCK_RTOL = 1e-2
+# factors of a constant iteration matrix kept, one per coefficient triple (oldest dropped first)
+MAX_CACHED_FACTORS = 64
 
 
 @dataclass(frozen=True)
@@ -125,6 +127,8 @@ class StepSolver:
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
         if not self.refactor:
+            if len(self._cache) >= MAX_CACHED_FACTORS:   # adaptive steps: a new triple per step size
+                del self._cache[next(iter(self._cache))]
             self._cache[coeffs] = (lin, factor)
         return lin, factor
 
