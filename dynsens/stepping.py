@@ -1,10 +1,11 @@
 """The primal stepper: one :class:`StepRecord` per accepted step (method.md §2–3).
 
 A step predicts from the previous state, solves the step equation F_R(z) = 0 by Newton and
-corrects.  When Newton fails, the step is halved (up to ``max_step_cuts`` times) and its two
-halves are taken in turn; every accepted sub-step is a record of its own.  A record holds what
-the derivative modes need of the step — time, step size, converged state, the linearization
-and factor that the sensitivity solve uses — so the direct mode can trail the state and the
+corrects; a model may then project the end state onto its constraints (``Model.project``).
+When Newton fails, the step is halved (up to ``max_step_cuts`` times) and its two halves are
+taken in turn; every accepted sub-step is a record of its own.  A record holds what the
+derivative modes need of the step — time, step size, converged state, the linearization and
+factor that the sensitivity solve uses — so the direct mode can trail the state and the
 adjoint mode can sweep back over the records without touching the Newton loop.
 """
 from __future__ import annotations
@@ -36,6 +37,10 @@ class StepRecord:
     lin, factor : the linearization and factor of S the sensitivity solve of this step uses
         (None when no derivatives are computed).
     iterations : Newton iterations taken.
+    projection : when the model projects its end states (``Model.project``), the projection:
+        ``raw`` the solved state, ``projected`` the consistent one, ``feedback`` whether the run
+        continues from the projected state (then ``state`` is it) or from the solved one (then
+        only what the run reports is projected); None otherwise.
     """
 
     step: int
@@ -45,6 +50,18 @@ class StepRecord:
     lin: Any
     factor: Any
     iterations: int
+    projection: Any = None
+
+    @property
+    def solved(self) -> StepState:
+        """The state the step's equations hold at (before a projection): where the design
+        partials of its residual are taken."""
+        return self.state if self.projection is None else self.projection.raw
+
+    @property
+    def reported(self) -> StepState:
+        """The state the run reports (histories, outputs, responses, events, monitors)."""
+        return self.state if self.projection is None else self.projection.projected
 
 
 def split_unknowns(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -157,10 +174,10 @@ class PrimalStepper:
             half = 0.5 * h
             aux = self._take(i, t_prev, half, cuts + 1, s, aux, records)
             return self._take(i, t_prev + half, half, cuts + 1, records[-1].state, aux, records)
-        s_new = out.state
-        check_finite(s_new, t, i, self.model)
+        check_finite(out.state, t, i, self.model)
+        s_new, projection = self.model.project(t, out.state, self.params)   # (s_new: continued from)
         if self.runaway is not None:
             self.runaway.observe(t, i, s_new)
         self.model.check_state(t, s_new, self.params)
-        records.append(StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations))
+        records.append(StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations, projection))
         return scheme.advance(pred, s_new)
