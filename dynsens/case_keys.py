@@ -527,8 +527,8 @@ SECTIONS: dict[str, Section] = {
         _k("enabled", "bool", "switch the projection on (writing the section switches it on)", default=True),
         _k("tol", "number", "bound on the last Newton correction, relative to 1 + ‖q‖", default=1e-13),
         _k("max_iterations", "integer", "iterations before the run stops with an error", default=12),
-        _k("mode", "enum", "state: the run continues from the projected state; output: it continues from "
-                           "the solved (index-1) state and reports the projected one", default="state",
+        _k("mode", "enum", "output: the run continues from the solved (index-1) state and reports the "
+                           "projected one; state: it continues from the projected state", default="output",
            values=("state", "output")),
     )),
     "multibody.quantity": Section("quantity (multibody)", "Exactly one of joint, body, marker, element, with `kind`.", (

@@ -89,46 +89,37 @@ def _all_eqs(model: "MultibodyModel") -> list:
     return model.eqs + model.assembly.equations
 
 
-def closest_point_residual(model: "MultibodyModel", eqs: list, q: Array, target: Array, mu: Array,
-                           params: MBParams, t: float) -> Array:
-    """[q − target − J(q)ᵀ μ ; Φ(q, t)] (n_q + n_eq,): zero at the point of the manifold Φ = 0 of
-    ``eqs`` closest to ``target`` (plain 2-norm; μ the multipliers); complex-safe.  The assembly
-    (target: the given poses) and the projection of a step's end state (:mod:`.projection`)."""
-    ctx = _ctx(q, None, params, t)
+def _F(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
+    """The assembly residual F(q, μ) (n_q + n_c,)."""
+    eqs = _all_eqs(model)
+    t0 = model.assembly.t0
+    ctx = _ctx(q, None, params, t0)
     phi = model.constraint_values(ctx, eqs)[0][:, 0]
     dt = np.result_type(q, mu, params.pv, float)
     JTmu = np.zeros((q.shape[0], 1), dt)
     for i, eq in enumerate(eqs):
         eq.apply(ctx, mu[i:i + 1].reshape(1, 1), JTmu)
-    return np.concatenate([q - target - JTmu[:, 0], phi])
+    return np.concatenate([q - guess(model, params) - JTmu[:, 0], phi])
 
 
-def closest_point_matrix(eqs: list, q: Array, mu: Array, params: MBParams, t: float) -> Array:
-    """∂/∂(q, μ) of :func:`closest_point_residual`: [[I − ∂(J_Φᵀμ)/∂q, −J_Φᵀ], [J_Φ, 0]] (the
-    curvature term by batched complex step, exact to round-off for real data)."""
+def _F_matrix(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
+    """∂F/∂(q, μ)."""
+    eqs = _all_eqs(model)
+    t0 = model.assembly.t0
     n_q = q.shape[0]
     real = not (np.iscomplexobj(q) or np.iscomplexobj(mu) or np.iscomplexobj(params.pv))
 
     def JTmu(qb: Array) -> Array:
-        ctx = Ctx(qb, np.zeros_like(qb), np.zeros_like(qb), params, t)
+        ctx = Ctx(qb, np.zeros_like(qb), np.zeros_like(qb), params, t0)
         out = np.zeros(qb.shape, np.result_type(qb, mu, params.pv, float))
         for i, eq in enumerate(eqs):
             eq.apply(ctx, mu[i:i + 1].reshape(1, 1), out)
         return out
 
     H = _jac(JTmu, q, real)
-    Jc = jacobian_rows(eqs, q, params, t)
-    return np.block([[np.eye(n_q) - H, -Jc.T], [Jc, np.zeros((len(eqs), len(eqs)))]])
-
-
-def _F(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
-    """The assembly residual F(q, μ) (n_q + n_c,)."""
-    return closest_point_residual(model, _all_eqs(model), q, guess(model, params), mu, params, model.assembly.t0)
-
-
-def _F_matrix(model: "MultibodyModel", q: Array, mu: Array, params: MBParams) -> Array:
-    """∂F/∂(q, μ)."""
-    return closest_point_matrix(_all_eqs(model), q, mu, params, model.assembly.t0)
+    Jc = jacobian_rows(eqs, q, params, t0)
+    K = np.block([[np.eye(n_q) - H, -Jc.T], [Jc, np.zeros((len(eqs), len(eqs)))]])
+    return K
 
 
 def dependent_equations(J: Array, labels: list[str], rel_tol: float | None = None

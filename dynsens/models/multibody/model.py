@@ -336,11 +336,17 @@ class MultibodyModel(Model):
         return project(self, self.projection, t, s, params)
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
-        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`)."""
+        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`); with
+        ``model.projection`` also those of the state Newton solved before the projection
+        (``*_solved``: in mode output the state the integration continues from)."""
         from .drift import constraint_residuals
         Phi = constraint_residuals(self, t, s, params)
-        return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
-                "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
+        out = {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
+               "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
+        if self.projection is not None:
+            from .projection import solved_monitors
+            out.update(solved_monitors(self, t, s, params, Phi))
+        return out
 
     def dof_labels(self) -> list[str]:
         """'body.x', 'body.y', 'body.z', 'body.e0' ... 'body.e3' per moving body."""

@@ -2,32 +2,35 @@ r"""Projection of each accepted step's end state onto the constraint manifolds (
 
 The index-1 form holds the constraints at the acceleration level only; its positions and
 velocities drift (‖Φ‖ ≈ 1e-6…1e-4 over a run).  With ``model.projection`` on, the state that
-Newmark and Newton produced at the end of a step, (q, q̇), is replaced by the closest consistent
-one — the same closest-point problem as the initial assembly (:mod:`.assembly`), plain 2-norm:
+Newmark and Newton produced at the end of a step, (q, q̇), is moved onto the constraint
+manifolds along the rows of J₀ = J_Φ(q, t; x) at that state (joints and Euler-parameter
+normalisations):
 
-    position:  q* − q − J_Φ(q*)ᵀ ν = 0,   Φ(q*, t; x) = 0        (joints and normalisations)
-    velocity:  q̇* = q̇ − J_Φᵀ (J_Φ J_Φᵀ)⁻¹ Φ̇(q*, q̇, t; x)          (J_Φ at q*; Φ̇ = J_Φ q̇ + Φ_t)
+    position:  q* = q + J₀ᵀ ν,    Φ(q*, t; x) = 0
+    velocity:  q̇* = q̇ − J₀ᵀ κ,    Φ̇(q*, q̇*, t; x) = J_Φ(q*) q̇* + Φ_t = 0
 
-The position problem is solved by Newton iterations with the Gauss–Newton matrix
-[[I, −J_Φᵀ], [J_Φ, 0]] at the current iterate (the curvature term ∂(J_Φᵀν)/∂q is of the size of
-the drift and only slows convergence from quadratic to fast linear); the velocity problem is
-linear.  q̈, λ and ṗ stay as solved.  The run continues from (q*, q̇*): outputs, events,
-monitors and the next step's predictor see the projected state.
+(to first order the plain minimum-norm projection; the correction is of the size of the drift).
+Both are solved by chord iterations with the matrix J₀J₀ᵀ, factorized once: each iteration costs
+one evaluation of Φ (or Φ̇) and converges at a rate of the size of the drift.  q̈, λ and ṗ stay
+as solved.  In mode ``state`` the run continues from (q*, q̇*); in mode ``output`` it continues
+from the solved state (the index-1 integration is unchanged) and reports (q*, q̇*): histories,
+outputs, responses, events and monitors.
 
 Derivatives.  The projection is a map (q, q̇, x) → (q*, q̇*) of the step's end state and the
 design, so the procedure the gradient differentiates is "Newmark step, then projection".  Its
-derivative is the implicit-function derivative of the converged equations above, with the
-exact matrix K = [[I − ∂(J_Φᵀν)/∂q, −J_Φᵀ], [J_Φ, 0]] and the design partials of Φ and J_Φ
-(lengths are design variables) taken by the run's design-partials method:
+Jacobian with respect to (q, q̇) is taken by batched complex step of the projection itself
+(2 n_q columns, iterated until the imaginary parts have converged too: the implicit-function
+derivative of the converged equations, exact to round-off), its design partials — Φ and J_Φ
+depend on the design through lengths, points and axes — by the run's design-partials method:
 
-    ∇q* = P_q ∇q + P_x,                 [P_q; ·] = K⁻¹ [I; 0],  [P_x; ·] = −K⁻¹ ∂_x G
-    ∇q̇* = V_q ∇q* + V_q̇ ∇q̇ + V_x,       V_q̇ = I − J_Φᵀ(J_Φ J_Φᵀ)⁻¹ J_Φ
+    [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x
 
-(V_q by batched complex step, exact to round-off).  The direct mode applies this map after the
-step's correction; the adjoint applies its transpose before the correction's transpose and adds
-P_xᵀ q̄* + V_xᵀ q̄̇* to x̄; the checkpointed segments take the same steps again, projection
-included.  The design partials of the step's residual are taken at the state Newton converged
-to (``Projection.raw``), where the step's equations hold.
+In mode ``state`` the direct mode applies this map after the step's correction and the adjoint
+its transpose before the correction's transpose (B_xᵀ of the bars joins x̄); in mode ``output``
+only the reported sensitivities (direct) or the responses' seeds (adjoint) pass through it.  The
+checkpointed segments of the adjoint take the same steps again, projection included.  The
+design partials of the step's residual are taken at the state Newton converged to
+(``Projection.raw``), where the step's equations hold.
 """
 from __future__ import annotations
 
@@ -40,12 +43,13 @@ from ...case_keys import allowed
 from ...errors import ModelError, ProblemCollector
 from .._keys import check_keys
 from ..base import StepState
-from .assembly import _ctx, _jac, closest_point_matrix, closest_point_residual, jacobian_rows
+from .assembly import jacobian_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
 
 Array = np.ndarray
+_H = 1e-30          # complex step of the state columns
 
 
 @dataclass(frozen=True)
@@ -54,54 +58,53 @@ class ProjectionSettings:
 
     tol : relative bound on the last Newton correction, ‖Δq‖ ≤ tol (1 + ‖q‖) (dimensionless).
     max_iterations : iterations before the run stops with a ModelError.
-    mode : ``state`` (the run continues from the projected state) or ``output`` (the run
-        continues from the solved state; what it reports is projected).
+    mode : ``output`` (the run continues from the solved state; what it reports is projected)
+        or ``state`` (the run continues from the projected state).
     """
 
     tol: float = 1e-13
     max_iterations: int = 12
-    mode: str = "state"
+    mode: str = "output"
 
 
 @dataclass
 class ProjectionMap:
-    """The derivative of one step's projection (module docstring): dense matrices."""
+    """The derivative of one step's projection: [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x."""
 
-    Pq: Array      # (n_q, n_q)  ∂q*/∂q
-    Px: Array      # (n_q, m)    ∂q*/∂x
-    Vq: Array      # (n_q, n_q)  ∂q̇*/∂q* (at fixed q̇)
-    Vqd: Array     # (n_q, n_q)  ∂q̇*/∂q̇
-    Vx: Array      # (n_q, m)    ∂q̇*/∂x (at fixed q*, q̇)
+    A: Array       # (2 n_q, 2 n_q)
+    Bx: Array      # (2 n_q, m)
 
     def apply(self, ds: StepState) -> StepState:
         """The sensitivities (n, m per leaf) of the projected state from those of the solved one."""
-        dq = self.Pq @ ds.q + self.Px
-        dqd = self.Vq @ dq + self.Vqd @ ds.qd + self.Vx
-        return ds._replace(q=dq, qd=dqd)
+        n_q = ds.q.shape[0]
+        d = self.A @ np.concatenate([ds.q, ds.qd]) + self.Bx
+        return ds._replace(q=d[:n_q], qd=d[n_q:])
 
     def transpose(self, q_bar: Array, qd_bar: Array) -> tuple[Array, Array, Array]:
         """Bars (n_q, r) of the projected q*, q̇* → bars of the solved q, q̇ and x̄ (m, r)."""
-        q_star_bar = q_bar + self.Vq.T @ qd_bar
-        return self.Pq.T @ q_star_bar, self.Vqd.T @ qd_bar, self.Px.T @ q_star_bar + self.Vx.T @ qd_bar
+        n_q = q_bar.shape[0]
+        y = np.concatenate([q_bar, qd_bar])
+        back = self.A.T @ y
+        return back[:n_q], back[n_q:], self.Bx.T @ y
 
 
 @dataclass
 class Projection:
     """One step's projection: the solved state ``raw``, the consistent state ``projected``
-    (q*, q̇*), ν, and whether the run continues from the projected state (``feedback``)."""
+    (q*, q̇*), and whether the run continues from the projected state (``feedback``)."""
 
     model: "MultibodyModel"
+    settings: "ProjectionSettings"
     t: float
     raw: StepState
     projected: StepState
-    nu: Array
     feedback: bool
     _map: ProjectionMap | None = field(default=None, repr=False)
 
     def linear_map(self, partials: Any) -> ProjectionMap:
         """The projection's derivative at the run's design (``partials``: DesignPartials), once."""
         if self._map is None:
-            self._map = projection_map(self.model, self, partials)
+            self._map = projection_map(self, partials)
         return self._map
 
     def apply(self, ds: StepState, partials: Any) -> StepState:
@@ -113,67 +116,96 @@ class Projection:
         return self.linear_map(partials).transpose(q_bar, qd_bar)
 
 
-def _velocity(model: "MultibodyModel", q: Array, qd: Array, params: Any, t: float) -> Array:
-    """q̇* = q̇ − J_Φᵀ (J_Φ J_Φᵀ)⁻¹ Φ̇(q, q̇) at q (n_q,) or for a batch q, q̇ (n_q, k); complex-safe."""
-    Q = q.reshape(q.shape[0], -1)
-    QD = np.ascontiguousarray(np.broadcast_to(qd.reshape(qd.shape[0], -1), Q.shape)).astype(
-        np.result_type(Q, qd, float))
-    J = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)              # (k, n_eq, n_q)
-    phid = model.constraint_values(_ctx(Q, QD, params, t))[1].T[:, :, None]     # (k, n_eq, 1)
-    kappa = np.linalg.solve(J @ J.transpose(0, 2, 1), phid)
-    out = (QD.T[:, :, None] - J.transpose(0, 2, 1) @ kappa)[:, :, 0].T
-    return out if q.ndim == 2 else out[:, 0]
+def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
+    """(Φ, Φ̇, Φ̈) (k, n_eq, 3) at the k states (columns of Q, QD (n_q, k)), q̈ = 0."""
+    zeros = np.zeros(0)
+    s = StepState(Q.T, QD.T, np.zeros_like(Q.T), zeros, zeros, zeros)
+    return model.constraint_levels(t, model.kinematics(s, params))[0]
 
 
-def project(model: "MultibodyModel", settings: ProjectionSettings, t: float, s: StepState,
+def _converged(step: Array, value: Array, tol: float) -> bool:
+    """Every column's last correction (n, k), real parts, within tol of its value."""
+    return bool(np.all(np.linalg.norm(np.real(step), axis=0)
+                       <= tol * (1.0 + np.linalg.norm(np.real(value), axis=0))))
+
+
+def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t: float, Q: Array,
+                     QD: Array, params: Any) -> tuple[Array, Array]:
+    """(q*, q̇*) (n_q, k each) for k solved states (columns of Q, QD); complex-safe."""
+    J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
+    J0T = J0.transpose(0, 2, 1)
+    A0 = J0 @ J0T
+    nu = np.zeros(A0.shape[:2] + (1,), A0.dtype)
+    kappa = np.zeros_like(nu)
+    Qs, QDs = Q, QD
+    complex_parts = np.iscomplexobj(Q) or np.iscomplexobj(QD) or np.iscomplexobj(params.pv)
+    for level in (0, 1):                       # positions, then velocities at the projected positions
+        done = 0                               # iterations until the real parts converged
+        for it in range(settings.max_iterations):
+            res = _levels(model, t, Qs, QDs, params)[:, :, level:level + 1]   # (k, n_eq, 1)
+            d = np.linalg.solve(A0, res)
+            if level == 0:
+                nu = nu - d
+                new = Q + (J0T @ nu)[:, :, 0].T
+                step, Qs = new - Qs, new
+            else:
+                kappa = kappa + d
+                new = QD - (J0T @ kappa)[:, :, 0].T
+                step, QDs = new - QDs, new
+            if done == 0 and _converged(step, new, settings.tol):
+                done = it + 1
+            # imaginary parts (complex step) start from their full size, not from the drift's,
+            # and contract at the same rate: as many iterations again, one more for safety
+            if done and (not complex_parts or it + 1 >= 2 * done + 1):
+                break
+        if not done:
+            what = ("position", "q") if level == 0 else ("velocity", "q̇")
+            raise ModelError(
+                f"projection onto the {what[0]} constraints did not converge at t = {float(np.real(t)):.6g} s: "
+                f"last correction ‖Δ{what[1]}‖ = {float(np.max(np.linalg.norm(np.real(step), axis=0))):.3g} "
+                f"after {settings.max_iterations} iterations (model.projection.tol = {settings.tol:.3g}, "
+                "relative); the step left the constraints too far, or the constraint Jacobian is "
+                "(nearly) singular at this pose")
+    return Qs, QDs
+
+
+def project(model: "MultibodyModel", settings: "ProjectionSettings", t: float, s: StepState,
             params: Any) -> tuple[StepState, Projection]:
     """The state s at t (s) projected onto Φ = 0 and Φ̇ = 0 (module docstring): the state the run
     continues from (the projected one in mode ``state``, s in mode ``output``) and the projection."""
-    q_raw = s.q
-    q, nu = q_raw.copy(), np.zeros(model.traits.n_lam, np.result_type(q_raw, params.pv, float))
-    scale = 1.0 + float(np.linalg.norm(np.real(q_raw)))
-    extra, step = 0, np.inf
-    for _ in range(settings.max_iterations):
-        J = jacobian_rows(model.eqs, q, params, t)
-        phi = model.constraint_values(_ctx(q, None, params, t))[0][:, 0]
-        g = q - q_raw - J.T @ nu
-        # [[I, −Jᵀ], [J, 0]] [Δq; Δν] = −[g; Φ]  by its Schur complement J Jᵀ
-        dnu = np.linalg.solve(J @ J.T, J @ g - phi)
-        dq = J.T @ dnu - g
-        q, nu = q + dq, nu + dnu
-        step = float(np.linalg.norm(np.real(dq)))
-        if step <= settings.tol * scale:
-            extra += 1
-            if extra >= 2:      # one iteration more: the imaginary parts of a complex-step run converge too
-                break
-    else:
-        raise ModelError(
-            f"projection onto the constraint manifold did not converge at t = {float(np.real(t)):.6g} s: "
-            f"last correction ‖Δq‖ = {step:.3g} after {settings.max_iterations} iterations "
-            f"(bound {settings.tol:.3g}·(1 + ‖q‖) from model.projection.tol); the step left the "
-            "constraints too far, or the constraint Jacobian is (nearly) singular at this pose")
-    projected = s._replace(q=q, qd=_velocity(model, q, s.qd, params, t))
+    Q, QD = _project_columns(model, settings, t, s.q[:, None], s.qd[:, None], params)
+    projected = s._replace(q=Q[:, 0], qd=QD[:, 0])
     feedback = settings.mode == "state"
-    return (projected if feedback else s), Projection(model, t, s, projected, nu, feedback)
+    model.__dict__["_solved_last"] = (t, projected, s)          # for the monitors of this step
+    return (projected if feedback else s), Projection(model, settings, t, s, projected, feedback)
 
 
-def projection_map(model: "MultibodyModel", proj: Projection, partials: Any) -> ProjectionMap:
+def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any, Phi: Array) -> dict[str, float]:
+    """‖Φ‖, ‖Φ̇‖ of the state Newton solved at t before the projection that gave the reported
+    state s (``Phi``: the levels at s; at t0, or for a state not projected here, s itself)."""
+    last = model.__dict__.get("_solved_last")
+    solved = last[2] if last is not None and last[0] == t and last[1].q is s.q else s
+    if solved is not s:
+        Phi = model.constraint_levels(t, model.kinematics(solved, params))[0][0]
+    return {"constraint_position_solved": float(np.linalg.norm(np.real(Phi[:, 0]))),
+            "constraint_velocity_solved": float(np.linalg.norm(np.real(Phi[:, 1])))}
+
+
+def projection_map(proj: Projection, partials: Any) -> ProjectionMap:
     """The derivative of the converged projection (module docstring) at design partials.params0."""
-    params, t = partials.params0, proj.t
-    q_raw, qd_raw, nu = proj.raw.q, proj.raw.qd, proj.nu
-    n_q = q_raw.shape[0]
-    q = proj.projected.q
-    K = closest_point_matrix(model.eqs, q, nu, params, t)
-    unit = np.zeros((K.shape[0], n_q))
-    unit[:n_q] = np.eye(n_q)
-    Gx = partials.of(lambda prm: closest_point_residual(model, model.eqs, q, q_raw, nu, prm, t))
-    sol = np.linalg.solve(K, np.concatenate([unit, -Gx], axis=1))
-    Pq, Px = sol[:n_q, :n_q], sol[:n_q, n_q:]
-    J = jacobian_rows(model.eqs, q, params, t)
-    Vqd = np.eye(n_q) - J.T @ np.linalg.solve(J @ J.T, J)
-    Vq = _jac(lambda Q: _velocity(model, Q, qd_raw, params, t), q, True)
-    Vx = partials.of(lambda prm: _velocity(model, q, qd_raw, prm, t))
-    return ProjectionMap(Pq, Px, Vq, Vqd, Vx)
+    model, settings, t = proj.model, proj.settings, proj.t
+    q, qd = proj.raw.q, proj.raw.qd
+    n_q = q.shape[0]
+    eye = np.eye(2 * n_q)
+    Y = np.concatenate([q, qd])[:, None] + 1j * _H * eye                   # (2 n_q, 2 n_q) columns
+    Qs, QDs = _project_columns(model, settings, t, Y[:n_q], Y[n_q:], partials.params0)
+    A = np.imag(np.concatenate([Qs, QDs])) / _H
+
+    def projected(prm: Any) -> Array:
+        Qp, QDp = _project_columns(model, settings, t, q[:, None], qd[:, None], prm)
+        return np.concatenate([Qp[:, 0], QDp[:, 0]])
+
+    return ProjectionMap(A, partials.of(projected, np.concatenate([proj.projected.q, proj.projected.qd])))
 
 
 def read_projection(spec: Any, path: str, problems: ProblemCollector) -> ProjectionSettings | None:
@@ -205,4 +237,5 @@ def read_projection(spec: Any, path: str, problems: ProblemCollector) -> Project
     return ProjectionSettings(float(tol), int(its), str(mode))
 
 
-__all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "projection_map", "read_projection"]
+__all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "projection_map", "read_projection",
+           "solved_monitors"]
