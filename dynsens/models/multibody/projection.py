@@ -99,6 +99,7 @@ class Projection:
     raw: StepState
     projected: StepState
     feedback: bool
+    multipliers: tuple[Array, Array]      # the converged (ν, κ), each (1, n_eq, 1)
     _map: ProjectionMap | None = field(default=None, repr=False)
 
     def linear_map(self, partials: Any) -> ProjectionMap:
@@ -130,20 +131,28 @@ def _converged(step: Array, value: Array, tol: float) -> bool:
 
 
 def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t: float, Q: Array,
-                     QD: Array, params: Any) -> tuple[Array, Array]:
-    """(q*, q̇*) (n_q, k each) for k solved states (columns of Q, QD); complex-safe."""
+                     QD: Array, params: Any, start: tuple[Array, Array, Array] | None = None
+                     ) -> tuple[Array, Array, Array, Array]:
+    """(q*, q̇*) (n_q, k each) and the multipliers (ν, κ) (k, n_eq, 1) for k solved states
+    (columns of Q, QD); complex-safe.  Without ``start``: chord iterations with J₀J₀ᵀ from ν = κ = 0
+    to convergence.  With ``start`` = (ν, κ, M) of the converged projection of a nearby state:
+    two Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ (for complex steps of that state:
+    the first gives the imaginary parts exactly; a perturbation δ of the data converges to O(δ⁴))."""
     J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
     J0T = J0.transpose(0, 2, 1)
-    A0 = J0 @ J0T
-    nu = np.zeros(A0.shape[:2] + (1,), A0.dtype)
-    kappa = np.zeros_like(nu)
-    Qs, QDs = Q, QD
+    if start is None:
+        A = J0 @ J0T
+        nu = np.zeros(A.shape[:2] + (1,), A.dtype)
+        kappa = np.zeros_like(nu)
+    else:
+        nu, kappa, A = start
     complex_parts = np.iscomplexobj(Q) or np.iscomplexobj(QD) or np.iscomplexobj(params.pv)
+    Qs, QDs = Q + (J0T @ nu)[:, :, 0].T, QD - (J0T @ kappa)[:, :, 0].T
     for level in (0, 1):                       # positions, then velocities at the projected positions
         done = 0                               # iterations until the real parts converged
-        for it in range(settings.max_iterations):
+        for it in range(settings.max_iterations if start is None else 2):
             res = _levels(model, t, Qs, QDs, params)[:, :, level:level + 1]   # (k, n_eq, 1)
-            d = np.linalg.solve(A0, res)
+            d = np.linalg.solve(A, res)
             if level == 0:
                 nu = nu - d
                 new = Q + (J0T @ nu)[:, :, 0].T
@@ -152,6 +161,9 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
                 kappa = kappa + d
                 new = QD - (J0T @ kappa)[:, :, 0].T
                 step, QDs = new - QDs, new
+            if start is not None:
+                done = it + 1
+                continue
             if done == 0 and _converged(step, new, settings.tol):
                 done = it + 1
             # imaginary parts (complex step) start from their full size, not from the drift's,
@@ -166,18 +178,19 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
                 f"after {settings.max_iterations} iterations (model.projection.tol = {settings.tol:.3g}, "
                 "relative); the step left the constraints too far, or the constraint Jacobian is "
                 "(nearly) singular at this pose")
-    return Qs, QDs
+    return Qs, QDs, nu, kappa
 
 
 def project(model: "MultibodyModel", settings: "ProjectionSettings", t: float, s: StepState,
             params: Any) -> tuple[StepState, Projection]:
     """The state s at t (s) projected onto Φ = 0 and Φ̇ = 0 (module docstring): the state the run
     continues from (the projected one in mode ``state``, s in mode ``output``) and the projection."""
-    Q, QD = _project_columns(model, settings, t, s.q[:, None], s.qd[:, None], params)
+    Q, QD, nu, kappa = _project_columns(model, settings, t, s.q[:, None], s.qd[:, None], params)
     projected = s._replace(q=Q[:, 0], qd=QD[:, 0])
     feedback = settings.mode == "state"
     model.__dict__["_solved_last"] = (t, projected, s)          # for the monitors of this step
-    return (projected if feedback else s), Projection(model, settings, t, s, projected, feedback)
+    return (projected if feedback else s), Projection(model, settings, t, s, projected, feedback,
+                                                      (nu, kappa))
 
 
 def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any, Phi: Array) -> dict[str, float]:
@@ -192,20 +205,24 @@ def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any
 
 
 def projection_map(proj: Projection, partials: Any) -> ProjectionMap:
-    """The derivative of the converged projection (module docstring) at design partials.params0."""
-    model, settings, t = proj.model, proj.settings, proj.t
+    """The derivative of the converged projection (module docstring) at design partials.params0:
+    the state columns by complex step, the design columns by the run's partials method, both
+    from the converged solution with its exact matrix (:func:`_project_columns`)."""
+    model, settings, t, params = proj.model, proj.settings, proj.t, partials.params0
     q, qd = proj.raw.q, proj.raw.qd
     n_q = q.shape[0]
-    eye = np.eye(2 * n_q)
-    Y = np.concatenate([q, qd])[:, None] + 1j * _H * eye                   # (2 n_q, 2 n_q) columns
-    Qs, QDs = _project_columns(model, settings, t, Y[:n_q], Y[n_q:], partials.params0)
+    J0 = jacobian_rows(model.eqs, q, params, t)
+    M = jacobian_rows(model.eqs, proj.projected.q, params, t) @ J0.T
+    start = (*proj.multipliers, M)
+    Y = np.concatenate([q, qd])[:, None] + 1j * _H * np.eye(2 * n_q)     # (2 n_q, 2 n_q) columns
+    Qs, QDs, _, _ = _project_columns(model, settings, t, Y[:n_q], Y[n_q:], params, start)
     A = np.imag(np.concatenate([Qs, QDs])) / _H
 
     def projected(prm: Any) -> Array:
-        Qp, QDp = _project_columns(model, settings, t, q[:, None], qd[:, None], prm)
+        Qp, QDp, _, _ = _project_columns(model, settings, t, q[:, None], qd[:, None], prm, start)
         return np.concatenate([Qp[:, 0], QDp[:, 0]])
 
-    return ProjectionMap(A, partials.of(projected, np.concatenate([proj.projected.q, proj.projected.qd])))
+    return ProjectionMap(A, partials.of(projected))
 
 
 def read_projection(spec: Any, path: str, problems: ProblemCollector) -> ProjectionSettings | None:
