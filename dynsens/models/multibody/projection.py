@@ -136,8 +136,8 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     """(q*, q̇*) (n_q, k each) and the multipliers (ν, κ) (k, n_eq, 1) for k solved states
     (columns of Q, QD); complex-safe.  Without ``start``: chord iterations with J₀J₀ᵀ from ν = κ = 0
     to convergence.  With ``start`` = (ν, κ, M) of the converged projection of a nearby state:
-    two Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ (for complex steps of that state:
-    the first gives the imaginary parts exactly; a perturbation δ of the data converges to O(δ⁴))."""
+    Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ — one for complex steps of that state
+    (it gives the imaginary parts exactly), two for a real perturbation δ (converged to O(δ⁴))."""
     J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
     J0T = J0.transpose(0, 2, 1)
     if start is None:
@@ -150,7 +150,7 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     Qs, QDs = Q + (J0T @ nu)[:, :, 0].T, QD - (J0T @ kappa)[:, :, 0].T
     for level in (0, 1):                       # positions, then velocities at the projected positions
         done = 0                               # iterations until the real parts converged
-        for it in range(settings.max_iterations if start is None else 2):
+        for it in range(settings.max_iterations if start is None else 1 if complex_parts else 2):
             res = _levels(model, t, Qs, QDs, params)[:, :, level:level + 1]   # (k, n_eq, 1)
             d = np.linalg.solve(A, res)
             if level == 0:
