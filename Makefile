@@ -77,6 +77,11 @@ report: $(STAMP)
 	$(VENV)/bin/dynsens convergence cases/tyrolean_weir.yaml --dt 0.004,0.002,0.001 --methods ddm-forward,fd-forward -o results/convergence
 	$(PY) scripts/adaptive_report.py -o results/convergence   # a mechanism on adaptive steps beside fixed ones
 	$(PY) scripts/extreme_report.py > results/extreme.md
+	# a mechanism three ways: fixed steps of the plain index-1 form, with Baumgarte terms, with projection
+	$(VENV)/bin/dynsens convergence cases/pendulum_projection.yaml --set name=pendulum_fixed_step --set model.projection.enabled=false --set integrator.t_end=2 --dt 0.01,0.005,0.0025 --methods ddm-forward,ddm-complex -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/pendulum_projection.yaml --set name=pendulum_baumgarte --set model.projection.enabled=false --set "model.stabilization={alpha: 10.0, beta: 10.0}" --set integrator.t_end=2 --dt 0.01,0.005,0.0025 --methods ddm-forward,ddm-complex -o results/convergence
+	$(VENV)/bin/dynsens convergence cases/pendulum_projection.yaml --set integrator.t_end=2 --dt 0.01,0.005,0.0025 --methods ddm-forward,ddm-complex -o results/convergence
+	$(PY) scripts/constraint_study.py > results/constraint_study.md
 
 bench: $(STAMP)
 	$(PY) scripts/bench_versions.py . . cases/slider_crank.yaml cases/four_bar.yaml cases/hydraulic_lever.yaml cases/pendulum_3d.yaml cases/tyrolean_weir.yaml --repeats 3 --before-env DYNSENS_KERNEL=numpy

@@ -414,6 +414,8 @@ SECTIONS: dict[str, Section] = {
         _k("forces", "list", "force elements", item=tuple(f"multibody.{t}" for t in FORCE_TYPES)),
         _k("initial", "section", "consistent initial assembly", item="multibody.initial"),
         _k("stabilization", "section", "Baumgarte terms (part of the residual)", item="multibody.stabilization"),
+        _k("projection", "section", "project each step's end state onto the position and velocity "
+                                    "constraints (recommended over Baumgarte)", item="multibody.projection"),
         _k("constraint_scale", "number", "multiplies the constraint rows", default=1.0),
         _k("drift_limit", "number", "bound on ‖Φ‖ beyond which a run stops", default="1e-2 × model size"),
     )),
@@ -531,6 +533,16 @@ SECTIONS: dict[str, Section] = {
     "multibody.stabilization": Section("model.stabilization", "Baumgarte stabilization of the constraint drift.", (
         _k("alpha", "number", "velocity-level coefficient (1/s)", default=0.0),
         _k("beta", "number", "position-level coefficient (1/s)", default=0.0),
+    )),
+    "multibody.projection": Section("model.projection", "Projection of each accepted step's (q, q̇) onto "
+                                    "Φ = 0 and Φ̇ = 0 (closest point, plain 2-norm); the sensitivities are "
+                                    "projected consistently.", (
+        _k("enabled", "bool", "switch the projection on (writing the section switches it on)", default=True),
+        _k("tol", "number", "bound on the last Newton correction, relative to 1 + ‖q‖", default=1e-13),
+        _k("max_iterations", "integer", "iterations before the run stops with an error", default=12),
+        _k("mode", "enum", "output: the run continues from the solved (index-1) state and reports the "
+                           "projected one; state: it continues from the projected state", default="output",
+           values=("state", "output")),
     )),
     "multibody.quantity": Section("quantity (multibody)", "Exactly one of joint, body, marker, element, with `kind`.", (
         _k("joint", "name", "joint: reaction_force | reaction_force_norm | reaction_moment | "

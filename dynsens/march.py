@@ -193,7 +193,7 @@ class GridFeed:
         if self.mode is not None:
             self.mode.take_step(records)
             self.taken += len(records)
-        self.marks.append((i, t, records[-1].state, h, event, self.taken - 1))
+        self.marks.append((i, t, records[-1].reported, h, event, self.taken - 1))
         if event is not None or len(self.marks) >= self.length:
             self.catch_up()
 
@@ -331,9 +331,9 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
         _, h, t = steps.log[-1]
         s = records[-1].state
         counters.steps += 1
-        store.record(i, t, s)
+        store.record(i, t, records[-1].reported)
         counters.output_evaluations += 1
-        event = responses.watch(t, s)
+        event = responses.watch(t, records[-1].reported)
         feed.add(i, t, h, records, event)                              # sensitivities, responses
         if event is not None:
             ev = next(reversed(responses.fired))

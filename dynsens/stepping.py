@@ -1,12 +1,13 @@
 """The primal stepper: one :class:`StepRecord` per accepted step (method.md §2–3).
 
 A step predicts from the previous state, solves the step equation F_R(z) = 0 by Newton and
-corrects.  When Newton fails, the step is halved (up to ``max_step_cuts`` times) and its two
-halves are taken in turn; every accepted sub-step is a record of its own.  A record holds what
-the derivative modes need of the step — time, step size, converged state, the linearization
-and factor that the sensitivity solve uses — so the direct mode can trail the state and the
-adjoint mode can sweep back over the records without touching the Newton loop.  With adaptive
-steps (:mod:`.step_sequence`) a step is first a :class:`Trial` that the step controller accepts
+corrects; a model may then project the end state onto its constraints (``Model.project``).
+When Newton fails, the step is halved (up to ``max_step_cuts`` times) and its two halves are
+taken in turn; every accepted sub-step is a record of its own.  A record holds what the
+derivative modes need of the step — time, step size, converged state, the linearization and
+factor that the sensitivity solve uses — so the direct mode can trail the state and the adjoint
+mode can sweep back over the records without touching the Newton loop.  With adaptive steps
+(:mod:`.step_sequence`) a step is first a :class:`Trial` that the step controller accepts
 (:meth:`PrimalStepper.commit`) or rejects (:meth:`PrimalStepper.discard`: no record, the Newton
 solver's memory as before it).
 """
@@ -39,6 +40,10 @@ class StepRecord:
     lin, factor : the linearization and factor of S the sensitivity solve of this step uses
         (None when no derivatives are computed).
     iterations : Newton iterations taken.
+    projection : when the model projects its end states (``Model.project``), the projection:
+        ``raw`` the solved state, ``projected`` the consistent one, ``feedback`` whether the run
+        continues from the projected state (then ``state`` is it) or from the solved one (then
+        only what the run reports is projected); None otherwise.
     """
 
     step: int
@@ -48,6 +53,18 @@ class StepRecord:
     lin: Any
     factor: Any
     iterations: int
+    projection: Any = None
+
+    @property
+    def solved(self) -> StepState:
+        """The state the step's equations hold at (before a projection): where the design
+        partials of its residual are taken."""
+        return self.state if self.projection is None else self.projection.raw
+
+    @property
+    def reported(self) -> StepState:
+        """The state the run reports (histories, outputs, responses, events, monitors)."""
+        return self.state if self.projection is None else self.projection.projected
 
 
 def split_unknowns(z: np.ndarray, n_q: int, n_lam: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -152,8 +169,9 @@ class PrimalStepper:
             half = 0.5 * h
             aux = self._take(i, t_prev, half, cuts + 1, s, aux, records)
             return self._take(i, t_prev + half, half, cuts + 1, records[-1].state, aux, records)
-        records.append(self._accept(i, t_prev + h, h, out))
-        return self.scheme.advance(pred, out.state)
+        record = self._accept(i, t_prev + h, h, out)
+        records.append(record)
+        return self.scheme.advance(pred, record.state)
 
     def _solve(self, i: int, t_prev: float, h: float, s: StepState, aux: Aux) -> tuple[StepOutcome, Prediction]:
         """Predict, solve F_R(z) = 0 by Newton and correct: the step from t_prev by h (s)."""
@@ -170,12 +188,14 @@ class PrimalStepper:
         return out, pred
 
     def _accept(self, i: int, t: float, h: float, out: StepOutcome) -> StepRecord:
-        """The record of a step taken (the model's range and the runaway monitor checked)."""
-        s_new = out.state
+        """The record of a step taken: the end state projected when the model projects (the
+        record's ``state`` is the one the run continues from), the model's range and the runaway
+        monitor checked."""
+        s_new, projection = self.model.project(t, out.state, self.params)
         if self.runaway is not None:
             self.runaway.observe(t, i, s_new)
         self.model.check_state(t, s_new, self.params)
-        return StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations)
+        return StepRecord(i, t, h, s_new, out.lin, out.factor, out.iterations, projection)
 
     # ------------------------------------------------------------------ adaptive steps
     def trial(self, i: int, t_prev: float, h: float, s: StepState) -> Trial:
@@ -189,12 +209,14 @@ class PrimalStepper:
         except (ConvergenceError, NonFiniteError):
             self.solver.restore(snap)
             raise
-        return Trial(i, t_prev + h, h, out, self.aux, self.scheme.advance(pred, out.state), snap)
+        return Trial(i, t_prev + h, h, out, pred, self.aux, self.scheme.advance(pred, out.state), snap)
 
     def commit(self, trial: Trial) -> StepRecord:
-        """Accept a trial: its record, and the scheme moves on from it."""
+        """Accept a trial: its record, and the scheme moves on from the state it continues from
+        (the projected one when the model projects its states)."""
         rec = self._accept(trial.step, trial.t, trial.h, trial.out)
-        self.aux = trial.aux_new
+        self.aux = (trial.aux_new if rec.state is trial.out.state
+                    else self.scheme.advance(trial.pred, rec.state))
         return rec
 
     def discard(self, trial: Trial) -> None:
@@ -206,13 +228,15 @@ class PrimalStepper:
 @dataclass(frozen=True)
 class Trial:
     """A solved step awaiting the step controller's verdict: grid step, end time t and size h
-    (s), the solver's outcome, the scheme's algorithmic accelerations before and after it and
-    the solver's memory before it."""
+    (s), the solver's outcome and prediction, the scheme's algorithmic accelerations before and
+    after it (after: from the solved state, which the error estimate judges) and the solver's
+    memory before it."""
 
     step: int
     t: float
     h: float
     out: StepOutcome
+    pred: Prediction
     aux_prev: Aux
     aux_new: Aux
     solver_snapshot: Any

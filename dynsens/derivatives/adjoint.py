@@ -9,7 +9,9 @@ column per response:
     z̄ = correctᵀ/advanceᵀ of the state's bar,   μ = −S⁻ᵀ z̄,
     bar of the predicted state += (R_q, R_q̇, R_p)ᵀ μ,   x̄ += ∂_xF_Rᵀ μ,   bar of X_{i−1} = predictᵀ(…)
 
-plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  At t0 the initial solve
+plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  A step whose end state
+the model projected onto its constraints transposes that projection first (its design term
+joins x̄; dynsens/models/multibody/projection.py).  At t0 the initial solve
 and the design derivative of the initial state (the mechanism's assembly included) close the
 sweep.  So the adjoint gradient equals the direct one to round-off, whatever the step sizes,
 step cuts or reused factors.  ∂_xF_Rᵀ μ of a block of records takes one batched residual call
@@ -56,6 +58,7 @@ class AdjointMode:
         self.store = store             # the records (all, or checkpoints and recomputation)
         self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
         self._pending = 0
+        self._projection_xbar = np.zeros((partials.m, 0))   # x̄ of the steps' projections (sweep)
 
     # ------------------------------------------------------------------ forward: keep records
     def start(self, rec: StepRecord) -> None:
@@ -102,10 +105,10 @@ class AdjointMode:
                     ws.append(w)
             if not ks:
                 return {}
-            found = self.seeds.seeds_block([self.grid_time(k) for k in ks], [rec.state for rec in recs], ws, r)
+            found = self.seeds.seeds_block([self.grid_time(k) for k in ks], [rec.reported for rec in recs], ws, r)
             for _, xpart in found:
                 xbar += xpart
-            return {k: ybar for k, (ybar, _) in zip(ks, found)}
+            return {k: self._reported_seed(rec, ybar) for k, rec, (ybar, _) in zip(ks, recs, found)}
 
         xbar += self._sweep(seeds, names)
         self.counters.backward_output_evaluations += self.seeds.evaluations
@@ -125,6 +128,7 @@ class AdjointMode:
         bar = [np.zeros((n, r)) for n in sizes]                   # q, q̇, q̈, λ, p, ṗ
         aux = [np.zeros((self.n_q, r)), np.zeros((self.n_p, r))]  # a, b
         xbar = np.zeros((self.partials.m, r))
+        self._projection_xbar = np.zeros((self.partials.m, r))
         queue: list[tuple[float, Any, np.ndarray, int]] = []
 
         def flush() -> None:
@@ -150,7 +154,7 @@ class AdjointMode:
                         bar[f] += ybar[a:b]
                 mu = self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux)
                 check_adjoint_step(rec, mu, names)
-                queue.append((rec.t, rec.state, mu, rec.step))
+                queue.append((rec.t, rec.solved, mu, rec.step))
                 if len(queue) >= self.block:
                     flush()
 
@@ -162,9 +166,21 @@ class AdjointMode:
                 block = []
         flush()
         dq0, dqd0, dp0 = initial_state_gradient(self.model, self.partials)
-        xbar = xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]
+        xbar = xbar + self._projection_xbar + dq0.T @ bar[0] + dqd0.T @ bar[1] + dp0.T @ bar[4]
         check_adjoint_gradient(xbar, names, "in the design derivative of the initial state (step 0)")
         return xbar
+
+    def _reported_seed(self, rec: StepRecord, ybar: np.ndarray) -> np.ndarray:
+        """A seed on the reported state as one on the record's state: through the transposed
+        projection when only the reported state was projected (its design term joins x̄)."""
+        proj = rec.projection
+        if proj is None or proj.feedback:
+            return ybar
+        n_q = self.n_q
+        out = ybar.copy()
+        out[:n_q], out[n_q:2 * n_q], x_part = proj.transpose(ybar[:n_q], ybar[n_q:2 * n_q], self.partials)
+        self._projection_xbar += x_part
+        return out
 
     def _solve(self, rec: StepRecord, zbar: np.ndarray) -> np.ndarray:
         """μ = −S⁻ᵀ z̄ with the record's factor."""
@@ -191,6 +207,9 @@ class AdjointMode:
         """Transpose of one direct step (predict, pseudo load, solve, correct, advance): the
         bars of step i become those of step i − 1, in place; returns μ of the step."""
         sc, h = self.scheme, rec.h
+        if rec.projection is not None and rec.projection.feedback:   # the projection came last: first here
+            bar[0], bar[1], x_part = rec.projection.transpose(bar[0], bar[1], self.partials)
+            self._projection_xbar += x_part
         am, af, beta, gamma = sc.alpha_m, sc.alpha_f, sc.beta, sc.gamma
         c = (1.0 - af) / (1.0 - am)
         c_q, c_qd, c_p = sc.coefficients(h)

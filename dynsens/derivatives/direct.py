@@ -87,19 +87,20 @@ class DirectMode:
         if not trail or self.ds is None or self.daux is None:
             return ds_of
         design_part = self.partials.residual_partials_steps(np.array([r.t for r in trail]),
-                                                            [r.state for r in trail])
+                                                            [r.solved for r in trail])
         self.counters.sensitivity_residual_evaluations += self.partials.evaluations_per_call * len(trail)
         ds, daux = self.ds, self.daux
         k = 0
         while k < len(trail):
             rec = trail[k]
             end = k + 1
-            while self._use_transitions and end < len(trail) and trail[end].lin is rec.lin and \
-                    trail[end].factor is rec.factor and trail[end].h == rec.h:
+            while self._use_transitions and rec.projection is None and end < len(trail) and \
+                    trail[end].lin is rec.lin and trail[end].factor is rec.factor and trail[end].h == rec.h:
                 end += 1
             if end - k == 1:
-                ds, daux = self._step(ds, daux, design_part[k], rec.lin, rec.factor, rec.h)
-                ds_of[k] = ds
+                ds, daux = self._step(ds, daux, design_part[k], rec.lin, rec.factor, rec.h, rec.projection)
+                ds_of[k] = ds if rec.projection is None or rec.projection.feedback else \
+                    rec.projection.apply(ds, self.partials)     # only the reported state is projected
             else:
                 T, U = self._transition(rec.lin, rec.factor, rec.h)
                 W = U @ design_part[k:end]
@@ -114,13 +115,16 @@ class DirectMode:
         return ds_of
 
     def _step(self, ds: StepState, daux: Aux, design_part: np.ndarray, lin: Any, factor: Any,
-              h: float) -> tuple[StepState, Aux]:
-        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct."""
+              h: float, projection: Any = None) -> tuple[StepState, Aux]:
+        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct (and
+        the derivative of the step's projection, when the model projects its end states)."""
         scheme = self.scheme
         dpred = scheme.predict(ds, daux, h)
         P = pseudo_load_with(design_part, lin, dpred.q, dpred.qd, dpred.p)
         dz = self.solver.solve_sensitivity(factor, P)
         ds = scheme.correct(dpred, *split_unknowns(dz, self.n_q, self.n_lam), h)
+        if projection is not None and projection.feedback:
+            ds = projection.apply(ds, self.partials)
         return ds, scheme.advance(dpred, ds)
 
     def _unpack(self, X: np.ndarray) -> tuple[StepState, Aux]:

@@ -387,6 +387,14 @@ class Model(ABC):
         """Total mass of the structure (model mass unit); complex-safe."""
         raise NotImplementedError(f"{type(self).__name__} does not define a structural mass")
 
+    def project(self, t: float, s: StepState, params: Any) -> tuple[StepState, Any]:
+        """The end state of an accepted step as the run continues from it, and what the
+        derivative modes need of that map (None: s itself, no projection).  A model whose state
+        must satisfy constraints may replace s by a consistent state here; the returned object then
+        has ``raw`` (the solved state), ``apply(ds, partials)`` (direct mode) and
+        ``transpose(q_bar, qd_bar, partials)`` (adjoint): see dynsens/models/multibody/projection.py."""
+        return s, None
+
     def check_state(self, t: float, s: StepState, params: Any) -> None:  # noqa: B027 (optional hook)
         """Raise ModelError when the state leaves the model's range of validity."""
 

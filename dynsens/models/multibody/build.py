@@ -23,6 +23,7 @@ from .drivers import read_driver
 from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
 from .redundancy import InconsistentRedundancy, analyse
+from .projection import read_projection
 from .pointmass import attachment_problem, orientation_lock, read_distance_joint
 from .rotational import RotationalSpringDamper
 from .rotations import rotate, atan2_cs
@@ -59,6 +60,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
             if not isinstance(v, (int, float)) or v < 0:
                 problems.add(f"{path}.stabilization.{key}", f"expected a number >= 0 (1/s), found {v!r}")
         alpha, beta = float(st.get("alpha", 0.0)), float(st.get("beta", 0.0))
+    projection = read_projection(spec.get("projection"), f"{path}.projection", problems)
     scale = spec.get("constraint_scale", 1.0)
     if not isinstance(scale, (int, float)) or scale <= 0:
         problems.add(f"{path}.constraint_scale", f"expected a number > 0, found {scale!r}")
@@ -76,6 +78,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         m = MultibodyModel(table, rd.bodies, rd.ground, joints, [*forces, *springs], cylinders,
                            rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
         m.drift_limit = None if drift_limit is None else float(drift_limit)
+        m.projection = projection
         m.point_mass_attachments = list(rd.point_mass_attachments)
         m.entry_paths = _entry_paths(spec, path)
         return m

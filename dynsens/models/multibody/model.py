@@ -39,6 +39,7 @@ from .rotations import from_axis_angle, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
+    from .projection import ProjectionSettings
 
 Array = np.ndarray
 Recipe = Callable[..., Any]  # recipe(params); "..." admits lambdas with bound defaults
@@ -323,13 +324,29 @@ class MultibodyModel(Model):
                 f"{', '.join(involved)})")
 
     drift_limit: float | None = None
+    #: ``model.projection`` (None: off): each step's end state projected onto Φ = 0, Φ̇ = 0
+    projection: "ProjectionSettings | None" = None
+
+    def project(self, t: float, s: StepState, params: MBParams) -> tuple[StepState, Any]:
+        """(q, q̇) of an accepted step projected onto the position and velocity constraints when
+        ``model.projection`` is on (:mod:`.projection`); else s unchanged."""
+        if self.projection is None:
+            return s, None
+        from .projection import project
+        return project(self, self.projection, t, s, params)
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
-        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`)."""
+        """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`); with
+        ``model.projection`` also those of the state Newton solved before the projection
+        (``*_solved``: in mode output the state the integration continues from)."""
         from .drift import constraint_residuals
         Phi = constraint_residuals(self, t, s, params)
-        return {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
-                "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
+        out = {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
+               "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
+        if self.projection is not None:
+            from .projection import solved_monitors
+            out.update(solved_monitors(self, t, s, params, Phi))
+        return out
 
     def dof_labels(self) -> list[str]:
         """'body.x', 'body.y', 'body.z', 'body.e0' ... 'body.e3' per moving body."""

@@ -1,0 +1,258 @@
+r"""Projection of each accepted step's end state onto the constraint manifolds (``model.projection``).
+
+The index-1 form holds the constraints at the acceleration level only; its positions and
+velocities drift (‖Φ‖ ≈ 1e-6…1e-4 over a run).  With ``model.projection`` on, the state that
+Newmark and Newton produced at the end of a step, (q, q̇), is moved onto the constraint
+manifolds along the rows of J₀ = J_Φ(q, t; x) at that state (joints and Euler-parameter
+normalisations):
+
+    position:  q* = q + J₀ᵀ ν,    Φ(q*, t; x) = 0
+    velocity:  q̇* = q̇ − J₀ᵀ κ,    Φ̇(q*, q̇*, t; x) = J_Φ(q*) q̇* + Φ_t = 0
+
+(to first order the plain minimum-norm projection; the correction is of the size of the drift).
+Both are solved by chord iterations with the matrix J₀J₀ᵀ, factorized once: each iteration costs
+one evaluation of Φ (or Φ̇) and converges at a rate of the size of the drift.  q̈, λ and ṗ stay
+as solved.  In mode ``state`` the run continues from (q*, q̇*); in mode ``output`` it continues
+from the solved state (the index-1 integration is unchanged) and reports (q*, q̇*): histories,
+outputs, responses, events and monitors.
+
+Derivatives.  The projection is a map (q, q̇, x) → (q*, q̇*) of the step's end state and the
+design, so the procedure the gradient differentiates is "Newmark step, then projection".  Its
+Jacobian with respect to (q, q̇) is taken by batched complex step of the projection itself
+(2 n_q columns, iterated until the imaginary parts have converged too: the implicit-function
+derivative of the converged equations, exact to round-off), its design partials — Φ and J_Φ
+depend on the design through lengths, points and axes — by the run's design-partials method:
+
+    [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x
+
+In mode ``state`` the direct mode applies this map after the step's correction and the adjoint
+its transpose before the correction's transpose (B_xᵀ of the bars joins x̄); in mode ``output``
+only the reported sensitivities (direct) or the responses' seeds (adjoint) pass through it.  The
+checkpointed segments of the adjoint take the same steps again, projection included.  The
+design partials of the step's residual are taken at the state Newton converged to
+(``Projection.raw``), where the step's equations hold.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...case_keys import allowed
+from ...errors import ModelError, ProblemCollector
+from .._keys import check_keys
+from ..base import StepState
+from .assembly import jacobian_rows
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import MultibodyModel
+
+Array = np.ndarray
+_H = 1e-30          # complex step of the state columns
+
+
+@dataclass(frozen=True)
+class ProjectionSettings:
+    """``model.projection``: convergence of the position projection.
+
+    tol : relative bound on the last Newton correction, ‖Δq‖ ≤ tol (1 + ‖q‖) (dimensionless).
+    max_iterations : iterations before the run stops with a ModelError.
+    mode : ``output`` (the run continues from the solved state; what it reports is projected)
+        or ``state`` (the run continues from the projected state).
+    """
+
+    tol: float = 1e-13
+    max_iterations: int = 12
+    mode: str = "output"
+
+
+@dataclass
+class ProjectionMap:
+    """The derivative of one step's projection: [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x."""
+
+    A: Array       # (2 n_q, 2 n_q)
+    Bx: Array      # (2 n_q, m)
+
+    def apply(self, ds: StepState) -> StepState:
+        """The sensitivities (n, m per leaf) of the projected state from those of the solved one."""
+        n_q = ds.q.shape[0]
+        d = self.A @ np.concatenate([ds.q, ds.qd]) + self.Bx
+        return ds._replace(q=d[:n_q], qd=d[n_q:])
+
+    def transpose(self, q_bar: Array, qd_bar: Array) -> tuple[Array, Array, Array]:
+        """Bars (n_q, r) of the projected q*, q̇* → bars of the solved q, q̇ and x̄ (m, r)."""
+        n_q = q_bar.shape[0]
+        y = np.concatenate([q_bar, qd_bar])
+        back = self.A.T @ y
+        return back[:n_q], back[n_q:], self.Bx.T @ y
+
+
+@dataclass
+class Projection:
+    """One step's projection: the solved state ``raw``, the consistent state ``projected``
+    (q*, q̇*), and whether the run continues from the projected state (``feedback``)."""
+
+    model: "MultibodyModel"
+    settings: "ProjectionSettings"
+    t: float
+    raw: StepState
+    projected: StepState
+    feedback: bool
+    multipliers: tuple[Array, Array]      # the converged (ν, κ), each (1, n_eq, 1)
+    _map: ProjectionMap | None = field(default=None, repr=False)
+
+    def linear_map(self, partials: Any) -> ProjectionMap:
+        """The projection's derivative at the run's design (``partials``: DesignPartials), once."""
+        if self._map is None:
+            self._map = projection_map(self, partials)
+        return self._map
+
+    def apply(self, ds: StepState, partials: Any) -> StepState:
+        """Direct mode: sensitivities of the projected state from those of the solved one."""
+        return self.linear_map(partials).apply(ds)
+
+    def transpose(self, q_bar: Array, qd_bar: Array, partials: Any) -> tuple[Array, Array, Array]:
+        """Adjoint mode: see :meth:`ProjectionMap.transpose`."""
+        return self.linear_map(partials).transpose(q_bar, qd_bar)
+
+
+def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
+    """(Φ, Φ̇, Φ̈) (k, n_eq, 3) at the k states (columns of Q, QD (n_q, k)), q̈ = 0."""
+    zeros = np.zeros(0)
+    s = StepState(Q.T, QD.T, np.zeros_like(Q.T), zeros, zeros, zeros)
+    return model.constraint_levels(t, model.kinematics(s, params))[0]
+
+
+def _converged(step: Array, value: Array, tol: float) -> bool:
+    """Every column's last correction (n, k), real parts, within tol of its value."""
+    return bool(np.all(np.linalg.norm(np.real(step), axis=0)
+                       <= tol * (1.0 + np.linalg.norm(np.real(value), axis=0))))
+
+
+def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t: float, Q: Array,
+                     QD: Array, params: Any, start: tuple[Array, Array, Array] | None = None
+                     ) -> tuple[Array, Array, Array, Array]:
+    """(q*, q̇*) (n_q, k each) and the multipliers (ν, κ) (k, n_eq, 1) for k solved states
+    (columns of Q, QD); complex-safe.  Without ``start``: chord iterations with J₀J₀ᵀ from ν = κ = 0
+    to convergence.  With ``start`` = (ν, κ, M) of the converged projection of a nearby state:
+    Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ — one for complex steps of that state
+    (it gives the imaginary parts exactly), two for a real perturbation δ (converged to O(δ⁴))."""
+    J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
+    J0T = J0.transpose(0, 2, 1)
+    if start is None:
+        A = J0 @ J0T
+        nu = np.zeros(A.shape[:2] + (1,), A.dtype)
+        kappa = np.zeros_like(nu)
+    else:
+        nu, kappa, A = start
+    complex_parts = np.iscomplexobj(Q) or np.iscomplexobj(QD) or np.iscomplexobj(params.pv)
+    Qs, QDs = Q + (J0T @ nu)[:, :, 0].T, QD - (J0T @ kappa)[:, :, 0].T
+    for level in (0, 1):                       # positions, then velocities at the projected positions
+        done = 0                               # iterations until the real parts converged
+        for it in range(settings.max_iterations if start is None else 1 if complex_parts else 2):
+            res = _levels(model, t, Qs, QDs, params)[:, :, level:level + 1]   # (k, n_eq, 1)
+            d = np.linalg.solve(A, res)
+            if level == 0:
+                nu = nu - d
+                new = Q + (J0T @ nu)[:, :, 0].T
+                step, Qs = new - Qs, new
+            else:
+                kappa = kappa + d
+                new = QD - (J0T @ kappa)[:, :, 0].T
+                step, QDs = new - QDs, new
+            if start is not None:
+                done = it + 1
+                continue
+            if done == 0 and _converged(step, new, settings.tol):
+                done = it + 1
+            # imaginary parts (complex step) start from their full size, not from the drift's,
+            # and contract at the same rate: as many iterations again, one more for safety
+            if done and (not complex_parts or it + 1 >= 2 * done + 1):
+                break
+        if not done:
+            what = ("position", "q") if level == 0 else ("velocity", "q̇")
+            raise ModelError(
+                f"projection onto the {what[0]} constraints did not converge at t = {float(np.real(t)):.6g} s: "
+                f"last correction ‖Δ{what[1]}‖ = {float(np.max(np.linalg.norm(np.real(step), axis=0))):.3g} "
+                f"after {settings.max_iterations} iterations (model.projection.tol = {settings.tol:.3g}, "
+                "relative); the step left the constraints too far, or the constraint Jacobian is "
+                "(nearly) singular at this pose")
+    return Qs, QDs, nu, kappa
+
+
+def project(model: "MultibodyModel", settings: "ProjectionSettings", t: float, s: StepState,
+            params: Any) -> tuple[StepState, Projection]:
+    """The state s at t (s) projected onto Φ = 0 and Φ̇ = 0 (module docstring): the state the run
+    continues from (the projected one in mode ``state``, s in mode ``output``) and the projection."""
+    Q, QD, nu, kappa = _project_columns(model, settings, t, s.q[:, None], s.qd[:, None], params)
+    projected = s._replace(q=Q[:, 0], qd=QD[:, 0])
+    feedback = settings.mode == "state"
+    model.__dict__["_solved_last"] = (t, projected, s)          # for the monitors of this step
+    return (projected if feedback else s), Projection(model, settings, t, s, projected, feedback,
+                                                      (nu, kappa))
+
+
+def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any, Phi: Array) -> dict[str, float]:
+    """‖Φ‖, ‖Φ̇‖ of the state Newton solved at t before the projection that gave the reported
+    state s (``Phi``: the levels at s; at t0, or for a state not projected here, s itself)."""
+    last = model.__dict__.get("_solved_last")
+    solved = last[2] if last is not None and last[0] == t and last[1].q is s.q else s
+    if solved is not s:
+        Phi = model.constraint_levels(t, model.kinematics(solved, params))[0][0]
+    return {"constraint_position_solved": float(np.linalg.norm(np.real(Phi[:, 0]))),
+            "constraint_velocity_solved": float(np.linalg.norm(np.real(Phi[:, 1])))}
+
+
+def projection_map(proj: Projection, partials: Any) -> ProjectionMap:
+    """The derivative of the converged projection (module docstring) at design partials.params0:
+    the state columns by complex step, the design columns by the run's partials method, both
+    from the converged solution with its exact matrix (:func:`_project_columns`)."""
+    model, settings, t, params = proj.model, proj.settings, proj.t, partials.params0
+    q, qd = proj.raw.q, proj.raw.qd
+    n_q = q.shape[0]
+    J0 = jacobian_rows(model.eqs, q, params, t)
+    M = jacobian_rows(model.eqs, proj.projected.q, params, t) @ J0.T
+    start = (*proj.multipliers, M)
+    Y = np.concatenate([q, qd])[:, None] + 1j * _H * np.eye(2 * n_q)     # (2 n_q, 2 n_q) columns
+    Qs, QDs, _, _ = _project_columns(model, settings, t, Y[:n_q], Y[n_q:], params, start)
+    A = np.imag(np.concatenate([Qs, QDs])) / _H
+
+    def projected(prm: Any) -> Array:
+        Qp, QDp, _, _ = _project_columns(model, settings, t, q[:, None], qd[:, None], prm, start)
+        return np.concatenate([Qp[:, 0], QDp[:, 0]])
+
+    return ProjectionMap(A, partials.of(projected))
+
+
+def read_projection(spec: Any, path: str, problems: ProblemCollector) -> ProjectionSettings | None:
+    """``model.projection`` of a case: the settings, or None when absent or ``enabled: false``."""
+    if spec is None:
+        return None
+    n0 = len(problems.problems)
+    if not check_keys(spec, path, allowed("multibody.projection"), problems):
+        return None
+    enabled = spec.get("enabled", True)
+    if not isinstance(enabled, bool):
+        problems.add(f"{path}.enabled", f"expected true or false, found {enabled!r}")
+    tol = spec.get("tol", ProjectionSettings.tol)
+    if isinstance(tol, str):            # YAML reads 1e-13 (no decimal point) as text
+        try:
+            tol = float(tol)
+        except ValueError:
+            pass
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1e-3:
+        problems.add(f"{path}.tol", f"expected a number in (0, 1e-3) (relative correction), found {tol!r}")
+    mode = spec.get("mode", ProjectionSettings.mode)
+    if mode not in ("state", "output"):
+        problems.add(f"{path}.mode", f"expected state or output, found {mode!r}")
+    its = spec.get("max_iterations", ProjectionSettings.max_iterations)
+    if isinstance(its, bool) or not isinstance(its, int) or its < 2:
+        problems.add(f"{path}.max_iterations", f"expected an integer >= 2, found {its!r}")
+    if enabled is not True or len(problems.problems) > n0:
+        return None
+    return ProjectionSettings(float(tol), int(its), str(mode))
+
+
+__all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "projection_map", "read_projection",
+           "solved_monitors"]
