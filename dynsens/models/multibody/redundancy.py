@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import ModelError
+from ..base import as_dense
 from .assembly import guess, jacobian_rows
 from .bodies import Ctx
 
@@ -237,7 +238,7 @@ def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any)
     n_q, n_lam = model.traits.n_q, model.traits.n_lam
     # the kept rows from the kernel's linearization at this state (∂R2/∂q̈ = c_s J_Φ; usually the
     # solver's own, cached), the few dropped rows term by term
-    Jk = np.real(np.asarray(model.linearize(t, state, params).R_z)[n_q:n_q + n_lam, :n_q]) / model.scale
+    Jk = np.real(as_dense(model.linearize(t, state, params).R_z[n_q:n_q + n_lam, :n_q])) / model.scale
     Jd = np.real(jacobian_rows([eq for _, _, eq in red], np.real(state.q), params, t))
     coef = np.linalg.solve(Jk @ Jk.T, Jk @ Jd.T)
     off = np.linalg.norm(Jd - coef.T @ Jk, axis=1) / np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
