@@ -105,6 +105,7 @@ class MultibodyModel(Model):
             use_sparse = False
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p, sparse=use_sparse)
         self._sparse: SparseStructure | None = None
+        self._lin: tuple[Evaluation, Linearization] | None = None
         self._kin = KinCache(self.layout)
         self._eval: tuple[tuple[Any, ...], Evaluation, tuple[Array, Array, Array]] | None = None
         self._stacked: tuple[list[MBParams], KParams] | None = None
@@ -285,9 +286,12 @@ class MultibodyModel(Model):
         """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`); CSC blocks on the model's kept
         pattern when ``traits.sparse`` (:mod:`.sparse`)."""
         ev = self._evaluation(t, s, params)
-        if self.traits.sparse:
-            return sparse_linearization(self, ev)
-        return ev.linearization()
+        last = self._lin
+        if last is not None and last[0] is ev:      # the same evaluation (the redundancy check
+            return last[1]                          # after a step reads the solver's own)
+        lin = sparse_linearization(self, ev) if self.traits.sparse else ev.linearization()
+        self._lin = (ev, lin)
+        return lin
 
     def sparse_structure(self) -> SparseStructure:
         """The positions of the sparse linearization's entries (built on first use)."""

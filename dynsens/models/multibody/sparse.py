@@ -341,22 +341,22 @@ class BlockSparseLinearization(Linearization):
 
     def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Any:
         """S = R_z + [c_q R_q + c_q̇ R_q̇, 0, c_p R_p] (method.md §3) as CSC."""
-        assert self.structure is not None
+        R_q, R_qd, R_p = self.R_q, self.R_qd, self.R_p
+        assert self.structure is not None and R_q is not None and R_qd is not None
         n_z = self.R_z.shape[0]
-        n_p = 0 if self.R_p is None else self.R_p.shape[1]
-        pad_q = _embed(self.R_q, n_z, 0)
-        mats = [self.R_z, pad_q, _embed(self.R_qd, n_z, 0)]
-        if n_p:
-            mats.append(_embed(self.R_p, n_z, n_z - n_p))
+        n_p = 0 if R_p is None else R_p.shape[1]
+        mats = [self.R_z, _embed(R_q, n_z, 0), _embed(R_qd, n_z, 0)]
+        if R_p is not None and n_p:
+            mats.append(_embed(R_p, n_z, n_z - n_p))
         u = self.structure.union(mats)
         dtype = np.result_type(*(m.dtype for m in mats), float)
         S = np.zeros(u.nnz, dtype)
         S[u.slots[0]] = self.R_z.data
         coupled = np.zeros(u.nnz, dtype)
-        coupled[u.slots[1]] = c_q * self.R_q.data
-        coupled[u.slots[2]] += c_qd * self.R_qd.data
-        if n_p:
-            coupled[u.slots[3]] += c_p * self.R_p.data
+        coupled[u.slots[1]] = c_q * R_q.data
+        coupled[u.slots[2]] += c_qd * R_qd.data
+        if R_p is not None and n_p:
+            coupled[u.slots[3]] += c_p * R_p.data
         return sp.csc_matrix((S + coupled, u.indices, u.indptr), shape=(n_z, n_z))
 
 
