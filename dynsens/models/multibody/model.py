@@ -36,7 +36,8 @@ from .joints import Equation, Joint, NormEq
 from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
 from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotations import from_axis_angle, rmatmul
-from .sparse import SparseStructure, SparseUnsupported, choose_sparse, sparse_linearization, sparse_refusal
+from .sparse import (SparseStructure, SparseUnsupported, choose_sparse, element_bodies, sparse_linearization,
+                     sparse_refusal)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
@@ -296,7 +297,8 @@ class MultibodyModel(Model):
     def sparse_structure(self) -> SparseStructure:
         """The positions of the sparse linearization's entries (built on first use)."""
         if self._sparse is None:
-            self._sparse = SparseStructure(self.layout, self.traits.n_lam, self.traits.n_p)
+            self._sparse = SparseStructure(self.layout, self.traits.n_lam, self.traits.n_p,
+                                           [element_bodies(el) or [] for el in self.other_forces])
         return self._sparse
 
     # ------------------------------------------------------------------ diagnostics

@@ -48,15 +48,30 @@ def choose_sparse(n_z: int) -> bool:
     return n_z >= SPARSE_MIN_NZ
 
 
+def element_bodies(el: Any) -> list[int] | None:
+    """The moving bodies a force element evaluated outside the kernel acts on (torques,
+    body-frame point forces, rotational spring-dampers): its ``body`` and the bodies of its
+    points and directions; None when it names no body at all (its Jacobian's place is unknown)."""
+    bodies: list[int] = []
+    named = False
+    for key, v in vars(el).items():
+        b = v if key == "body" else getattr(v, "body", None)
+        if isinstance(b, (int, np.integer)) and not isinstance(b, bool):
+            named = True
+            if b >= 0 and int(b) not in bodies:       # (the ground, -1, has no coordinates)
+                bodies.append(int(b))
+    return bodies if named else None
+
+
 def sparse_refusal(other_forces: list[Any]) -> str:
-    """Why the sparse path cannot serve a model ('' when it can): force elements evaluated
-    outside the kernel (torques, body-frame point forces, rotational spring-dampers) add
-    Jacobians whose positions the pattern does not know."""
-    if not other_forces:
+    """Why the sparse path cannot serve a model ('' when it can): a force element evaluated
+    outside the kernel whose bodies are unknown (its Jacobian would have no place in the pattern)."""
+    unknown = [el for el in other_forces if element_bodies(el) is None]
+    if not unknown:
         return ""
-    names = ", ".join(f"'{getattr(el, 'name', type(el).__name__)}'" for el in other_forces)
-    return (f"the force element(s) {names} are evaluated outside the multibody kernel and have no "
-            "place in the sparse pattern; use linear_algebra: dense (or auto)")
+    names = ", ".join(f"'{getattr(el, 'name', type(el).__name__)}'" for el in unknown)
+    return (f"the force element(s) {names} act on no known moving body and have no place in the "
+            "sparse pattern; use linear_algebra: dense (or auto)")
 
 
 @cc.jit
@@ -210,7 +225,7 @@ class SparseStructure:
     """Where the values of :func:`block_linearization` go in R_z, R_q, R_q̇ and R_p (built once
     per model from the kernel's layout; see the module docstring)."""
 
-    def __init__(self, lay: Layout, n_lam: int, n_p: int):
+    def __init__(self, lay: Layout, n_lam: int, n_p: int, groups: list[list[int]] | None = None):
         cl = lay.compiled_arrays()
         n_b, n_prod, n_q = lay.n_b, lay.n_prod, lay.n_q
         self.n_q, self.n_lam, self.n_p = n_q, n_lam, n_p
@@ -231,7 +246,7 @@ class SparseStructure:
         PB = max([1] + [len(b) for b in prod_bodies])
         # body blocks: every body's own block, then every pair sharing a product
         blk: dict[tuple[int, int], int] = {(b, b): b for b in range(n_b)}
-        for bodies in prod_bodies:
+        for bodies in prod_bodies + (groups or []):   # (groups: the other force elements' bodies)
             for b1 in bodies:
                 for b2 in bodies:
                     blk.setdefault((b1, b2), len(blk))
@@ -260,6 +275,7 @@ class SparseStructure:
         u7 = np.arange(7)
         blk_r = (7 * pairs[:, 0, None, None] + u7[None, :, None]).repeat(7, axis=2).ravel()
         blk_c = (7 * pairs[:, 1, None, None] + u7[None, None, :]).repeat(7, axis=1).ravel()
+        self.block_positions = (blk_r.reshape(-1, 7, 7), blk_c.reshape(-1, 7, 7))
         eqb = np.full((n_lam, EB), -1, np.int64)
         for e, bodies in enumerate(eq_bodies):
             eqb[e, :len(bodies)] = bodies
@@ -377,11 +393,17 @@ def sparse_linearization(model: Any, ev: Any) -> BlockSparseLinearization:
         return st.from_dense(ev.linearization())
     lay, kin = model.layout, ev.kin
     cl, ck = kin.arrays, kin.params
-    blocks = block_linearization(
+    Jc, Bq, Bqd, Bqdd, R1p, R3q, R3qd = block_linearization(
         kin.Lp[0], kin.C[0], kin.ABV[0], cl.is_point, ck.Ts4[0], cl.pb, cl.side_ptr, cl.side_prim,
         cl.side_coef, *st.args, np.ascontiguousarray(ev.cf[0], kin.dtype), model.eq_row_weights,
         model.norm_row_weights, cl.norm_eq, cl.norm_body, ev.w[0], ev.f[0],
         np.asarray(ev.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG, cl.ax_prod, ev._ax[0], ev._Pp[0],
         cl.p_owner, ev._hL[0], ev._hLd[0])
     assert lay.n_cp == st.args[5]
-    return st.linearization(blocks, ev._hp[0], float(model.scale))
+    if model.other_forces:            # torques, body-frame forces, rotational spring-dampers
+        from .residual import other_forces_jacobians
+        Kq, Kqd = other_forces_jacobians(model, ev.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
+        rows, cols = st.block_positions
+        Bq -= Kq[rows, cols]
+        Bqd -= Kqd[rows, cols]
+    return st.linearization((Jc, Bq, Bqd, Bqdd, R1p, R3q, R3qd), ev._hp[0], float(model.scale))
