@@ -404,8 +404,7 @@ SECTIONS: dict[str, Section] = {
         _k("constraint_scale", "number", "multiplies the constraint rows", default=1.0),
         _k("drift_limit", "number", "bound on ‖Φ‖ beyond which a run stops", default="1e-2 × model size"),
         _k("linear_algebra", "enum", "storage of the linearization (auto: sparse from 200 step unknowns "
-                                     "q, λ, p; not with torques, body-frame point forces or rotational "
-                                     "spring-dampers)", values=("auto", "dense", "sparse"), default="auto"),
+                                     "q, λ, p)", values=("auto", "dense", "sparse"), default="auto"),
     )),
     "multibody.body": Section("model.bodies.NAME", "A rigid body; numbers may be design expressions.", (
         _k("mass", "expr", "mass (required for moving bodies)"),
