@@ -36,8 +36,7 @@ from .joints import Equation, Joint, NormEq
 from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
 from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotations import from_axis_angle, rmatmul
-from .sparse import (SparseStructure, SparseUnsupported, choose_sparse, element_bodies, sparse_linearization,
-                     sparse_refusal)
+from .sparse import SparseStructure, sparse_linearization, use_sparse
 
 if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
@@ -98,13 +97,8 @@ class MultibodyModel(Model):
                              and f not in self.point_forces]
         self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
         # the storage of the linearization (:mod:`.sparse`): chosen by size unless the case says
-        self.sparse_refusal = sparse_refusal(self.other_forces)
-        use_sparse = choose_sparse(self.traits.n_z) if sparse is None else sparse
-        if use_sparse and self.sparse_refusal:
-            if sparse:
-                raise SparseUnsupported(self.sparse_refusal)
-            use_sparse = False
-        self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p, sparse=use_sparse)
+        self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p,
+                             sparse=use_sparse(self.traits.n_z, self.other_forces, sparse))
         self._sparse: SparseStructure | None = None
         self._lin: tuple[Evaluation, Linearization] | None = None
         self._kin = KinCache(self.layout)
@@ -297,8 +291,7 @@ class MultibodyModel(Model):
     def sparse_structure(self) -> SparseStructure:
         """The positions of the sparse linearization's entries (built on first use)."""
         if self._sparse is None:
-            self._sparse = SparseStructure(self.layout, self.traits.n_lam, self.traits.n_p,
-                                           [element_bodies(el) or [] for el in self.other_forces])
+            self._sparse = SparseStructure.of(self)
         return self._sparse
 
     # ------------------------------------------------------------------ diagnostics

@@ -43,9 +43,13 @@ class SparseUnsupported(ValueError):
     """``linear_algebra: sparse`` for a model with elements the sparse path does not cover."""
 
 
-def choose_sparse(n_z: int) -> bool:
-    """Whether a multibody model of n_z step unknowns is linearized sparse by default."""
-    return n_z >= SPARSE_MIN_NZ
+def use_sparse(n_z: int, other_forces: list[Any], requested: bool | None) -> bool:
+    """Whether a model of n_z step unknowns is linearized sparse: as ``requested`` (the case's
+    ``linear_algebra``; SparseUnsupported when it cannot be), by size when None."""
+    why = sparse_refusal(other_forces)
+    if requested and why:
+        raise SparseUnsupported(why)
+    return (n_z >= SPARSE_MIN_NZ if requested is None else requested) and not why
 
 
 def element_bodies(el: Any) -> list[int] | None:
@@ -224,6 +228,12 @@ class _CSCGather:
 class SparseStructure:
     """Where the values of :func:`block_linearization` go in R_z, R_q, R_q̇ and R_p (built once
     per model from the kernel's layout; see the module docstring)."""
+
+    @classmethod
+    def of(cls, model: Any) -> "SparseStructure":
+        """The structure of a multibody model (its layout, sizes and other force elements)."""
+        return cls(model.layout, model.traits.n_lam, model.traits.n_p,
+                   [element_bodies(el) or [] for el in model.other_forces])
 
     def __init__(self, lay: Layout, n_lam: int, n_p: int, groups: list[list[int]] | None = None):
         cl = lay.compiled_arrays()
