@@ -418,6 +418,8 @@ SECTIONS: dict[str, Section] = {
                                     "constraints (recommended over Baumgarte)", item="multibody.projection"),
         _k("constraint_scale", "number", "multiplies the constraint rows", default=1.0),
         _k("drift_limit", "number", "bound on ‖Φ‖ beyond which a run stops", default="1e-2 × model size"),
+        _k("linear_algebra", "enum", "storage of the linearization (auto: sparse from 200 step unknowns "
+                                     "q, λ, p)", values=("auto", "dense", "sparse"), default="auto"),
     )),
     "multibody.body": Section("model.bodies.NAME", "A rigid body; numbers may be design expressions.", (
         _k("mass", "expr", "mass (required for moving bodies)"),

@@ -22,6 +22,7 @@ from .hydraulics import HydraulicCylinder
 from .drivers import read_driver
 from .joints import JOINT_TYPES, DotEq, Joint, const_coef, make_joint
 from .model import Assembly, MultibodyModel
+from .sparse import SparseUnsupported
 from .redundancy import InconsistentRedundancy, analyse
 from .projection import read_projection
 from .pointmass import attachment_problem, orientation_lock, read_distance_joint
@@ -70,19 +71,29 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
                                     or drift_limit <= 0):
         problems.add(f"{path}.drift_limit", f"expected a length > 0 (bound on ‖Φ‖), found {drift_limit!r}")
         drift_limit = None
+    la = spec.get("linear_algebra", "auto")
+    if la not in ("auto", "dense", "sparse"):
+        problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
     if not rd.bodies:
         problems.add(f"{path}.bodies", "no moving body")
     if len(problems.problems) > n0:
         return None
+    sparse = None if la == "auto" else la == "sparse"
+
     def make() -> MultibodyModel:
         m = MultibodyModel(table, rd.bodies, rd.ground, joints, [*forces, *springs], cylinders,
-                           rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs)
+                           rd.vec, rd.scal, assembly, alpha, beta, float(scale), springs=springs,
+                           sparse=sparse)
         m.drift_limit = None if drift_limit is None else float(drift_limit)
         m.projection = projection
         m.point_mass_attachments = list(rd.point_mass_attachments)
         m.entry_paths = _entry_paths(spec, path)
         return m
-    model = make()
+    try:
+        model = make()
+    except SparseUnsupported as exc:
+        problems.add(f"{path}.linear_algebra", f"sparse: {exc}")
+        return None
     if table.nominal is None or problems.problems:   # outside a case, or the design has problems:
         return model                                  # no initial design to analyse
     x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])

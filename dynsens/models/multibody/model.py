@@ -36,6 +36,7 @@ from .joints import Equation, Joint, NormEq
 from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
 from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotations import from_axis_angle, rmatmul
+from .sparse import SparseStructure, sparse_linearization, use_sparse
 
 if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
@@ -63,7 +64,7 @@ class MultibodyModel(Model):
                  joints: list[Joint], forces: list[ForceElement], cylinders: list[HydraulicCylinder],
                  vec_recipes: list[tuple[str, Recipe]], scal_recipes: list[tuple[str, Recipe]],
                  assembly: Assembly, alpha: float = 0.0, beta: float = 0.0, scale: float = 1.0,
-                 springs: list[Any] | None = None):
+                 springs: list[Any] | None = None, sparse: bool | None = None):
         self.table = table
         self.bodies = bodies
         self.ground = ground
@@ -96,6 +97,11 @@ class MultibodyModel(Model):
         self.other_forces = [f for f in forces if not isinstance(f, (Gravity, SpringDamper))
                              and f not in self.point_forces]
         self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
+        # the storage of the linearization (:mod:`.sparse`): chosen by size unless the case says
+        self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p,
+                             sparse=use_sparse(self.traits.n_z, self.other_forces, sparse))
+        self._sparse: SparseStructure | None = None
+        self._lin: tuple[Evaluation, Linearization] | None = None
         self._kin = KinCache(self.layout)
         self._eval: tuple[tuple[Any, ...], Evaluation, tuple[Array, Array, Array]] | None = None
         self._stacked: tuple[list[MBParams], KParams] | None = None
@@ -273,8 +279,21 @@ class MultibodyModel(Model):
         return R.transpose(0, 2, 1)
 
     def linearize(self, t: float, s: StepState, params: MBParams) -> Linearization:
-        """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`)."""
-        return self._evaluation(t, s, params).linearization()
+        """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`); CSC blocks on the model's kept
+        pattern when ``traits.sparse`` (:mod:`.sparse`)."""
+        ev = self._evaluation(t, s, params)
+        last = self._lin
+        if last is not None and last[0] is ev:      # the same evaluation (the redundancy check
+            return last[1]                          # after a step reads the solver's own)
+        lin = sparse_linearization(self, ev) if self.traits.sparse else ev.linearization()
+        self._lin = (ev, lin)
+        return lin
+
+    def sparse_structure(self) -> SparseStructure:
+        """The positions of the sparse linearization's entries (built on first use)."""
+        if self._sparse is None:
+            self._sparse = SparseStructure.of(self)
+        return self._sparse
 
     # ------------------------------------------------------------------ diagnostics
     redundant: list[tuple[str, str, Equation]] = []   # (joint, label, equation) left out of Φ

@@ -31,10 +31,12 @@ the time and the joints, never a silently different mechanism.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ...errors import ModelError
 from .assembly import guess, jacobian_rows
@@ -210,13 +212,16 @@ def _persists(model: "MultibodyModel", params: Any, q: Array, kept: list[int], d
     return True
 
 
-def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_norm: float) -> None:
+def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_norm: float,
+                 phi: Array | None = None) -> None:
     """ModelError when an equation left out does not hold at (t, q) although the kept ones do
     (‖Φ_kept‖ = kept_norm): the dependency found at the initial design does not hold here (another
-    design, or equations that conflict as time goes on, such as two drivers of one freedom)."""
+    design, or equations that conflict as time goes on, such as two drivers of one freedom).
+    ``phi``: the left-out equations' values at (t, q) when already known."""
     from .drift import drift_limit
     red = model.redundant
-    phi = np.real(model.constraint_values(_ctx(np.real(q), params, t), [eq for _, _, eq in red])[0][:, 0])
+    if phi is None:
+        phi = np.real(model.constraint_values(_ctx(np.real(q), params, t), [eq for _, _, eq in red])[0][:, 0])
     bound = max(1e-4 * drift_limit(model, params), 100.0 * kept_norm)
     bad = np.flatnonzero(np.abs(phi) > bound)
     if bad.size:
@@ -228,22 +233,84 @@ def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_
             "or equations that conflict as time goes on, e.g. two drivers of one freedom)")
 
 
+def dropped_values_and_rows(model: "MultibodyModel", t: float, q: Array, params: Any) -> tuple[Array, Array]:
+    """(Φ_d (n_d,), J_d (n_d, n_q)) of the left-out equations at (t, q), real parts: by the
+    compiled kernel on a layout of their own when their terms have unit coefficients and no
+    shifts (joints' equations), term by term otherwise."""
+    from . import compiled as cc
+    from .kernel import CompiledKin, Layout, kernel_params
+    eqs = [eq for _, _, eq in model.redundant]
+    kept = model.__dict__.get("_dropped_layout")
+    if kept is None:        # the layout and its products-to-equations map (sparse: no dense product)
+        lay = Layout(model.layout.n_b, eqs, [], [])
+        kept = model.__dict__["_dropped_layout"] = (lay, sp.csr_matrix(lay.S))
+    lay, S = kept
+    q = np.real(q)
+    if lay.coefs or lay.shifts or not cc.enabled() or lay.n_eq != lay.n_cp:
+        return (np.real(model.constraint_values(_ctx(q, params, t), eqs)[0][:, 0]),
+                np.real(jacobian_rows(eqs, q, params, t)))
+    kp = params.ts.get("__kernel_dropped__")
+    if kp is None:      # the kernel parameters of this layout, kept apart from the model's own
+        kp = params.ts["__kernel_dropped__"] = kernel_params(lay, replace(params, ts={}))
+    z = np.zeros_like(q)[None]
+    kin = CompiledKin(lay, kp, q[None], z, z)
+    cl = kin.arrays
+    G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef,
+                        lay.n_q)
+    return np.real(S @ kin.X[0, :, 0]), np.real(S @ G[:, 0])
+
+
+def _span_distance(Jk: Any, R: Array) -> Array:
+    """Relative distance of each row of R from the span of the rows of Jk (sparse): the sparse
+    normal equations first, a rank-revealing least-squares solve to confirm a distance beyond
+    RUN_TOL (near a singular configuration of the kept rows J_k J_kᵀ is nearly singular)."""
+    size = np.maximum(np.linalg.norm(R, axis=1), 1e-300)
+    try:
+        with np.errstate(all="ignore"):
+            coef = spla.splu(sp.csc_matrix(Jk @ Jk.T)).solve(np.ascontiguousarray(Jk @ R.T))
+            off = np.linalg.norm(R - (Jk.T @ coef).T, axis=1) / size
+    except RuntimeError:             # exactly singular normal equations: decide below
+        off = np.full(R.shape[0], np.inf)
+    if not np.all(off <= RUN_TOL):
+        Jkd = Jk.toarray()
+        coef = np.linalg.lstsq(Jkd.T, R.T, rcond=1e-10)[0]
+        off = np.linalg.norm(R - coef.T @ Jkd, axis=1) / size
+    return off
+
+
 def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any) -> None:
     """ModelError when a dropped equation's row has left the span of the kept rows at (t, state):
-    the rank of the joints' equations changed during the run."""
+    the rank of the joints' equations changed during the run.
+
+    The distance of each dropped row J_d from the span of the kept rows J_k is
+    ‖J_d − cᵀJ_k‖ with J_k J_kᵀ c = J_k J_dᵀ (sparse normal equations: J_k has a few bodies'
+    columns per row); a distance beyond RUN_TOL is confirmed by a rank-revealing least-squares
+    solve before it is reported (at a singular configuration of the kept equations, such as the
+    flat pose of a parallelogram loop, J_k J_kᵀ is nearly singular while the dropped rows stay
+    in the span: the run goes on)."""
     red = model.redundant
     if not red:
         return
     n_q, n_lam = model.traits.n_q, model.traits.n_lam
     # the kept rows from the kernel's linearization at this state (∂R2/∂q̈ = c_s J_Φ; usually the
-    # solver's own, cached), the few dropped rows term by term
-    Jk = np.real(np.asarray(model.linearize(t, state, params).R_z)[n_q:n_q + n_lam, :n_q]) / model.scale
-    Jd = np.real(jacobian_rows([eq for _, _, eq in red], np.real(state.q), params, t))
-    coef = np.linalg.solve(Jk @ Jk.T, Jk @ Jd.T)
-    off = np.linalg.norm(Jd - coef.T @ Jk, axis=1) / np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
+    # solver's own, cached), the few dropped rows from a kernel of their own
+    Jk = sp.csr_matrix(model.linearize(t, state, params).R_z[n_q:n_q + n_lam, :n_q]).real / model.scale
+    phi_d, Jd = dropped_values_and_rows(model, t, state.q, params)
+    rows = np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
+    # first a few fixed random combinations of the dropped rows (each leaves the span when any
+    # row does), then, only if one is off, every row apart (to name them)
+    W = model.__dict__.get("_span_probe")
+    if W is None or W.shape[0] != Jd.shape[0]:
+        W = model.__dict__["_span_probe"] = np.random.default_rng(0).standard_normal((Jd.shape[0], 4))
+    probe = (W / rows[:, None]).T @ Jd
+    off = _span_distance(Jk, probe)
+    if not np.all(off <= 0.01 * RUN_TOL):
+        off = _span_distance(Jk, Jd)
+    else:
+        off = np.zeros(Jd.shape[0])
     from .drift import constraint_residuals
     kept = float(np.linalg.norm(np.real(constraint_residuals(model, t, state, params)[:, 0])))
-    check_values(model, t, state.q, params, kept)
+    check_values(model, t, state.q, params, kept, phi=phi_d)
     bad = np.flatnonzero(off > RUN_TOL)
     if bad.size:
         names = ", ".join(f"{red[i][0]}.{red[i][1]}" for i in bad)
