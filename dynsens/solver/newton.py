@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import ConvergenceError, NonFiniteError
 from ..integrators.newmark import Prediction
 from ..models.base import Linearization, Model, StepState
-from .linalg import Counters, Factor, SingularMatrixError
+from .linalg import Counters, Factor, SingularMatrixError, abs_product
 
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
@@ -200,7 +200,7 @@ class StepSolver:
         """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix."""
         if self._S is None:
             return False
-        terms = abs(self._S.real) @ np.abs(z.real)
+        terms = abs_product(self._S, np.abs(z.real))
         return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
