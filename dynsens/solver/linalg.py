@@ -140,7 +140,7 @@ class Factor:
         if self._kind == "diag":
             return int(self._inv.nbytes)
         if self._kind == "banded":
-            return int(self._lu.lu.nbytes + self._lu.piv.nbytes)
+            return self._lu.nbytes
         if self._kind == "sparse":
             return 12 * int(self._lu.L.nnz + self._lu.U.nnz)
         return int(self._lu[0].nbytes)
