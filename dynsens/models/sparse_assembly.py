@@ -17,6 +17,7 @@ almost all of it index work that is the same every time.  Here the index work is
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,6 +60,24 @@ class RightProduct:
         return y.T.reshape(x.shape[:-1] + (self.G.shape[1],))
 
 
+def _pattern(n: int, uniq: np.ndarray) -> sp.csc_matrix:
+    """The (n, n) CSC matrix with entries at the sorted unique keys column · n + row (zeros)."""
+    indices = (uniq % n).astype(np.int32)
+    indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+    A = sp.csc_matrix((np.zeros(uniq.size), indices, indptr), shape=(n, n))
+    assert A.has_canonical_format      # sorted and unique by construction; the flag is kept
+    return A
+
+
+def on_pattern(pattern: sp.csc_matrix, data: np.ndarray) -> sp.csc_matrix:
+    """The matrix of ``pattern`` (a canonical CSC matrix made once) with the entries ``data``: a
+    shallow copy sharing its index arrays, without the format checks of scipy's constructor
+    (which cost more than the values of a step at a thousand unknowns)."""
+    A = copy.copy(pattern)
+    A.data = data
+    return A
+
+
 class PatternAssembly:
     """(n, n) CSC matrices whose entries sit at fixed (rows, cols); duplicates are summed."""
 
@@ -67,15 +86,14 @@ class PatternAssembly:
         key = cols.astype(np.int64) * n + rows
         uniq, self.slot = np.unique(key, return_inverse=True)
         self.nnz = uniq.size
-        self.indices = (uniq % n).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+        self.pattern = _pattern(n, uniq)
 
     def matrix(self, values: np.ndarray, dtype: Any) -> sp.csc_matrix:
         """The matrix with entry k of ``values`` added at its slot."""
         data = np.bincount(self.slot, values.real, self.nnz)
         if np.iscomplexobj(values) or np.dtype(dtype).kind == "c":
             data = data + 1j * np.bincount(self.slot, values.imag, self.nnz)
-        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        return on_pattern(self.pattern, data)
 
 
 class _Union:
@@ -89,8 +107,7 @@ class _Union:
         slots = [np.searchsorted(uniq, k) for k in keys]
         self.slots = [None if s.size == uniq.size else s for s in slots]   # unique keys: all, in order
         self.nnz, self.n = uniq.size, n
-        self.indices = (uniq % n).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+        self.pattern = _pattern(n, uniq)
         self.patterns = [(A.indptr.copy(), A.indices.copy()) for A in mats]
         # the pattern arrays themselves: a model's assembly hands the same (never modified)
         # arrays with every matrix, recognised without comparing them entry by entry
@@ -136,7 +153,7 @@ class UnionCache:
         total = np.zeros(u.nnz, np.result_type(*(A.dtype for A in mats), float))
         for k, A in enumerate(mats):
             total[u._slots(k)] += A.data    # a canonical matrix has each position once
-        return sp.csc_matrix((total, u.indices, u.indptr), shape=(u.n, u.n))
+        return on_pattern(u.pattern, total)
 
 
 @dataclass(frozen=True)
@@ -167,4 +184,4 @@ class SparseLinearization(Linearization):
             if D is not None:
                 coupled[u._slots(k)] = coupled[u._slots(k)] + c_qd * D.data
         S = u.place(M.data, 0, dtype)
-        return sp.csc_matrix((S + coupled, u.indices, u.indptr), shape=(u.n, u.n))
+        return on_pattern(u.pattern, S + coupled)

@@ -126,6 +126,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         # the spring state of the last residual: Newton linearizes at the state it has just
         # evaluated, and the tangent needs the same products (kept with q and params themselves)
         self._last_springs: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
+        self._last_loads: tuple[float, Any, np.ndarray] | None = None       # (t, params, f_ext)
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
         self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per _assemble site
         self._sums: dict[str, UnionCache] = {}                   # sparse models: per _add site
@@ -243,6 +244,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         f = f + k2 * delta ** 2 + k3 * delta ** 3
         kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
         if springs is None:
+            f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
             self._last_springs = (q, params, f, kt)
         return f, kt
 
@@ -260,12 +262,20 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         return {"d": d, "strain": strain, "N": N}
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
-        """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis."""
+        """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis.
+        The loads of the last (t, params) are kept (read-only): every Newton iteration of a
+        step evaluates them at the same time."""
+        last = self._last_loads
+        if last is not None and last[0] == t and last[1] is params:
+            return last[2]
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n + 1,), dtype=pv.dtype)
         for dof, amp, fn in self.loads:
             f[..., dof] += pv[..., amp] * fn.value(t, pv)
-        return f[..., :self.n]
+        f = f[..., :self.n]
+        f.flags.writeable = False
+        self._last_loads = (t, params, f)
+        return f
 
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
