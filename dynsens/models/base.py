@@ -118,6 +118,10 @@ class Linearization:
             for b in blocks:
                 S = S + b
             return sp.csc_matrix(S)
+        if isinstance(coupled_q, np.ndarray) and coupled_p is None and n_q == n_z and \
+                coupled_q.dtype == np.result_type(coupled_q, self.R_z):
+            coupled_q += self.R_z     # a new array: S = R_z + coupled_q (the same sums, one pass fewer)
+            return coupled_q
         S = np.array(self.R_z, copy=True)
         if coupled_q is not None:
             S[:, :n_q] += coupled_q

@@ -217,14 +217,16 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
         return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
 
-    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Spring forces f (..., n_s) and tangents df/dδ of all springs or of the indices
-        ``springs``; params may carry a leading batch axis."""
-        if springs is None:
+    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None,
+                      tangent: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Spring forces f (..., n_s) and, with ``tangent``, the tangents df/dδ (else None) of all
+        springs or of the indices ``springs``; params may carry a leading batch axis."""
+        keep = springs is None and tangent
+        if keep:
             last = self._last_springs
             if last is not None and last[0] is q and last[1] is params:
                 return last[2], last[3]
+        if springs is None:
             elongation = self._spring_elongation
         else:
             key = tuple(springs.tolist())
@@ -237,13 +239,14 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             return params[key] if springs is None else params[key][..., springs]
         k1 = pick("k1")
         f = k1 * delta
-        kt = k1 + 0 * delta
+        kt = k1 + 0 * delta if tangent else None
         if self.traits.linear:
             return f, kt
         k2, k3 = pick("k2"), pick("k3")
         f = f + k2 * delta ** 2 + k3 * delta ** 3
-        kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
-        if springs is None:
+        if kt is not None:
+            kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
+        if keep and kt is not None:
             f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
             self._last_springs = (q, params, f, kt)
         return f, kt
@@ -299,7 +302,8 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
-            fs, _ = self._spring_state(q, params)
+            # a single state: the tangent at it is asked for next (Newton), batches need none
+            fs, _ = self._spring_state(q, params, tangent=q.ndim == 1)
             f = f + self._spring_scatter(fs)
         if len(self.bar_names):
             bs = self._bar_state(q, params)

@@ -121,7 +121,8 @@ class StepSolver:
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
         self._S = S
         factor = Factor(S, self.counters, dense_general=self._dense_general)
-        self._dense_general = factor.kind == "dense"   # the structure of S does not change
+        # the structure of S does not change: a dense S that was not diagonal stays so
+        self._dense_general = factor.kind == "dense" or (factor.kind == "banded" and isinstance(S, np.ndarray))
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
         if not self.refactor:
@@ -220,7 +221,7 @@ class StepSolver:
     def _block_norms(self, z: np.ndarray, dz: np.ndarray) -> tuple[list[float], list[float]]:
         """2-norms of the real parts of the present blocks of z and dz (one reduction for both;
         the overflow-safe :func:`_real_norm` per block when the squares overflow)."""
-        r = np.stack((z.real, dz.real))
+        r = np.array((z.real, dz.real))
         sq = np.add.reduceat(r * r, self._starts, axis=1)
         if sq.max() < 1e300:
             zn, dzn = np.sqrt(sq).tolist()
