@@ -127,6 +127,18 @@ def test_singular_tridiagonal_matrix_is_an_error() -> None:
         Factor(A, Counters())
 
 
+@pytest.mark.parametrize("where", [(50, 51), (50, 90)])
+def test_non_finite_entry_of_a_dense_band_matrix_is_an_error(where) -> None:
+    """Inside the kept band, or far outside it (the band then no longer holds the matrix)."""
+    A = _band(100, 1).toarray()
+    assert Factor(A, Counters()).kind == "banded"
+    for bad in (np.nan, np.inf):
+        B = A.copy()
+        B[where] = bad
+        with pytest.raises(SingularMatrixError):
+            Factor(B, Counters())
+
+
 def test_singular_band_matrix_is_an_error() -> None:
     A = _band(100, 1).toarray()
     A[50, :] = 0.0

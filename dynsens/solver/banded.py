@@ -84,13 +84,17 @@ class BandPlan:
         """One diagonal on each side of the main one (and more than one row)."""
         return self.kl == 1 and self.ku == 1 and self.n > 1
 
-    def factor(self, values: np.ndarray) -> "BandFactor | TridiagonalFactor":
-        """Factorize the matrix whose stored entries are ``values`` (see ``src``)."""
-        entries = values if self.src is None else values.ravel()[self.src]
+    def entries(self, values: np.ndarray) -> np.ndarray:
+        """The stored entries, in the order of ``rows``/``cols``, of a matrix whose CSC data
+        (or, with ``src``, dense array) is ``values``."""
+        return values if self.src is None else values.ravel()[self.src]
+
+    def factor(self, entries: np.ndarray) -> "BandFactor | TridiagonalFactor":
+        """Factorize the matrix with the stored ``entries`` (see :meth:`entries`)."""
         if self.tridiagonal:
             return TridiagonalFactor(self, entries)
         rows = 2 * self.kl + self.ku + 1
-        flat = np.zeros(rows * self.n, dtype=values.dtype)
+        flat = np.zeros(rows * self.n, dtype=entries.dtype)
         flat[self.positions] = entries
         ab = flat.reshape(self.n, rows).T              # the (rows, n) band array, Fortran-ordered
         gbtrf, gbtrs = _lapack_pair("gb", ab.dtype)
@@ -204,6 +208,7 @@ class SparsePlan:
 
     def __init__(self, S: sp.csc_matrix):
         self.indptr, self.indices = S.indptr.copy(), S.indices.copy()
+        self._seen: tuple[Any, Any] = (None, None)     # the index arrays of the last match
         n = S.shape[0]
         self.n = n
         j = np.repeat(np.arange(n), np.diff(S.indptr))
@@ -218,9 +223,16 @@ class SparsePlan:
         self._kept: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def matches(self, S: sp.csc_matrix) -> bool:
-        """Whether S has exactly this plan's pattern."""
-        return (S.indptr.size == self.indptr.size and S.indices.size == self.indices.size
+        """Whether S has exactly this plan's pattern (recognised at once when S shares the
+        never-modified index arrays of the last matrix that matched, as a model's matrices on a
+        kept pattern do)."""
+        if S.indptr is self._seen[0] and S.indices is self._seen[1]:
+            return True
+        same = (S.indptr.size == self.indptr.size and S.indices.size == self.indices.size
                 and np.array_equal(S.indptr, self.indptr) and np.array_equal(S.indices, self.indices))
+        if same:
+            self._seen = (S.indptr, S.indices)
+        return same
 
     def superlu(self, S: sp.csc_matrix) -> Any:
         """SuperLU of S; from the second call on with the kept column order (no ordering step)."""

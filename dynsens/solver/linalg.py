@@ -98,11 +98,12 @@ class Factor:
         elif not sp.issparse(S):
             band = dense_band_plan(S, _DENSE_PLANS)
         if band is not None:
-            values = S.data if plan is not None else S
-            if not np.isfinite(values.sum()) and not np.all(np.isfinite(values)):
+            # the stored entries (a dense S has every nonzero, NaN and Inf too, inside its band)
+            entries = band.entries(S.data if plan is not None else S)
+            if not np.isfinite(entries.sum()) and not np.all(np.isfinite(entries)):
                 raise SingularMatrixError("matrix has non-finite entries")
             self._kind = "banded"
-            self._lu = band.factor(values)
+            self._lu = band.factor(entries)
             if self._lu.info > 0:
                 raise SingularMatrixError(f"exactly zero pivot in column {self._lu.info}")
             udiag = self._lu.u_diagonal()
@@ -201,17 +202,18 @@ def abs_product(S: Any, v: np.ndarray) -> np.ndarray:
     return np.bincount(S.indices, np.abs(S.data.real) * v[_entry_columns(S.indptr)], S.shape[0])
 
 
-_COLUMNS: list[tuple[np.ndarray, np.ndarray]] = []   # the last (indptr, column of each entry)
+_COLUMNS: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # the last indptr, a copy, entry columns
 
 
 def _entry_columns(indptr: np.ndarray) -> np.ndarray:
     """The column of every stored entry of a CSC matrix with column pointers ``indptr``
     (a run's iteration matrices share one pattern: the last one is kept)."""
-    kept = _COLUMNS[-1] if _COLUMNS else None      # read once: never another caller's pair
-    if kept is not None and np.array_equal(kept[0], indptr):
-        return kept[1]
+    kept = _COLUMNS[-1] if _COLUMNS else None      # read once: never another caller's triple
+    # the same (never modified) array a model's assembly hands with every matrix, or equal to it
+    if kept is not None and (indptr is kept[0] or np.array_equal(kept[1], indptr)):
+        return kept[2]
     cols = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
-    _COLUMNS[:] = [(indptr.copy(), cols)]
+    _COLUMNS[:] = [(indptr, indptr.copy(), cols)]
     return cols
 
 

@@ -146,7 +146,7 @@ class StepSolver:
             self.counters.residual_evaluations += 1
             rnorm = _real_norm(R)
             history.append(rnorm)
-            if not np.isfinite(rnorm):
+            if not math.isfinite(rnorm):
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
             if it > 1 and self._at_roundoff(R, z):
                 # each residual entry is within round-off of the terms that make it up (Oettli-
