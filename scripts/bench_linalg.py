@@ -61,10 +61,11 @@ def measure(n: int, w: int, repeats: int) -> dict[str, float]:
         out["dense"] = best(dense, repeats, max(1, loops // (1 + n // 100)))
         plan = dense_band_plan(D, {})
         if plan is not None:
-            out["band (dense input)"] = best(lambda: plan.factor(D).solve(b), repeats, loops)
+            out["band (dense input)"] = best(lambda: plan.factor(plan.entries(D)).solve(b), repeats, loops)
     sp_plan = SparsePlan(A)
-    if sp_plan.band is not None:
-        out["band (sparse input)"] = best(lambda: sp_plan.band.factor(A.data).solve(b), repeats, loops)
+    band = sp_plan.band
+    if band is not None:
+        out["band (sparse input)"] = best(lambda: band.factor(band.entries(A.data)).solve(b), repeats, loops)
     out["SuperLU"] = best(lambda: spla.splu(A).solve(b), repeats, loops)
     sp_plan.superlu(A)
     out["SuperLU kept order"] = best(lambda: sp_plan.superlu(A).solve(b), repeats, loops)

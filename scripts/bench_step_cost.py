@@ -7,7 +7,9 @@ primal and primal + gradient.  CPU seconds (``time.process_time``; BLAS is singl
 medians of ``--repeats`` interleaved repeats, every variant run once before timing (numba
 compilation and first-call costs excluded).  Before timing, the yardstick's gradient is checked
 against dynsens' (complex-step partials) at each N.
-Usage: python scripts/bench_step_cost.py [--sizes 10 100 1000] [--steps 2000] [--repeats 5]
+With ``--weir`` the shipped weir (cases/tyrolean_weir.yaml, its own settings and partials) is
+timed in the same run, primal and primal + gradient (the issue's target: the latter under 2.5 s).
+Usage: python scripts/bench_step_cost.py [--sizes 10 100 1000] [--steps 2000] [--repeats 5] [--weir]
 """
 from __future__ import annotations
 
@@ -41,9 +43,17 @@ def variants(n: int, steps: int) -> dict[str, Callable[[], Any]]:
     }
 
 
-def measure(n: int, steps: int, repeats: int) -> dict[str, float]:
+def weir_variants() -> dict[str, Callable[[], Any]]:
+    """The shipped weir, primal and primal + gradient (its own partials), by label."""
+    case = dynsens.load_case(str(HERE.parent / "cases" / "tyrolean_weir.yaml"))
+    return {
+        "weir primal": lambda: dynsens.run_case(case, sensitivities=False, history=()),
+        "weir + gradient": lambda: dynsens.run_case(case, sensitivities=True, history=()),
+    }
+
+
+def measure(runs: dict[str, Callable[[], Any]], repeats: int) -> dict[str, float]:
     """Median CPU seconds per variant, interleaved repeats after one untimed run of each."""
-    runs = variants(n, steps)
     for fn in runs.values():
         fn()
     times: dict[str, list[float]] = {k: [] for k in runs}
@@ -61,6 +71,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--check-steps", type=int, default=200, help="steps of the gradient check")
+    ap.add_argument("--weir", action="store_true", help="time the shipped weir too")
     args = ap.parse_args()
     rows = []
     for n in args.sizes:
@@ -68,7 +79,7 @@ def main() -> None:
         worst = max(v for k, v in diffs.items() if k.endswith("gradient"))
         if worst > GRADIENT_TOLERANCE:
             sys.exit(f"N = {n}: the yardstick's gradient differs from dynsens' by {worst:.1e}")
-        t = measure(n, args.steps, args.repeats)
+        t = measure(variants(n, args.steps), args.repeats)
         rows.append((n, t, worst))
         print(f"N = {n} done (gradient check {worst:.1e})", file=sys.stderr, flush=True)
     print(f"Duffing chain, {args.steps} steps of 1 ms, CPU seconds, medians of {args.repeats}\n")
@@ -78,6 +89,10 @@ def main() -> None:
     for n, t, worst in rows:
         print(f"| {n} | {_pair(t, 'dynsens')} | {_pair(t, 'SuperLU')} | {_pair(t, 'tridiagonal')} | "
               f"{_ratio(t, 'SuperLU')} | {_ratio(t, 'tridiagonal')} | {worst:.0e} |")
+    if args.weir:
+        w = measure(weir_variants(), args.repeats)
+        print(f"\nTyrolean weir (cases/tyrolean_weir.yaml), CPU seconds, medians of {args.repeats}: "
+              f"primal {w['weir primal']:.3f}, primal + gradient {w['weir + gradient']:.3f}")
 
 
 def _pair(t: dict[str, float], name: str) -> str:

@@ -84,6 +84,61 @@ def test_sparse_wide_pattern_keeps_superlu_column_order_across_values() -> None:
     assert _residual(other, f.solve(b), b) < 1e-13
 
 
+@pytest.mark.parametrize("dtype", [float, complex])
+@pytest.mark.parametrize("storage", ["dense", "sparse"])
+def test_tridiagonal_matrix_is_factorized_by_gttrf(dtype, storage) -> None:
+    """A tridiagonal matrix (dense, or sparse and scrambled) goes to gttrf / gttrs: solves with S
+    and with Sᵀ (not the conjugate transpose), one or several right-hand sides, real or complex,
+    against numpy's dense solve; pivoting happens (small diagonal entries)."""
+    n = 120
+    rng = np.random.default_rng(7)
+    A = sp.diags([rng.standard_normal(n - 1), 0.1 * rng.standard_normal(n), rng.standard_normal(n - 1)],
+                 [-1, 0, 1]).toarray().astype(dtype)
+    if dtype is complex:
+        A = A + 1j * np.diag(rng.standard_normal(n))
+    S: object = A
+    if storage == "sparse":
+        p = rng.permutation(n)
+        S = sp.csc_matrix(A[p][:, p])
+        A = A[p][:, p]
+    f = Factor(S, Counters())
+    assert f.kind == "banded" and isinstance(f._lu, banded.TridiagonalFactor)
+    assert np.any(f._lu.ipiv != np.arange(1, n + 1))      # rows were swapped
+    for b in (rng.standard_normal(n), rng.standard_normal((n, 3)) + 1j * rng.standard_normal((n, 3))):
+        x = f.solve(b)
+        assert x.shape == b.shape
+        assert np.allclose(x, np.linalg.solve(A, b), rtol=1e-11, atol=0)
+        xt = f.solve_transposed(b)
+        assert np.allclose(xt, np.linalg.solve(A.T, b), rtol=1e-11, atol=0)
+    assert f.nbytes > 0
+
+
+def test_singular_tridiagonal_matrix_is_an_error() -> None:
+    A = _band(100, 1).toarray()
+    A[:, 40] = 0.0                                         # a zero column: an exactly zero pivot
+    with pytest.raises(SingularMatrixError):
+        Factor(A, Counters())
+    A = _band(100, 1).toarray()
+    A[40, 39] = A[41, 42] = 0.0
+    A[40, 40:42] = A[41, 40:42] = [0.3, 0.7]              # two equal rows inside the band
+    plan = banded.dense_band_plan(A, {})
+    assert plan is not None and plan.tridiagonal
+    with pytest.raises(SingularMatrixError):
+        Factor(A, Counters())
+
+
+@pytest.mark.parametrize("where", [(50, 51), (50, 90)])
+def test_non_finite_entry_of_a_dense_band_matrix_is_an_error(where) -> None:
+    """Inside the kept band, or far outside it (the band then no longer holds the matrix)."""
+    A = _band(100, 1).toarray()
+    assert Factor(A, Counters()).kind == "banded"
+    for bad in (np.nan, np.inf):
+        B = A.copy()
+        B[where] = bad
+        with pytest.raises(SingularMatrixError):
+            Factor(B, Counters())
+
+
 def test_singular_band_matrix_is_an_error() -> None:
     A = _band(100, 1).toarray()
     A[50, :] = 0.0

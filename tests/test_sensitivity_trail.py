@@ -27,6 +27,7 @@ FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 
 def _run(case, trail: int, monkeypatch):
     monkeypatch.setattr(direct, "TRAIL_STEPS", trail)
+    monkeypatch.setattr(direct, "SPARSE_TRAIL_STEPS", trail)
     plan = replace(case.plan, sensitivities=True, history=FIELDS, sensitivity_history=True)
     return march.integrate(case.model, case.x0, case.scheme, plan, case.new_response_set(),
                            design_names=case.design_names, design_scale=case.scale)
@@ -43,6 +44,7 @@ def _same(a, b, what, tol=1e-12):
 
 @pytest.mark.parametrize("name, over", [
     ("duffing_chain", []),                                  # structural, vectorized block partials
+    ("duffing_chain", ["model.linear_algebra=sparse"]),     # sparse: batched sparse products
     ("sdof_step", ["integrator.t_end=2"]),                  # linear, one factor for the whole run
     ("sdof_step", ["integrator.t_end=2.0015",               # transition matrices of a dissipative
                    "integrator.scheme=generalized_alpha"]), # scheme, and a shortened last step
@@ -75,12 +77,15 @@ def test_trailing_sensitivities_match_step_by_step(name, over, monkeypatch):
 
 def test_trail_length_follows_the_memory_it_holds():
     """Dense models trail up to TRAIL_STEPS steps while their held matrices stay within
-    TRAIL_BYTES; sparse models (large factors) do not trail."""
+    TRAIL_BYTES; sparse models up to SPARSE_TRAIL_STEPS, counted at SPARSE_ROW_ENTRIES per row."""
     small = dynsens.load_case(CASES / "tyrolean_weir.yaml").model.traits
     assert direct.trail_length(small, 4) == direct.TRAIL_STEPS
     big = replace(small, n_q=500, n_lam=0, n_p=0)      # 8 MB of matrices per step
     assert 1 < direct.trail_length(big, 4) < direct.TRAIL_STEPS
-    assert direct.trail_length(replace(small, sparse=True), 4) == 1
+    assert direct.trail_length(replace(small, sparse=True), 4) == direct.SPARSE_TRAIL_STEPS
+    sparse = replace(small, n_q=20_000, n_lam=0, n_p=0, sparse=True)     # 10 MB a step
+    assert 1 < direct.trail_length(sparse, 4) < direct.SPARSE_TRAIL_STEPS
+    assert direct.trail_length(replace(sparse, n_q=200_000), 4) == 1
 
 
 @pytest.mark.parametrize("name", ["tyrolean_weir", "slider_crank", "hydraulic_lever", "pendulum_3d",

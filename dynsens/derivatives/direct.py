@@ -25,6 +25,10 @@ from .finite import check_block
 
 TRAIL_STEPS = 128
 TRAIL_BYTES = 32 * 2**20
+# sparse models: a short trail (their factors' fill is not known before the run), each step
+# counted at a generous number of stored entries per row
+SPARSE_TRAIL_STEPS = 8
+SPARSE_ROW_ENTRIES = 64
 # Largest sensitivity state (∇q, ∇q̇, ∇q̈, ∇λ, ∇p, ∇ṗ and the scheme's ∇a, ∇b stacked) for
 # which constant-matrix steps advance by a transition matrix (its product costs n_x² m; above
 # this size the step's own solve is cheaper)
@@ -34,9 +38,12 @@ TRANSITION_MAX = 32
 def trail_length(traits: Any, m: int) -> int:
     """Steps the sensitivities may trail the state: up to TRAIL_STEPS, while the held dense
     linearizations and factors (≈ 4 n_z² + 6 m n_z numbers per step) stay within TRAIL_BYTES;
-    one step (no trail) for sparse models, whose factors are large."""
+    sparse models up to SPARSE_TRAIL_STEPS, counting SPARSE_ROW_ENTRIES numbers per row for
+    their blocks and factor (a block of steps shares one call of the design partials: 10 % of
+    a gradient run of the chain at N = 1 000, BENCHMARKS.md)."""
     if traits.sparse:
-        return 1
+        per_step = 8 * (SPARSE_ROW_ENTRIES * traits.n_z + 6 * m * traits.n_z)
+        return max(1, min(SPARSE_TRAIL_STEPS, TRAIL_BYTES // per_step))
     per_step = 8 * (4 * traits.n_z * traits.n_z + 6 * m * traits.n_z)
     return max(1, min(TRAIL_STEPS, TRAIL_BYTES // per_step))
 

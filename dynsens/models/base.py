@@ -118,6 +118,10 @@ class Linearization:
             for b in blocks:
                 S = S + b
             return sp.csc_matrix(S)
+        if isinstance(coupled_q, np.ndarray) and coupled_p is None and n_q == n_z and \
+                coupled_q.dtype == np.result_type(coupled_q, self.R_z):
+            coupled_q += self.R_z     # a new array: S = R_z + coupled_q (the same sums, one pass fewer)
+            return coupled_q
         S = np.array(self.R_z, copy=True)
         if coupled_q is not None:
             S[:, :n_q] += coupled_q
@@ -251,15 +255,26 @@ class ParameterTable:
         values = np.array(self._constants, dtype=float)
         out: list[tuple[str, str]] = []
         bad: set[int] = set()
+        # an expression written many times (every element's "k") is evaluated once
+        outcome: dict[str, float | str] = {}
         for i, expr in self._exprs:
-            try:
-                values[i] = float(np.real(expr.evaluate(env)))
-            except ExpressionError as exc:
-                out.append((self._paths[i], str(exc)))
+            if expr.text not in outcome:
+                try:
+                    outcome[expr.text] = float(np.real(expr.evaluate(env)))
+                except ExpressionError as exc:
+                    outcome[expr.text] = str(exc)
+            result = outcome[expr.text]
+            if isinstance(result, str):
+                out.append((self._paths[i], result))
                 bad.add(i)
+            else:
+                values[i] = result
+        derivative: dict[str, str | None] = {}
         for i, expr in self._exprs:
             if expr.symbols and i not in bad:
-                why = expr.derivative_problem(env)
+                if expr.text not in derivative:
+                    derivative[expr.text] = expr.derivative_problem(env)
+                why = derivative[expr.text]
                 if why:
                     out.append((self._paths[i], why))
                     bad.add(i)
@@ -308,19 +323,25 @@ class ParameterTable:
             if changed.size <= max(1, x.size // 8):
                 out = base[1].astype(dtype)
                 if changed.size:
-                    env: Mapping[str, Any] = dict(zip(self.design_names, x))
                     naming = self._expressions_naming()
-                    for k in sorted(set().union(*(naming[j] for j in changed))):
-                        i, expr = self._exprs[k]
-                        out[i] = expr.evaluate(env)
+                    ks = sorted(set().union(*(naming[j] for j in changed)))
+                    _evaluate_into(out, [self._exprs[k] for k in ks], dict(zip(self.design_names, x)))
                 return out
         out = np.array(self._constants, dtype=dtype)
         if self._exprs:
-            env = dict(zip(self.design_names, x))
-            for i, expr in self._exprs:
-                out[i] = expr.evaluate(env)
+            _evaluate_into(out, self._exprs, dict(zip(self.design_names, x)))
         self._base = (np.array(x, copy=True), out.copy())
         return out
+
+
+def _evaluate_into(out: Array, exprs: Sequence[tuple[int, Expression]], env: Mapping[str, Any]) -> None:
+    """out[i] = expression value for every (i, expression), each distinct text evaluated once
+    (a case names one design variable in many entries: every element's "k")."""
+    values: dict[str, Any] = {}
+    for i, expr in exprs:
+        if expr.text not in values:
+            values[expr.text] = expr.evaluate(env)
+        out[i] = values[expr.text]
 
 
 class Model(ABC):

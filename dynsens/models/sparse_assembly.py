@@ -12,10 +12,12 @@ almost all of it index work that is the same every time.  Here the index work is
   state-dependent terms a block gathers: follower loads, nonlinear dampers, a turning mass);
 * :class:`SparseLinearization` — the iteration matrix S = M + (c_q K + c_q̇ D) on the union
   pattern of M, K and D, entry by entry the same sums as the sparse additions (an entry that
-  cancels to zero stays in the pattern as an explicit zero).
+  cancels to zero stays in the pattern as an explicit zero);
+* :class:`RightProduct` — x @ G for a fixed element-to-node map G with the transpose kept.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,6 +25,57 @@ import numpy as np
 import scipy.sparse as sp
 
 from .base import Linearization
+
+
+class RightProduct:
+    """x ↦ x @ G for x (..., a) and a fixed (a, b) matrix G, dense or sparse (element values to
+    nodal forces, nodal values to element values).  scipy forms a sparse x @ G as (Gᵀ @ xᵀ)ᵀ and
+    builds the transposed matrix object on every call, which costs more than the product at a
+    thousand entries; here Gᵀ is made once from the same arrays, so the sums are the same, in the
+    same order.  Leading axes of x are folded into one (scipy's products take two)."""
+
+    def __init__(self, G: Any):
+        self.G = G
+        self.GT = G.T if sp.issparse(G) else None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(a, b): the shape of G."""
+        return self.G.shape
+
+    def transposed(self) -> "RightProduct":
+        """The product with Gᵀ (nodal values to element values for a scatter map G)."""
+        return RightProduct(self.G.T)
+
+    def columns(self, cols: np.ndarray) -> "RightProduct":
+        """The product with the columns ``cols`` of G."""
+        return RightProduct(self.G[:, cols])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if self.GT is None:
+            return x @ self.G
+        if x.ndim == 1:
+            return self.GT @ x
+        y = self.GT @ x.reshape(-1, x.shape[-1]).T
+        return y.T.reshape(x.shape[:-1] + (self.G.shape[1],))
+
+
+def _pattern(n: int, uniq: np.ndarray) -> sp.csc_matrix:
+    """The (n, n) CSC matrix with entries at the sorted unique keys column · n + row (zeros)."""
+    indices = (uniq % n).astype(np.int32)
+    indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+    A = sp.csc_matrix((np.zeros(uniq.size), indices, indptr), shape=(n, n))
+    assert A.has_canonical_format      # sorted and unique by construction; the flag is kept
+    return A
+
+
+def on_pattern(pattern: sp.csc_matrix, data: np.ndarray) -> sp.csc_matrix:
+    """The matrix of ``pattern`` (a canonical CSC matrix made once) with the entries ``data``: a
+    shallow copy sharing its index arrays, without the format checks of scipy's constructor
+    (which cost more than the values of a step at a thousand unknowns)."""
+    A = copy.copy(pattern)
+    A.data = data
+    return A
 
 
 class PatternAssembly:
@@ -33,35 +86,50 @@ class PatternAssembly:
         key = cols.astype(np.int64) * n + rows
         uniq, self.slot = np.unique(key, return_inverse=True)
         self.nnz = uniq.size
-        self.indices = (uniq % n).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+        self.pattern = _pattern(n, uniq)
 
     def matrix(self, values: np.ndarray, dtype: Any) -> sp.csc_matrix:
         """The matrix with entry k of ``values`` added at its slot."""
         data = np.bincount(self.slot, values.real, self.nnz)
         if np.iscomplexobj(values) or np.dtype(dtype).kind == "c":
             data = data + 1j * np.bincount(self.slot, values.imag, self.nnz)
-        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        return on_pattern(self.pattern, data)
 
 
 class _Union:
-    """Union pattern of some CSC matrices and the slots of each one's entries in it."""
+    """Union pattern of some CSC matrices and the slots of each one's entries in it (None for a
+    matrix whose pattern is the union itself: its entries are the union's, in order)."""
 
     def __init__(self, mats: list[sp.csc_matrix]):
         n = mats[0].shape[0]
         keys = [np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr)) * n + A.indices for A in mats]
         uniq = np.unique(np.concatenate(keys))
-        self.slots = [np.searchsorted(uniq, k) for k in keys]
+        slots = [np.searchsorted(uniq, k) for k in keys]
+        self.slots = [None if s.size == uniq.size else s for s in slots]   # unique keys: all, in order
         self.nnz, self.n = uniq.size, n
-        self.indices = (uniq % n).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+        self.pattern = _pattern(n, uniq)
         self.patterns = [(A.indptr.copy(), A.indices.copy()) for A in mats]
+        # the pattern arrays themselves: a model's assembly hands the same (never modified)
+        # arrays with every matrix, recognised without comparing them entry by entry
+        self._seen = [(A.indptr, A.indices) for A in mats]
 
     def fits(self, mats: list[sp.csc_matrix]) -> bool:
         """Whether the matrices have exactly the patterns this union was made of."""
         return len(mats) == len(self.patterns) and all(
-            (A.indptr is p or np.array_equal(A.indptr, p)) and (A.indices is i or np.array_equal(A.indices, i))
-            for A, (p, i) in zip(mats, self.patterns))
+            (A.indptr is s[0] or np.array_equal(A.indptr, p)) and (A.indices is s[1] or np.array_equal(A.indices, i))
+            for A, (p, i), s in zip(mats, self.patterns, self._seen))
+
+    def place(self, values: np.ndarray, k: int, dtype: Any) -> np.ndarray:
+        """The entries ``values`` of matrix k on the union pattern (zero where it has none)."""
+        if self.slots[k] is None and values.dtype == dtype:
+            return values
+        out = np.zeros(self.nnz, dtype)
+        out[self._slots(k)] = values
+        return out
+
+    def _slots(self, k: int) -> Any:
+        s = self.slots[k]
+        return slice(None) if s is None else s
 
 
 class UnionCache:
@@ -83,9 +151,9 @@ class UnionCache:
         mats = [A if A.format == "csc" and A.has_canonical_format else sp.csc_matrix(A) for A in mats]
         u = self.get(mats)
         total = np.zeros(u.nnz, np.result_type(*(A.dtype for A in mats), float))
-        for A, slots in zip(mats, u.slots):
-            total[slots] += A.data    # a canonical matrix has each position once
-        return sp.csc_matrix((total, u.indices, u.indptr), shape=(u.n, u.n))
+        for k, A in enumerate(mats):
+            total[u._slots(k)] += A.data    # a canonical matrix has each position once
+        return on_pattern(u.pattern, total)
 
 
 @dataclass(frozen=True)
@@ -104,13 +172,16 @@ class SparseLinearization(Linearization):
         mats = [m for m in (M, K, D) if m is not None]
         u = self.unions.get(mats)
         dtype = np.result_type(*(m.dtype for m in mats), float)
-        coupled = np.zeros(u.nnz, dtype)
-        k = 1
-        if K is not None:
-            coupled[u.slots[k]] = c_q * K.data
-            k += 1
-        if D is not None:
-            coupled[u.slots[k]] = coupled[u.slots[k]] + c_qd * D.data
-        S = np.zeros(u.nnz, dtype)
-        S[u.slots[0]] = M.data
-        return sp.csc_matrix((S + coupled, u.indices, u.indptr), shape=(u.n, u.n))
+        # coupled = c_q K + c_q̇ D on the union, S = M + coupled: the sums of the sparse additions
+        if K is not None and D is not None and u.slots[1] is None and u.slots[2] is None:
+            coupled = c_q * K.data + c_qd * D.data      # both on the union pattern itself
+        else:
+            coupled = np.zeros(u.nnz, dtype)
+            k = 1
+            if K is not None:
+                coupled[u._slots(k)] = c_q * K.data
+                k += 1
+            if D is not None:
+                coupled[u._slots(k)] = coupled[u._slots(k)] + c_qd * D.data
+        S = u.place(M.data, 0, dtype)
+        return on_pattern(u.pattern, S + coupled)

@@ -28,7 +28,7 @@ from .beams import BeamSet
 from .beams3d import Beam3DSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
-from .sparse_assembly import PatternAssembly, UnionCache
+from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
 from .structural_diagnostics import StructuralDiagnostics
 from .structural_matrices import StructuralMatrices
 from .structural_outputs import StructuralOutputs
@@ -113,7 +113,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
                              has_damping=has_damping, sparse=use_sparse)
         # element forces -> nodal forces as one matrix product (works with a leading batch axis)
         self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
-        self._spring_elongation = self._spring_scatter.T  # (n, n_s): δ = q @ it
+        self._spring_elongation = self._spring_scatter.transposed()  # (n, n_s): δ = q @ it
         self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
         self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
         self._inertia_scatter = self._scatter(self.beams.idx[self.beams.is_consistent], np.ones(6), per_element=False)
@@ -123,14 +123,18 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
+        # the spring state of the last residual: Newton linearizes at the state it has just
+        # evaluated, and the tangent needs the same products (kept with q and params themselves)
+        self._last_springs: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
+        self._last_loads: tuple[float, Any, np.ndarray] | None = None       # (t, params, f_ext)
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
         self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per _assemble site
         self._sums: dict[str, UnionCache] = {}                   # sparse models: per _add site
         self._unions = UnionCache()                              # sparse iteration matrices
         self._diag_mass: tuple[np.ndarray, Any] | None = None    # (mass vector, its sparse diag(M))
 
-    def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> Any:
-        """Scatter matrix Gᵀ so that nodal forces = element values @ Gᵀ.
+    def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> RightProduct:
+        """The product with the scatter matrix Gᵀ: nodal forces = element values @ Gᵀ.
 
         With ``per_element`` one value per element acts on its k DOFs with ``signs`` (springs);
         otherwise every element supplies k values, one per DOF (bars).  Fixed DOFs are dropped.
@@ -142,7 +146,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         keep = rows < self.n
         G = sp.csr_matrix((vals[keep], (rows[keep], cols[keep])),
                           shape=(self.n, n_e if per_element else n_e * k))
-        return G.T.tocsr() if self.traits.sparse else G.toarray().T
+        return RightProduct(G.T.tocsr() if self.traits.sparse else G.toarray().T)
 
     # ------------------------------------------------------------------ parameters
     def parameters(self, x: np.ndarray) -> dict[str, Any]:
@@ -192,10 +196,10 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         f = params["mass"] * s.qdd
         if self.rotating_mass:
             fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
-            f = f + _times(fe.reshape(fe.shape[:-2] + (-1,)), self._inertia_scatter)
+            f = f + self._inertia_scatter(fe.reshape(fe.shape[:-2] + (-1,)))
         if self.frame_mass:
             fe = self.frames.inertia(self._ext(s.qdd), params)
-            f = f + _times(fe.reshape(fe.shape[:-2] + (-1,)), self._frame_inertia_scatter)
+            f = f + self._frame_inertia_scatter(fe.reshape(fe.shape[:-2] + (-1,)))
         return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -213,29 +217,38 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
         return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
 
-    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Spring forces f (..., n_s) and tangents df/dδ of all springs or of the indices
-        ``springs``; params may carry a leading batch axis."""
+    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None,
+                      tangent: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Spring forces f (..., n_s) and, with ``tangent``, the tangents df/dδ (else None) of all
+        springs or of the indices ``springs``; params may carry a leading batch axis."""
+        keep = springs is None and tangent
+        if keep:
+            last = self._last_springs
+            if last is not None and last[0] is q and last[1] is params:
+                return last[2], last[3]
         if springs is None:
             elongation = self._spring_elongation
         else:
             key = tuple(springs.tolist())
             if key not in self._elongation_of:
-                self._elongation_of[key] = self._spring_elongation[:, springs]
+                self._elongation_of[key] = self._spring_elongation.columns(springs)
             elongation = self._elongation_of[key]
-        delta = _times(q, elongation)                # δ = u_a − u_b for every spring
+        delta = elongation(q)                        # δ = u_a − u_b for every spring
 
         def pick(key: str) -> np.ndarray:
             return params[key] if springs is None else params[key][..., springs]
         k1 = pick("k1")
         f = k1 * delta
-        kt = k1 + 0 * delta
+        kt = k1 + 0 * delta if tangent else None
         if self.traits.linear:
             return f, kt
         k2, k3 = pick("k2"), pick("k3")
         f = f + k2 * delta ** 2 + k3 * delta ** 3
-        kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
+        if kt is not None:
+            kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
+        if keep and kt is not None:
+            f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
+            self._last_springs = (q, params, f, kt)
         return f, kt
 
     def _bar_state(self, q: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -252,12 +265,20 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         return {"d": d, "strain": strain, "N": N}
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
-        """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis."""
+        """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis.
+        The loads of the last (t, params) are kept (read-only): every Newton iteration of a
+        step evaluates them at the same time."""
+        last = self._last_loads
+        if last is not None and last[0] == t and last[1] is params:
+            return last[2]
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n + 1,), dtype=pv.dtype)
         for dof, amp, fn in self.loads:
             f[..., dof] += pv[..., amp] * fn.value(t, pv)
-        return f[..., :self.n]
+        f = f[..., :self.n]
+        f.flags.writeable = False
+        self._last_loads = (t, params, f)
+        return f
 
     # ------------------------------------------------------------------ residual contract
     def residual(self, t: float, s: StepState, params: dict[str, Any]) -> np.ndarray:
@@ -274,26 +295,27 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if not len(self.nl_dampers):
             return 0.0
         F, _ = self.nl_dampers.force(self.nl_dampers.velocity(self._ext(qd)), params["pv"])
-        return _times(F, self._nl_damper_scatter)
+        return self._nl_damper_scatter(F)
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         if len(self.spring_names):
-            fs, _ = self._spring_state(q, params)
-            f = f + _times(fs, self._spring_scatter)
+            # a single state: the tangent at it is asked for next (Newton), batches need none
+            fs, _ = self._spring_state(q, params, tangent=q.ndim == 1)
+            f = f + self._spring_scatter(fs)
         if len(self.bar_names):
             bs = self._bar_state(q, params)
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
             flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
-            f = f + _times(flat, self._bar_scatter)
+            f = f + self._bar_scatter(flat)
         if len(self.beams):
             fb = self.beams.forces(self._ext(q), params)
-            f = f + _times(fb.reshape(fb.shape[:-2] + (-1,)), self._beam_scatter)
+            f = f + self._beam_scatter(fb.reshape(fb.shape[:-2] + (-1,)))
         if len(self.frames):
             fb = self.frames.forces(self._ext(q), params)
-            f = f + _times(fb.reshape(fb.shape[:-2] + (-1,)), self._frame_scatter)
+            f = f + self._frame_scatter(fb.reshape(fb.shape[:-2] + (-1,)))
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -398,11 +420,3 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
-
-
-def _times(x: np.ndarray, M: Any) -> np.ndarray:
-    """x @ M for x (..., a) and M (a, b) dense or sparse (scipy's sparse products take at most
-    two dimensions: the leading axes are folded into one)."""
-    if x.ndim <= 2 or not sp.issparse(M):
-        return x @ M
-    return (x.reshape(-1, x.shape[-1]) @ M).reshape(x.shape[:-1] + (M.shape[1],))

@@ -66,6 +66,7 @@ class StructuralMatrices:
         rows, cols, vals = [], [], []
         if len(self.spring_names):
             _, kt = self._spring_state(q, params)
+            assert kt is not None
             a, b = self.spring_dofs[:, 0], self.spring_dofs[:, 1]
             rows += [a, b, a, b]
             cols += [a, b, b, a]
@@ -159,13 +160,14 @@ class StructuralMatrices:
         return SparseLinearization(R_z=M, R_q=K, R_qd=D, unions=self._unions)
 
     def _diagonal_mass(self, params: dict[str, Any]) -> Any:
-        """diag(M) of the point, bar and lumped beam masses; sparse: made once per design."""
+        """diag(M) of the point, bar and lumped beam masses, made once per design (read-only)."""
         mass = params["mass"]
-        if not self.traits.sparse:
-            return np.diag(mass)
         kept = self._diag_mass          # read once: the pair stays consistent
         if kept is None or kept[0] is not mass:
-            kept = self._diag_mass = (mass, sp.diags(mass).tocsc())
+            M = sp.diags(mass).tocsc() if self.traits.sparse else np.diag(mass)
+            if not self.traits.sparse:
+                M.flags.writeable = False
+            kept = self._diag_mass = (mass, M)
         return kept[1]
 
     def _add(self, site: str, terms: list[Any]) -> Any:

@@ -120,7 +120,7 @@ class StructuralOutputs:
             return None
         if springs:
             si = np.array(springs)
-            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i)[0],
+            return Output(lambda t, s, prm, _i=si: self._spring_state(s.q, prm, _i, tangent=False)[0],
                           tuple(f"{n}.force" for n in names), "", batched=True, autonomous=True)
         bi = np.array(bars)
 

@@ -7,7 +7,8 @@ applied to a matrix it was not made for):
 
 * :class:`BandPlan` — a symmetric permutation (reverse Cuthill–McKee for sparse matrices, the
   identity for dense ones) and the positions of the entries in LAPACK's band storage, for
-  gbtrf / gbtrs when the bandwidth after reordering is small;
+  gbtrf / gbtrs when the bandwidth after reordering is small, or in the three diagonals of
+  gttrf / gttrs when the matrix is tridiagonal (O(n) loops without gbtrf's BLAS call per column);
 * :class:`OrderedSparsePlan` — SuperLU's column ordering of the first factorization, applied to
   the values of later ones (only the numeric factorization is repeated).
 
@@ -34,21 +35,24 @@ DENSE_BAND_MIN_N = 48
 DENSE_BAND_FRACTION = 1 / 6
 SPARSE_BAND_MAX = 129
 
-_GB: dict[Any, tuple[Any, Any]] = {}
+_LAPACK: dict[tuple[str, Any], tuple[Any, Any]] = {}
 
 
-def _gb(dtype: Any) -> tuple[Any, Any]:
-    """gbtrf, gbtrs for a dtype (looked up once)."""
-    if dtype not in _GB:
-        _GB[dtype] = tuple(lapack.get_lapack_funcs(("gbtrf", "gbtrs"), dtype=dtype))
-    return _GB[dtype]
+def _lapack_pair(kind: str, dtype: Any) -> tuple[Any, Any]:
+    """(``kind``trf, ``kind``trs) for a dtype, kind "gb" or "gt" (looked up once)."""
+    key = (kind, dtype)
+    if key not in _LAPACK:
+        _LAPACK[key] = tuple(lapack.get_lapack_funcs((kind + "trf", kind + "trs"), dtype=dtype))
+    return _LAPACK[key]
 
 
 class BandPlan:
     """Band storage of a matrix with rows/columns reordered by ``perm`` (None: as they are).
 
     ``rows``, ``cols``: where each stored entry (CSC data order, or the row-major positions
-    ``src`` of a dense matrix) goes in the (2 kl + ku + 1, n) band array.
+    ``src`` of a dense matrix) goes in the (2 kl + ku + 1, n) band array; ``positions``: where it
+    goes in the storage the factorization reads (the band array read flat, or the three
+    diagonals of a tridiagonal matrix one after the other).
     """
 
     def __init__(self, n: int, i: np.ndarray, j: np.ndarray, perm: np.ndarray | None,
@@ -62,17 +66,38 @@ class BandPlan:
         self.ku = int(max(np.max(j - i, initial=0), 0))
         self.rows = self.kl + self.ku + i - j
         self.cols = j
+        n_rows = 2 * self.kl + self.ku + 1
+        if self.tridiagonal:
+            # band rows 3, 2, 1 (A[j+1, j], A[j, j], A[j−1, j]) as [sub (n−1) | main (n) | super (n−1)]
+            r = self.rows
+            self.positions = np.where(r == 3, j, np.where(r == 2, n - 1 + j, 2 * n - 2 + j))
+        else:
+            self.positions = self.rows + n_rows * j     # in the Fortran-ordered band array, read flat
 
     @property
     def width(self) -> int:
         """kl + ku + 1: the number of stored diagonals."""
         return self.kl + self.ku + 1
 
-    def factor(self, values: np.ndarray) -> "BandFactor":
-        """Factorize the matrix whose stored entries are ``values`` (see ``src``)."""
-        ab = np.zeros((2 * self.kl + self.ku + 1, self.n), dtype=values.dtype, order="F")
-        ab[self.rows, self.cols] = values if self.src is None else values.ravel()[self.src]
-        gbtrf, gbtrs = _gb(ab.dtype)
+    @property
+    def tridiagonal(self) -> bool:
+        """One diagonal on each side of the main one (and more than one row)."""
+        return self.kl == 1 and self.ku == 1 and self.n > 1
+
+    def entries(self, values: np.ndarray) -> np.ndarray:
+        """The stored entries, in the order of ``rows``/``cols``, of a matrix whose CSC data
+        (or, with ``src``, dense array) is ``values``."""
+        return values if self.src is None else values.ravel()[self.src]
+
+    def factor(self, entries: np.ndarray) -> "BandFactor | TridiagonalFactor":
+        """Factorize the matrix with the stored ``entries`` (see :meth:`entries`)."""
+        if self.tridiagonal:
+            return TridiagonalFactor(self, entries)
+        rows = 2 * self.kl + self.ku + 1
+        flat = np.zeros(rows * self.n, dtype=entries.dtype)
+        flat[self.positions] = entries
+        ab = flat.reshape(self.n, rows).T              # the (rows, n) band array, Fortran-ordered
+        gbtrf, gbtrs = _lapack_pair("gb", ab.dtype)
         lu, piv, info = gbtrf(ab, self.kl, self.ku, overwrite_ab=1)
         return BandFactor(self, lu, piv, info, gbtrs)
 
@@ -85,25 +110,68 @@ class BandFactor:
         self.plan, self.lu, self.piv, self.info, self._gbtrs = plan, lu, piv, info, gbtrs
         self.complex = lu.dtype.kind == "c"
 
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the factor (bytes)."""
+        return int(self.lu.nbytes + self.piv.nbytes)
+
     def u_diagonal(self) -> np.ndarray:
         """Diagonal of U (the pivots), for the singularity test."""
         p = self.plan
         return self.lu[p.kl + p.ku]
 
     def solve(self, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
-        """x with S x = rhs, or Sᵀ x = rhs when ``transposed``.  The symmetric reordering
-        P S Pᵀ has the transpose P Sᵀ Pᵀ: the same permutation serves both."""
-        if np.iscomplexobj(rhs) and not self.complex:
-            return self.solve(rhs.real, transposed) + 1j * self.solve(rhs.imag, transposed)
+        """x with S x = rhs, or Sᵀ x = rhs when ``transposed``."""
         p = self.plan
-        b = rhs if p.perm is None else rhs[p.perm]
-        x, _ = self._gbtrs(self.lu, p.kl, p.ku, b.reshape(p.n, -1), self.piv, trans=int(transposed))
-        x = x.reshape(rhs.shape)
-        if p.perm is None:
-            return x
-        out = np.empty_like(x)
-        out[p.perm] = x
-        return out
+        return _permuted_solve(self, rhs, transposed, lambda b: self._gbtrs(
+            self.lu, p.kl, p.ku, b, self.piv, trans=int(transposed))[0])
+
+
+class TridiagonalFactor:
+    """LU of a tridiagonal matrix with partial pivoting (gttrf: the sub-, main and super-diagonal
+    and the second super-diagonal of U that pivoting fills); the interface of :class:`BandFactor`."""
+
+    def __init__(self, plan: BandPlan, entries: np.ndarray):
+        self.plan = plan
+        n = plan.n
+        diagonals = np.zeros(3 * n - 2, dtype=entries.dtype)
+        diagonals[plan.positions] = entries
+        gttrf, self._gttrs = _lapack_pair("gt", diagonals.dtype)
+        dl, d, du = diagonals[:n - 1], diagonals[n - 1:2 * n - 1], diagonals[2 * n - 1:]
+        self.dl, self.d, self.du, self.du2, self.ipiv, self.info = gttrf(
+            dl, d, du, overwrite_dl=1, overwrite_d=1, overwrite_du=1)
+        self.complex = diagonals.dtype.kind == "c"
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the factor (bytes)."""
+        return int(sum(a.nbytes for a in (self.dl, self.d, self.du, self.du2, self.ipiv)))
+
+    def u_diagonal(self) -> np.ndarray:
+        """Diagonal of U (the pivots), for the singularity test."""
+        return self.d
+
+    def solve(self, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
+        """x with S x = rhs, or Sᵀ x = rhs when ``transposed``."""
+        return _permuted_solve(self, rhs, transposed, lambda b: self._gttrs(
+            self.dl, self.d, self.du, self.du2, self.ipiv, b, trans="T" if transposed else "N")[0])
+
+
+def _permuted_solve(factor: "BandFactor | TridiagonalFactor", rhs: np.ndarray, transposed: bool,
+                    solve: Any) -> np.ndarray:
+    """A band factor's solve with the plan's symmetric reordering around it: P S Pᵀ has the
+    transpose P Sᵀ Pᵀ, so the same permutation serves both.  A complex right-hand side of a
+    real factor is solved as its real and imaginary parts."""
+    if np.iscomplexobj(rhs) and not factor.complex:
+        return factor.solve(rhs.real, transposed) + 1j * factor.solve(rhs.imag, transposed)
+    p = factor.plan
+    b = rhs if p.perm is None else rhs[p.perm]
+    x = solve(b.reshape(p.n, -1)).reshape(rhs.shape)
+    if p.perm is None:
+        return x
+    out = np.empty_like(x)
+    out[p.perm] = x
+    return out
 
 
 def dense_band_plan(S: np.ndarray, cache: dict[Any, BandPlan | None]) -> BandPlan | None:
@@ -140,6 +208,7 @@ class SparsePlan:
 
     def __init__(self, S: sp.csc_matrix):
         self.indptr, self.indices = S.indptr.copy(), S.indices.copy()
+        self._seen: tuple[Any, Any] = (None, None)     # the index arrays of the last match
         n = S.shape[0]
         self.n = n
         j = np.repeat(np.arange(n), np.diff(S.indptr))
@@ -154,9 +223,16 @@ class SparsePlan:
         self._kept: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def matches(self, S: sp.csc_matrix) -> bool:
-        """Whether S has exactly this plan's pattern."""
-        return (S.indptr.size == self.indptr.size and S.indices.size == self.indices.size
+        """Whether S has exactly this plan's pattern (recognised at once when S shares the
+        never-modified index arrays of the last matrix that matched, as a model's matrices on a
+        kept pattern do)."""
+        if S.indptr is self._seen[0] and S.indices is self._seen[1]:
+            return True
+        same = (S.indptr.size == self.indptr.size and S.indices.size == self.indices.size
                 and np.array_equal(S.indptr, self.indptr) and np.array_equal(S.indices, self.indices))
+        if same:
+            self._seen = (S.indptr, S.indices)
+        return same
 
     def superlu(self, S: sp.csc_matrix) -> Any:
         """SuperLU of S; from the second call on with the kept column order (no ordering step)."""

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import ConvergenceError, NonFiniteError
 from ..integrators.newmark import Prediction
 from ..models.base import Linearization, Model, StepState
-from .linalg import Counters, Factor, SingularMatrixError
+from .linalg import Counters, Factor, SingularMatrixError, abs_product
 
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
@@ -123,7 +123,8 @@ class StepSolver:
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
         self._S = S
         factor = Factor(S, self.counters, dense_general=self._dense_general)
-        self._dense_general = factor.kind == "dense"   # the structure of S does not change
+        # the structure of S does not change: a dense S that was not diagonal stays so
+        self._dense_general = factor.kind == "dense" or (factor.kind == "banded" and isinstance(S, np.ndarray))
         if coeffs != (0.0, 0.0, 0.0):
             self.counters.step_factorizations += 1
         if not self.refactor:
@@ -149,7 +150,7 @@ class StepSolver:
             self.counters.residual_evaluations += 1
             rnorm = _real_norm(R)
             history.append(rnorm)
-            if not np.isfinite(rnorm):
+            if not math.isfinite(rnorm):
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
             if it > 1 and self._at_roundoff(R, z):
                 # each residual entry is within round-off of the terms that make it up (Oettli-
@@ -204,7 +205,7 @@ class StepSolver:
         """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix."""
         if self._S is None:
             return False
-        terms = abs(self._S.real) @ np.abs(z.real)
+        terms = abs_product(self._S, np.abs(z.real))
         return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
@@ -224,7 +225,7 @@ class StepSolver:
     def _block_norms(self, z: np.ndarray, dz: np.ndarray) -> tuple[list[float], list[float]]:
         """2-norms of the real parts of the present blocks of z and dz (one reduction for both;
         the overflow-safe :func:`_real_norm` per block when the squares overflow)."""
-        r = np.stack((z.real, dz.real))
+        r = np.array((z.real, dz.real))
         sq = np.add.reduceat(r * r, self._starts, axis=1)
         if sq.max() < 1e300:
             zn, dzn = np.sqrt(sq).tolist()
