@@ -124,10 +124,11 @@ class _Union:
         if self.slots[k] is None and values.dtype == dtype:
             return values
         out = np.zeros(self.nnz, dtype)
-        out[self._slots(k)] = values
+        out[self.positions(k)] = values
         return out
 
-    def _slots(self, k: int) -> Any:
+    def positions(self, k: int) -> Any:
+        """Where matrix k's entries sit in the union (an index array, or all of it)."""
         s = self.slots[k]
         return slice(None) if s is None else s
 
@@ -152,7 +153,7 @@ class UnionCache:
         u = self.get(mats)
         total = np.zeros(u.nnz, np.result_type(*(A.dtype for A in mats), float))
         for k, A in enumerate(mats):
-            total[u._slots(k)] += A.data    # a canonical matrix has each position once
+            total[u.positions(k)] += A.data    # a canonical matrix has each position once
         return on_pattern(u.pattern, total)
 
 
@@ -179,9 +180,9 @@ class SparseLinearization(Linearization):
             coupled = np.zeros(u.nnz, dtype)
             k = 1
             if K is not None:
-                coupled[u._slots(k)] = c_q * K.data
+                coupled[u.positions(k)] = c_q * K.data
                 k += 1
             if D is not None:
-                coupled[u._slots(k)] = coupled[u._slots(k)] + c_qd * D.data
+                coupled[u.positions(k)] = coupled[u.positions(k)] + c_qd * D.data
         S = u.place(M.data, 0, dtype)
         return on_pattern(u.pattern, S + coupled)

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..base import Linearization
+from ..sparse_assembly import on_pattern
 from . import compiled as cc
 from .kernel import Layout
 
@@ -376,14 +377,13 @@ class BlockSparseLinearization(Linearization):
             mats.append(_embed(R_p, n_z, n_z - n_p))
         u = self.structure.union(mats)
         dtype = np.result_type(*(m.dtype for m in mats), float)
-        S = np.zeros(u.nnz, dtype)
-        S[u.slots[0]] = self.R_z.data
+        S = u.place(self.R_z.data, 0, dtype)
         coupled = np.zeros(u.nnz, dtype)
-        coupled[u.slots[1]] = c_q * R_q.data
-        coupled[u.slots[2]] += c_qd * R_qd.data
+        coupled[u.positions(1)] = c_q * R_q.data
+        coupled[u.positions(2)] += c_qd * R_qd.data
         if R_p is not None and n_p:
-            coupled[u.slots[3]] += c_p * R_p.data
-        return sp.csc_matrix((S + coupled, u.indices, u.indptr), shape=(n_z, n_z))
+            coupled[u.positions(3)] += c_p * R_p.data
+        return on_pattern(u.pattern, S + coupled)
 
 
 def _embed(A: sp.csc_matrix, n: int, col0: int) -> sp.csc_matrix:
