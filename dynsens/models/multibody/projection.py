@@ -19,8 +19,9 @@ outputs, responses, events and monitors.
 Derivatives.  The projection is a map (q, q̇, x) → (q*, q̇*) of the step's end state and the
 design, so the procedure the gradient differentiates is "Newmark step, then projection".  Its
 Jacobian with respect to (q, q̇) is taken by batched complex step of the projection itself
-(2 n_q columns, iterated until the imaginary parts have converged too: the implicit-function
-derivative of the converged equations, exact to round-off), its design partials — Φ and J_Φ
+(Newton iterations from the converged solution with its exact matrix: the implicit-function
+derivative of the converged equations, exact to round-off) — in direct mode only along the m
+sensitivity columns, for the adjoint's transpose all 2 n_q columns —, its design partials — Φ and J_Φ
 depend on the design through lengths, points and axes — by the run's design-partials method:
 
     [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x
@@ -38,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import scipy.linalg as sla
 
 from ...case_keys import allowed
 from ...errors import ModelError, ProblemCollector
@@ -101,20 +103,79 @@ class Projection:
     feedback: bool
     multipliers: tuple[Array, Array]      # the converged (ν, κ), each (1, n_eq, 1)
     _map: ProjectionMap | None = field(default=None, repr=False)
+    _design: Array | None = field(default=None, repr=False)
+    _newton: tuple[Any, tuple[Array, Array, "_Factored"]] | None = field(default=None, repr=False)
 
     def linear_map(self, partials: Any) -> ProjectionMap:
-        """The projection's derivative at the run's design (``partials``: DesignPartials), once."""
+        """The projection's derivative at the run's design (``partials``: DesignPartials), once:
+        A by 2 n_q complex-step columns (the adjoint's transpose needs all of it)."""
         if self._map is None:
-            self._map = projection_map(self, partials)
+            n_q = self.raw.q.shape[0]
+            I = np.eye(2 * n_q)
+            A = np.concatenate(self._state_directions(I[:n_q], I[n_q:], partials.params0))
+            self._map = ProjectionMap(A, self._design_columns(partials))
         return self._map
 
     def apply(self, ds: StepState, partials: Any) -> StepState:
-        """Direct mode: sensitivities of the projected state from those of the solved one."""
-        return self.linear_map(partials).apply(ds)
+        """Direct mode: sensitivities (n_q, m per leaf) of the projected state from those of the
+        solved one.  Only A·[∇q; ∇q̇] is needed: m complex-step columns along the sensitivities
+        themselves (the directional derivative, as exact as A's columns) instead of A's 2 n_q."""
+        if self._map is not None or np.iscomplexobj(ds.q) or np.iscomplexobj(ds.qd):
+            return self.linear_map(partials).apply(ds)
+        n_q = ds.q.shape[0]
+        dq, dqd = self._state_directions(ds.q, ds.qd, partials.params0)
+        Bx = self._design_columns(partials)
+        return ds._replace(q=dq + Bx[:n_q], qd=dqd + Bx[n_q:])
 
     def transpose(self, q_bar: Array, qd_bar: Array, partials: Any) -> tuple[Array, Array, Array]:
         """Adjoint mode: see :meth:`ProjectionMap.transpose`."""
         return self.linear_map(partials).transpose(q_bar, qd_bar)
+
+    def _start(self, params: Any) -> tuple[Array, Array, "_Factored"]:
+        """(ν, κ, M) of the converged projection, M = J_Φ(q*) J₀ᵀ its exact Newton matrix
+        (factorized; kept for the step)."""
+        if self._newton is None or self._newton[0] is not params:
+            eqs, t = self.model.eqs, self.t
+            M = jacobian_rows(eqs, self.projected.q, params, t) @ jacobian_rows(eqs, self.raw.q, params, t).T
+            self._newton = (params, (*self.multipliers, _Factored(M)))
+        return self._newton[1]
+
+    def _state_directions(self, dQ: Array, dQD: Array, params: Any) -> tuple[Array, Array]:
+        """The derivative of (q*, q̇*) along the k directions (dQ, dQD) (n_q, k each) of the
+        solved (q, q̇), by complex step of the converged projection (:func:`_project_columns`)."""
+        q, qd = self.raw.q[:, None], self.raw.qd[:, None]
+        Qs, QDs, _, _ = _project_columns(self.model, self.settings, self.t, q + 1j * _H * dQ, qd + 1j * _H * dQD,
+                                         params, self._start(params))
+        return np.imag(Qs) / _H, np.imag(QDs) / _H
+
+    def _design_columns(self, partials: Any) -> Array:
+        """B_x (2 n_q, m): the design partials of the projection at the solved state, by the
+        run's partials method (once per step)."""
+        if self._design is None:
+            q, qd = self.raw.q[:, None], self.raw.qd[:, None]
+            start = self._start(partials.params0)
+
+            def projected(prm: Any) -> Array:
+                Qp, QDp, _, _ = _project_columns(self.model, self.settings, self.t, q, qd, prm, start)
+                return np.concatenate([Qp[:, 0], QDp[:, 0]])
+
+            self._design = partials.of(projected)
+        return self._design
+
+
+class _Factored:
+    """A (n, n), or a stack (k, n, n), factorized once: the chord and Newton iterations solve
+    with the same matrix every iteration, and one matrix serves all k columns at once."""
+
+    def __init__(self, A: Array):
+        self.stacked = A.ndim == 3
+        self.lu = [sla.lu_factor(a) for a in A] if self.stacked else sla.lu_factor(A)
+
+    def solve(self, res: Array) -> Array:
+        """x (k, n, 1) for the right-hand sides res (k, n, 1)."""
+        if self.stacked:
+            return np.stack([sla.lu_solve(lu, r) for lu, r in zip(self.lu, res)])
+        return sla.lu_solve(self.lu, res[:, :, 0].T).T[:, :, None]
 
 
 def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
@@ -131,7 +192,7 @@ def _converged(step: Array, value: Array, tol: float) -> bool:
 
 
 def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t: float, Q: Array,
-                     QD: Array, params: Any, start: tuple[Array, Array, Array] | None = None
+                     QD: Array, params: Any, start: tuple[Array, Array, "_Factored"] | None = None
                      ) -> tuple[Array, Array, Array, Array]:
     """(q*, q̇*) (n_q, k each) and the multipliers (ν, κ) (k, n_eq, 1) for k solved states
     (columns of Q, QD); complex-safe.  Without ``start``: chord iterations with J₀J₀ᵀ from ν = κ = 0
@@ -141,8 +202,8 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
     J0T = J0.transpose(0, 2, 1)
     if start is None:
-        A = J0 @ J0T
-        nu = np.zeros(A.shape[:2] + (1,), A.dtype)
+        A = _Factored(J0 @ J0T)
+        nu = np.zeros(J0.shape[:2] + (1,), J0.dtype)
         kappa = np.zeros_like(nu)
     else:
         nu, kappa, A = start
@@ -152,7 +213,7 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
         done = 0                               # iterations until the real parts converged
         for it in range(settings.max_iterations if start is None else 1 if complex_parts else 2):
             res = _levels(model, t, Qs, QDs, params)[:, :, level:level + 1]   # (k, n_eq, 1)
-            d = np.linalg.solve(A, res)
+            d = A.solve(res)
             if level == 0:
                 nu = nu - d
                 new = Q + (J0T @ nu)[:, :, 0].T
@@ -204,27 +265,6 @@ def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any
             "constraint_velocity_solved": float(np.linalg.norm(np.real(Phi[:, 1])))}
 
 
-def projection_map(proj: Projection, partials: Any) -> ProjectionMap:
-    """The derivative of the converged projection (module docstring) at design partials.params0:
-    the state columns by complex step, the design columns by the run's partials method, both
-    from the converged solution with its exact matrix (:func:`_project_columns`)."""
-    model, settings, t, params = proj.model, proj.settings, proj.t, partials.params0
-    q, qd = proj.raw.q, proj.raw.qd
-    n_q = q.shape[0]
-    J0 = jacobian_rows(model.eqs, q, params, t)
-    M = jacobian_rows(model.eqs, proj.projected.q, params, t) @ J0.T
-    start = (*proj.multipliers, M)
-    Y = np.concatenate([q, qd])[:, None] + 1j * _H * np.eye(2 * n_q)     # (2 n_q, 2 n_q) columns
-    Qs, QDs, _, _ = _project_columns(model, settings, t, Y[:n_q], Y[n_q:], params, start)
-    A = np.imag(np.concatenate([Qs, QDs])) / _H
-
-    def projected(prm: Any) -> Array:
-        Qp, QDp, _, _ = _project_columns(model, settings, t, q[:, None], qd[:, None], prm, start)
-        return np.concatenate([Qp[:, 0], QDp[:, 0]])
-
-    return ProjectionMap(A, partials.of(projected))
-
-
 def read_projection(spec: Any, path: str, problems: ProblemCollector) -> ProjectionSettings | None:
     """``model.projection`` of a case: the settings, or None when absent or ``enabled: false``."""
     if spec is None:
@@ -254,5 +294,5 @@ def read_projection(spec: Any, path: str, problems: ProblemCollector) -> Project
     return ProjectionSettings(float(tol), int(its), str(mode))
 
 
-__all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "projection_map", "read_projection",
+__all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "read_projection",
            "solved_monitors"]
