@@ -52,7 +52,8 @@ def errors(res: Any, sol: Any) -> tuple[float, float]:
             float(np.max(np.abs(res.quantities["pole_rate"].value - y[3]))))
 
 
-PROJECTION = {"": [], " + projection (output)": ["model.projection.mode=output"],
+# the case continues from the projected state (mode state); the plain index-1 form for comparison
+PROJECTION = {"": ["model.projection.enabled=false"], " + projection (output)": ["model.projection.mode=output"],
               " + projection (state)": ["model.projection.mode=state"]}
 SETTINGS = [(f"adaptive{p}", f"rtol = {r:g}",
              [f"integrator.adaptive.rtol={r}", f"integrator.adaptive.atol={r * 1e-3}", *ov])
