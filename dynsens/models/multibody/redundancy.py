@@ -238,6 +238,7 @@ def dropped_values_and_rows(model: "MultibodyModel", t: float, q: Array, params:
     compiled kernel on a layout of their own when their terms have unit coefficients and no
     shifts (joints' equations), term by term otherwise."""
     from . import compiled as cc
+    from . import compiled_linearization as clin
     from .kernel import CompiledKin, Layout, kernel_params
     eqs = [eq for _, _, eq in model.redundant]
     kept = model.__dict__.get("_dropped_layout")
@@ -255,7 +256,7 @@ def dropped_values_and_rows(model: "MultibodyModel", t: float, q: Array, params:
     z = np.zeros_like(q)[None]
     kin = CompiledKin(lay, kp, q[None], z, z)
     cl = kin.arrays
-    G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef,
+    G = clin.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef,
                         lay.n_q)
     return np.real(S @ kin.X[0, :, 0]), np.real(S @ G[:, 0])
 

@@ -25,6 +25,7 @@ import numpy as np
 from ..base import Linearization
 from .bodies import Ctx
 from . import compiled as cc
+from . import compiled_linearization as clin
 from .kernel import CompiledKin, Kin
 from .rotations import T_G, rmatmul
 
@@ -62,7 +63,7 @@ class CompiledLinearization(Linearization):
 
     def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Array:
         R_p = self.R_p if self.R_p is not None else np.zeros((self.R_z.shape[0], 0), self.R_z.dtype)
-        return cc.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
+        return clin.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
 
 
 def point_force(pf: Any, t: float, pv: Array) -> Array:
@@ -290,9 +291,9 @@ class Evaluation:
         kin = cast(CompiledKin, self.kin)   # the compiled path runs on compiled kinematics
         tr = m.traits
         cl, ck = kin.arrays, kin.params
-        G = cc.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
+        G = clin.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                             cl.side_coef, tr.n_q)
-        R_z, R_q, R_qd, R_p = cc.linearization(
+        R_z, R_q, R_qd, R_p = clin.linearization(
             kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
             cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], kin.dtype), m.eq_row_weights,
             m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0],

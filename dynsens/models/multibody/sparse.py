@@ -13,11 +13,11 @@ few bodies:
 
 :class:`SparseStructure` works these positions out once per model; the compiled
 :func:`block_linearization` computes only the values, in this compact form, with the same
-per-element arithmetic as the dense :func:`.compiled.linearization` (the shared inline helpers
-of :mod:`.compiled`).  :class:`BlockSparseLinearization` hands the blocks out as CSC matrices
-and forms the iteration matrix on their kept union pattern, so that the solver's per-pattern
-plan (:mod:`dynsens.solver.banded`: ordering and symbolic analysis once, numeric refresh per
-step) serves every Newton iteration of the run.
+per-element arithmetic as the dense :func:`.compiled_linearization.linearization` (the shared
+inline helpers of :mod:`.compiled_linearization`).  :class:`BlockSparseLinearization` hands the
+blocks out as CSC matrices and forms the iteration matrix on their kept union pattern, so that
+the solver's per-pattern plan (:mod:`dynsens.solver.banded`: ordering and symbolic analysis
+once, numeric refresh per step) serves every Newton iteration of the run.
 """
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ import scipy.sparse as sp
 from ..base import Linearization
 from ..sparse_assembly import on_pattern
 from . import compiled as cc
+from . import compiled_linearization as clin
 from .kernel import Layout
 
 Array = np.ndarray
@@ -93,7 +94,7 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
     Jc (3, n_λ, 7·n_eq_slots): rows of J_Φ, ∂R2/∂q/c_s, ∂R2/∂q̇/c_s on the equations' bodies;
     Bq, Bqd, Bqdd (n_blk, 7, 7): the body blocks of ∂R1/∂q, ∂R1/∂q̇, ∂R1/∂q̈;
     R1p (n_ax, 7·PB, n_p): ∂R1/∂p on an axial element's bodies; R3q, R3qd (n_p, 7·PB): ∂R3/∂q,
-    ∂R3/∂q̇ on the owner element's bodies.  Arguments as :func:`.compiled.linearization`, plus
+    ∂R3/∂q̇ on the owner element's bodies.  Arguments as :func:`.compiled_linearization.linearization`, plus
     side_slot (the slot of a side entry's body among its product's bodies), prod_nb (bodies per
     product), prod_blk[p, s, s'] (the block of the product's bodies s, s'), body_blk[b] (the
     diagonal block of body b) and eq_slot[p, s] (the slot of product p's body s in its equation).
@@ -108,14 +109,14 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
     G = np.zeros((n_prod, 3, 7 * PB), dt)
     side_col = 7 * side_slot
     for p in range(n_prod):
-        cc.product_row(G, p, C, ABV, is_point, side_ptr, side_prim, side_coef, side_col)
+        clin.product_row(G, p, C, ABV, is_point, side_ptr, side_prim, side_coef, side_col)
     # --- constraint rows
     Jc = np.zeros((3, n_lam, 7 * n_eq_slots), dt)
     for p in range(n_cp):
         e = prod_eq[p]
         for o in range(3):
             for r in range(3):
-                kk = cc.row_weight(eq_w, cf, p, o, r)
+                kk = clin.row_weight(eq_w, cf, p, o, r)
                 if kk != 0.0:
                     for s in range(prod_nb[p]):
                         a, b = 7 * eq_slot[p, s], 7 * s
@@ -124,7 +125,7 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
     for i in range(norm_eq.shape[0]):               # a normalisation's only body is its slot 0
         for o in range(3):
             for k in range(4):
-                Jc[o, norm_eq[i], 3 + k] += cc.norm_row_entry(norm_w, Lp, norm_body[i], o, k)
+                Jc[o, norm_eq[i], 3 + k] += clin.norm_row_entry(norm_w, Lp, norm_body[i], o, k)
     # --- R1 body blocks: geometric stiffness, ∂²(A s̄)/∂p²·f, normalisations, inertia
     Bq = np.zeros((n_blk, 7, 7), dt)
     Bqd = np.zeros((n_blk, 7, 7), dt)
@@ -134,9 +135,9 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
         if wp == 0.0:
             continue
         for ea in range(side_ptr[p], side_ptr[p + 1]):
-            Ka = cc._prim_jac0(side_prim[ea], C, is_point)
+            Ka = clin._prim_jac0(side_prim[ea], C, is_point)
             for eb in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):
-                Kb = cc._prim_jac0(side_prim[eb], C, is_point)
+                Kb = clin._prim_jac0(side_prim[eb], C, is_point)
                 c = wp * side_coef[ea] * side_coef[eb]
                 blk = cc._mm(Ka.T, Kb)
                 k1 = prod_blk[p, side_slot[ea], side_slot[eb]]
@@ -158,7 +159,7 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
         for k in range(4):
             Bq[k0, 3 + k, 3 + k] += 2.0 * lam[norm_eq[i]]
     for b in range(n_b):
-        Kpp, Cpp, Mpp = cc.inertia_blocks(Lp, b, J[b], TG)
+        Kpp, Cpp, Mpp = clin.inertia_blocks(Lp, b, J[b], TG)
         k0 = body_blk[b]
         for a in range(3):
             Bqdd[k0, a, a] += mass[b]
@@ -176,8 +177,8 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
         pp = ax_prod[i]
         jx = G[pp, 0]
         L, Ld, P, P_L, P_Ld = ax_law[i, 0], ax_law[i, 1], ax_law[i, 2], ax_law[i, 3], ax_law[i, 4]
-        cc.axial_rates(jx, G[pp, 1], L, Ld, dL[i], dLd[i])
-        w_L, w_Ld = cc.axial_weights(L, P, P_L, P_Ld)
+        clin.axial_rates(jx, G[pp, 1], L, Ld, dL[i], dLd[i])
+        w_L, w_Ld = clin.axial_weights(L, P, P_L, P_Ld)
         for su in range(prod_nb[pp]):
             for sv in range(prod_nb[pp]):
                 kb = prod_blk[pp, su, sv]
