@@ -13,7 +13,8 @@ import dynsens
 from conftest import CASES
 from dynsens.models.base import Linearization, StepState
 from dynsens.models.multibody import compiled
-from dynsens.models.multibody.kernel import CompiledKin, Kin
+from dynsens.models.multibody.kernel import Kin
+from dynsens.models.multibody.kernel_compiled import CompiledKin
 
 pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not installed")
 
@@ -161,7 +162,7 @@ def test_switch_off_by_environment(monkeypatch):
 
 def test_buffer_pool_hands_out_only_unreferenced_memory():
     """A pooled buffer is reused only once no array made from it is alive."""
-    from dynsens.models.multibody.kernel import BufferPool
+    from dynsens.models.multibody.kernel_compiled import BufferPool
     pool = BufferPool(limit=2)
     a = pool.take(12, float)
     view = a.reshape(3, 4)[:, 1]           # a derived view keeps the buffer in use
@@ -183,7 +184,7 @@ def test_block_kinematics_from_the_pool_are_exact_and_stay_valid(name, monkeypat
     """Block kinematics written into pooled buffers equal freshly allocated ones, a Kin still
     held keeps its values while later blocks are evaluated, and whole runs (real and complex
     partials) give bit-identical gradients with and without the pool."""
-    from dynsens.models.multibody import kernel
+    from dynsens.models.multibody import kernel_compiled
     case = dynsens.load_case(CASES / f"{name}.yaml", ["integrator.t_end=0.3"])
     res = dynsens.run_case(case, sensitivities=False, history=FIELDS)
     model = case.model
@@ -203,7 +204,7 @@ def test_block_kinematics_from_the_pool_are_exact_and_stay_valid(name, monkeypat
     for partials in ("forward", "complex"):
         over = ["integrator.t_end=0.3", f"sensitivity.partials={partials}"]
         pooled = dynsens.run_case(dynsens.load_case(CASES / f"{name}.yaml", over))
-        monkeypatch.setattr(kernel, "POOL_MIN_ENTRIES", 10**9)
+        monkeypatch.setattr(kernel_compiled, "POOL_MIN_ENTRIES", 10**9)
         plain = dynsens.run_case(dynsens.load_case(CASES / f"{name}.yaml", over))
         monkeypatch.undo()
         for r, v in plain.responses.items():

@@ -17,7 +17,8 @@ import pytest
 import dynsens
 from dynsens.models.base import StepState
 from dynsens.models.multibody import compiled
-from dynsens.models.multibody.kernel import CompiledKin, Layout
+from dynsens.models.multibody.kernel import Layout
+from dynsens.models.multibody.kernel_compiled import CompiledKin
 
 pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not installed")
 

@@ -33,7 +33,8 @@ from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
-from .kernel import CompiledKin, KinCache, KParams, Kin, Layout, _use_compiled, kernel_params, stack_kernel_params
+from .kernel import KParams, Kin, Layout, kernel_params, stack_kernel_params
+from .kernel_compiled import CompiledKin, KinCache, _use_compiled
 from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotations import from_axis_angle, rmatmul
 from .sparse import SparseStructure, sparse_linearization, use_sparse

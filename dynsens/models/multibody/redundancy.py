@@ -239,7 +239,8 @@ def dropped_values_and_rows(model: "MultibodyModel", t: float, q: Array, params:
     shifts (joints' equations), term by term otherwise."""
     from . import compiled as cc
     from . import compiled_linearization as clin
-    from .kernel import CompiledKin, Layout, kernel_params
+    from .kernel import Layout, kernel_params
+    from .kernel_compiled import CompiledKin
     eqs = [eq for _, _, eq in model.redundant]
     kept = model.__dict__.get("_dropped_layout")
     if kept is None:        # the layout and its products-to-equations map (sparse: no dense product)

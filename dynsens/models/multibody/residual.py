@@ -26,7 +26,8 @@ from ..base import Linearization
 from .bodies import Ctx
 from . import compiled as cc
 from . import compiled_linearization as clin
-from .kernel import CompiledKin, Kin
+from .kernel import Kin
+from .kernel_compiled import CompiledKin
 from .rotations import T_G, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
