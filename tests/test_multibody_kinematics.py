@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from dynsens.errors import ProblemCollector
-from dynsens.models.base import ParameterTable, StepState
+from dynsens.models.base import StepState
+from dynsens.models.parameters import ParameterTable
 from dynsens.models.multibody.assembly import jacobian_rows
 from dynsens.models.multibody.bodies import Ctx
 from dynsens.models.registry import build_model

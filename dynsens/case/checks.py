@@ -17,7 +17,8 @@ from ..runchecks import size_problem, stability_problem
 
 if TYPE_CHECKING:
     from ..march import RunPlan
-    from ..models.base import Model, ParameterTable
+    from ..models.base import Model
+    from ..models.parameters import ParameterTable
     from .load import DesignVariable
 
 

@@ -23,7 +23,8 @@ from ..integrators.newmark import SCHEMES, Newmark, make_scheme
 from ..march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
 from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
-from ..models.base import Model, Output, ParameterTable
+from ..models.base import Model, Output
+from ..models.parameters import ParameterTable
 from ..models.registry import build_model
 from ..records import QuantitySpec, Recorder
 from ..response_set import ResponseSet

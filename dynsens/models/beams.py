@@ -37,7 +37,7 @@ import numpy as np
 from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .base import ParameterTable
+from .parameters import ParameterTable
 
 SHAPES = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"), "properties": ("A", "I", "c")}
 MASS_KINDS = ("lumped", "consistent")

@@ -42,7 +42,7 @@ import numpy as np
 from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .base import ParameterTable
+from .parameters import ParameterTable
 from .beams3d_corot import element_forces, local_deformations, local_forces
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),

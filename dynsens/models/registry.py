@@ -5,7 +5,8 @@ import difflib
 from typing import Any, Callable
 
 from ..errors import ProblemCollector
-from .base import Model, ParameterTable
+from .base import Model
+from .parameters import ParameterTable
 
 Builder = Callable[[dict, str, ParameterTable, ProblemCollector], "Model | None"]
 _BUILDERS: dict[str, Builder] = {}

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .base import Model, ParameterTable, StepState, Traits
+from .base import Model, StepState, Traits
+from .parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
 from .dampers import NonlinearDampers

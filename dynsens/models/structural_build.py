@@ -8,7 +8,7 @@ from typing import Any
 from ..case_keys import STRUCTURAL_ELEMENT_TYPES, allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .base import ParameterTable
+from .parameters import ParameterTable
 from .beams import BeamSet, parse_beam
 from .beams3d import Beam3DSet, parse_beam_3d
 from .dampers import NonlinearDampers

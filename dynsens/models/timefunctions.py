@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import ProblemCollector
 from ..case_keys import TIME_FUNCTION_TYPES, allowed
 from ._keys import check_keys, did_you_mean
-from .base import ParameterTable
+from .parameters import ParameterTable
 
 KINDS = TIME_FUNCTION_TYPES   # the keys of each: dynsens/case_keys.py
 

@@ -13,7 +13,7 @@ import numpy as np
 from ...errors import ProblemCollector
 from ...case_keys import FORCE_TYPES, allowed
 from .._keys import check_keys, did_you_mean
-from ..base import ParameterTable
+from ..parameters import ParameterTable
 from ..registry import register
 from ..timefunctions import build_time_function
 from .bodies import GROUND, BodyDef, Const, Diff, Direction, Point

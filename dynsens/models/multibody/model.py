@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ...errors import ProblemCollector
-from ..base import Linearization, Model, Output, ParameterTable, StepState, Traits
+from ..base import Linearization, Model, Output, StepState, Traits
+from ..parameters import ParameterTable
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder

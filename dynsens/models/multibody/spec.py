@@ -14,7 +14,7 @@ import numpy as np
 from ...errors import ProblemCollector
 from ...case_keys import allowed
 from .._keys import check_keys, did_you_mean
-from ..base import ParameterTable
+from ..parameters import ParameterTable
 from .bodies import GROUND, BodyDef, MBParams
 from .rotations import perpendicular_pair, rotate
 
