@@ -1,4 +1,4 @@
-"""The case-file reference and its JSON Schema, generated from the key table (dynsens/case_keys.py).
+"""The case-file reference and its JSON Schema, generated from the key table (dynsens/case_keys/).
 
 ``python -m dynsens.case.schema --write`` writes docs/case-reference.md and docs/case.schema.json;
 ``--check`` exits 1 when they differ from what the table generates (a test runs it).  The schema
@@ -89,7 +89,7 @@ def json_schema() -> dict[str, Any]:
     return {"$schema": "https://json-schema.org/draft/2020-12/schema",
             "$id": "https://dynsens.invalid/case.schema.json",
             "title": "dynsens case file",
-            "description": "Generated from dynsens/case_keys.py by `python -m dynsens.case.schema --write`; "
+            "description": "Generated from dynsens/case_keys/ by `python -m dynsens.case.schema --write`; "
                            "do not edit by hand.",
             **{k: v for k, v in top.items() if k not in ("title", "description")},
             "$defs": defs}
@@ -123,7 +123,7 @@ def _anchor(name: str) -> str:
 def reference_markdown() -> str:
     """docs/case-reference.md: every section and key of the case language."""
     lines = ["# Case-file reference (every accepted key)", "",
-             "Generated from `dynsens/case_keys.py`, the table the case loader checks keys against, by "
+             "Generated from `dynsens/case_keys/`, the table the case loader checks keys against, by "
              "`python -m dynsens.case.schema --write`; do not edit by hand. A tour by example is in the README "
              "(\"Case-file reference\"); the JSON Schema for editors is [case.schema.json](case.schema.json).", "",
              "Kinds: *number or expression* is a number or an expression of the design variables "

@@ -16,7 +16,7 @@ from ..case_keys import TIME_FUNCTION_TYPES, allowed
 from ._keys import check_keys, did_you_mean
 from .parameters import ParameterTable
 
-KINDS = TIME_FUNCTION_TYPES   # the keys of each: dynsens/case_keys.py
+KINDS = TIME_FUNCTION_TYPES   # the keys of each: dynsens/case_keys/
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from .rotational import RotationalSpringDamper
 from .rotations import rotate, atan2_cs
 from .spec import Reader
 
-# the accepted keys live in the case language's key table (dynsens/case_keys.py)
+# the accepted keys live in the case language's key table (dynsens/case_keys/)
 TOP_KEYS = allowed("model.multibody")
 JOINT_KEYS = allowed("multibody.joint")
 FORCE_KEYS = {kind: allowed(f"multibody.{kind}") for kind in FORCE_TYPES}

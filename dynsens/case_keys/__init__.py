@@ -1,0 +1,34 @@
+"""Every key a case file accepts: the one table the loaders check against and the reference and
+JSON Schema are generated from (``python -m dynsens.case.schema --write``).
+
+A :class:`Section` is one mapping of the case language (``integrator``, a response of type
+``ks``, a multibody joint, ...).  Its :class:`Key` entries give the key's name, what it takes,
+whether it is required, its default and a one-line meaning with units.  Sections that differ by
+their ``type`` key (responses, elements, forces, time functions) are variants of a family.
+This package imports nothing else from dynsens, so every loader may import it.  The table is
+kept in two parts, the sections every model shares (:mod:`.general`) and those of each model
+kind (:mod:`.models`), joined here in that order.
+"""
+from __future__ import annotations
+
+from .general import GENERAL_SECTIONS
+from .keys import (AGGREGATE_TYPES, BEAM_SECTION_SHAPES, FORCE_TYPES, JOINT_TYPES, KINDS, NO_DEFAULT,
+                   RESPONSE_TYPES, STRUCTURAL_ELEMENT_TYPES, TIME_FUNCTION_TYPES, Key, Section)
+from .models import MODEL_SECTIONS
+
+SECTIONS: dict[str, Section] = {**GENERAL_SECTIONS, **MODEL_SECTIONS}
+
+
+def allowed(section: str, *extra: str) -> tuple[str, ...]:
+    """The keys ``section`` accepts (plus ``extra``), in table order."""
+    return tuple(k.name for k in SECTIONS[section].keys) + extra
+
+
+def required(section: str) -> tuple[str, ...]:
+    """The keys ``section`` requires."""
+    return tuple(k.name for k in SECTIONS[section].keys if k.required)
+
+
+__all__ = ["AGGREGATE_TYPES", "BEAM_SECTION_SHAPES", "FORCE_TYPES", "JOINT_TYPES", "KINDS", "NO_DEFAULT",
+           "RESPONSE_TYPES", "SECTIONS", "STRUCTURAL_ELEMENT_TYPES", "TIME_FUNCTION_TYPES", "Key", "Section",
+           "allowed", "required"]
