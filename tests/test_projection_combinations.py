@@ -56,6 +56,19 @@ def test_adaptive_cart_pole_with_projection_against_complex_step(mode):
     assert res.monitors["constraint_velocity"].max() <= 1e-12
 
 
+def test_sensitivities_of_adaptive_projected_runs_hold_the_constraints():
+    """J_Φ ∇q_j + ∂Φ/∂x_j and its velocity counterpart (/monitors sensitivity_constraint_*) at
+    round-off of their scale on adaptive steps with projection; drifting without it."""
+    sets = ["integrator.t_end=0.8", "output.sensitivity_history=true", "output.history=[q,qd,qdd]"]
+    proj = dynsens.run_case(dynsens.load_case(CART_POLE, [*sets, "model.projection={mode: state}"]))
+    plain = dynsens.run_case(dynsens.load_case(CART_POLE, [*sets, "model.projection.enabled=false"]))
+    scale = proj.monitors["sensitivity_constraint_scale"].max()
+    assert scale > 0.1
+    assert proj.monitors["sensitivity_constraint_position"].max() <= 1e-12 * scale
+    assert proj.monitors["sensitivity_constraint_velocity"].max() <= 1e-12 * scale
+    assert plain.monitors["sensitivity_constraint_position"].max() > 1e-8 * scale
+
+
 def test_projection_of_the_state_removes_the_drift_that_limits_adaptive_steps():
     sol = reference(5.0)
     sets = ["integrator.adaptive.rtol=1e-7", "integrator.adaptive.atol=1e-10"]
