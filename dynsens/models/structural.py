@@ -240,13 +240,15 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             return params[key] if springs is None else params[key][..., springs]
         k1 = pick("k1")
         f = k1 * delta
-        kt = k1 + 0 * delta if tangent else None
         if self.traits.linear:
-            return f, kt
+            return f, (k1 + 0 * delta if tangent else None)
         k2, k3 = pick("k2"), pick("k3")
-        f = f + k2 * delta ** 2 + k3 * delta ** 3
-        if kt is not None:
-            kt = kt + 2 * k2 * delta + 3 * k3 * delta ** 2
+        # the sums of f = k1 δ + k2 δ² + k3 δ³ and k_t = k1 + 2 k2 δ + 3 k3 δ² in this order (the
+        # values are those of the written-out expressions bit for bit), δ² formed once
+        d2 = delta ** 2
+        f = f + k2 * d2 + k3 * delta ** 3
+        # k1 + 2 k2 δ equals (k1 + 0·δ) + 2 k2 δ for finite δ (a non-finite δ is caught anyway)
+        kt = (2 * k2 * delta + k1) + 3 * k3 * d2 if tangent else None
         if keep and kt is not None:
             f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
             self._last_springs = (q, params, f, kt)
