@@ -22,8 +22,10 @@ from .case.load import Case, load_case, load_case_dict
 from .models.multibody.model import MultibodyModel
 from .simulation import run_case
 
-# the shipped mechanisms (together they use every joint, force law and driver the kernel knows)
-DEFAULT_CASES = ("pendulum_3d", "slider_crank", "four_bar", "hydraulic_lever", "tyrolean_weir")
+# the shipped mechanisms (together they use every joint, force law and driver the kernel knows,
+# and the constraint projection's J_Φ)
+DEFAULT_CASES = ("pendulum_3d", "slider_crank", "four_bar", "hydraulic_lever", "tyrolean_weir",
+                 "pendulum_projection")
 CASES_DIR = Path(__file__).resolve().parent.parent / "cases"
 
 

@@ -6,10 +6,13 @@ partials), run over two short horizons in alternation; the marginal cost per ste
 difference of the two run times over the difference of the step counts (the assembly and the
 initial design derivative, paid once per run, drop out).  Medians over ``--repeats``.
 
+``--projection MODE``: every run with ``model.projection`` in that mode (state or output), for
+the cost of the projection and of its derivative map.
+
 ``--full``: the benchmark itself once, N = 40 over 20 s at Δt = 1 ms with both sensitivities,
 on the sparse path (wall time, crossings of the singular configuration, energy drift).
 
-Run: python scripts/bench_n_four_bar.py [--n 2 5 10 20 40] [--repeats 3] [--full]
+Run: python scripts/bench_n_four_bar.py [--n 2 5 10 20 40] [--repeats 3] [--projection MODE] [--full]
 (dynsens is imported before numpy, so that its single-threaded BLAS setting takes effect.)
 """
 from __future__ import annotations
@@ -35,6 +38,7 @@ def _args() -> argparse.Namespace:
     ap.add_argument("--full", action="store_true", help="also the 40-loop, 20 s benchmark (sparse)")
     ap.add_argument("--full-only", action="store_true", help="only the 40-loop, 20 s benchmark")
     ap.add_argument("--t-end", type=float, default=20.0, help="horizon of --full, s")
+    ap.add_argument("--projection", choices=("state", "output"), help="run with model.projection in this mode")
     return ap.parse_args()
 
 
@@ -44,6 +48,8 @@ ARGS = _args()
 def _case(n: int, t_end: float, la: str) -> "dynsens.Case":
     raw = n_four_bar(n, t_end=t_end)
     raw["model"]["linear_algebra"] = la
+    if ARGS.projection:
+        raw["model"]["projection"] = {"mode": ARGS.projection}
     return dynsens.load_case_dict(raw, source=f"n_four_bar_{n}.yaml")
 
 
@@ -86,7 +92,8 @@ def full_run(t_end: float) -> None:
 
 def main() -> None:
     print(f"BLAS threads: {os.environ.get('OPENBLAS_NUM_THREADS', 'default')}; horizons {ARGS.short} s; "
-          f"medians of {ARGS.repeats}")
+          f"medians of {ARGS.repeats}; projection: {ARGS.projection or 'off'}; dynsens from "
+          f"{Path(dynsens.__file__).parent}")
     if not ARGS.full_only:
         print("| N | n_z | dense primal | sparse primal | dense + sens. | sparse + sens. | (ms per step)")
         print("|---|---|---|---|---|---|")

@@ -5,7 +5,9 @@ a small mechanism around each joint type, each force law and the actuator, so th
 no shipped case uses is compared too.  At random states (off any solution, so every term of the
 residual is of its own size), real and complex (a complex parameter set and complex states, as
 complex-step partials evaluate them): the residual F_R and the exact linearization blocks
-R_z, R_q, R_q̇, R_p agree to 1e-12 relative to each block's scale.
+R_z, R_q, R_q̇, R_p agree to 1e-12 relative to each block's scale, and so does the constraint
+Jacobian J_Φ the projection takes from the compiled kernel with the term-by-term rows of the
+assembly (two configurations at once, as the projection batches them).
 """
 from __future__ import annotations
 
@@ -17,8 +19,10 @@ import pytest
 import dynsens
 from dynsens.models.base import StepState
 from dynsens.models.multibody import compiled
+from dynsens.models.multibody.assembly import jacobian_rows
 from dynsens.models.multibody.kernel import Layout
 from dynsens.models.multibody.kernel_compiled import CompiledKin
+from dynsens.models.multibody.projection import _jacobians
 
 pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not installed")
 
@@ -135,6 +139,9 @@ def _compare(joints: list, forces: list, label: str, monkeypatch) -> None:
                 assert (a is None) == (b is None), block
                 if b is not None:
                     _close(a, b, f"{block} of {what}")
+            Q = np.stack([s.q, q0 + rnd(tr.n_q, 1e-2)], axis=1)
+            _close(_jacobians(cmp_.model, t, Q, pc), jacobian_rows(ref.model.eqs, Q, pr, t).transpose(2, 0, 1),
+                   f"J_Φ of {what}")
 
 
 @pytest.mark.parametrize("kind", list(JOINTS))

@@ -98,6 +98,46 @@ def norm_row_entry(norm_w: Array, Lp: Array, b: int, o: int, k: int) -> Any:
 
 
 @inline
+def constraint_rows(rows: Array, G: Array, Lp: Array, cf: Array, eq_w: Array, norm_w: Array,
+                    prod_eq: Array, norm_eq: Array, norm_body: Array, n_cp: int) -> None:
+    """rows[o] += output row o of every constraint equation for o < rows.shape[0] (J_Φ,
+    ∂R2/∂q, ∂R2/∂q̇): the product rows G weighted by the coefficient levels, plus the
+    normalisations' 2p·(levels) on their body's Euler parameters."""
+    n_o, n_q = rows.shape[0], rows.shape[2]
+    for p in range(n_cp):
+        e = prod_eq[p]
+        for o in range(n_o):
+            for r in range(3):
+                kk = row_weight(eq_w, cf, p, o, r)
+                if kk != 0.0:
+                    for n in range(n_q):
+                        rows[o, e, n] += kk * G[p, r, n]
+    for i in range(norm_eq.shape[0]):
+        e = norm_eq[i]
+        b = norm_body[i]
+        for o in range(n_o):
+            for k in range(4):
+                rows[o, e, 7 * b + 3 + k] += norm_row_entry(norm_w, Lp, b, o, k)
+
+
+@jit
+def constraint_jacobians(C: Array, ABV: Array, Lp: Array, cf: Array, pb: Array, is_point: Array,
+                         side_ptr: Array, side_prim: Array, side_coef: Array, n_cp: int,
+                         prod_eq: Array, eq_w: Array, norm_w: Array, norm_eq: Array,
+                         norm_body: Array, n_eq: int) -> Array:
+    """J_Φ (B, n_eq, n_q) at each of the B entries of the kinematics (C, ABV, Lp with leading
+    axis B; the coefficient levels cf (1 or B, n_cp, 3)): the first output row of
+    :func:`constraint_rows`, the same arithmetic as the linearization's."""
+    B, n_q = C.shape[0], 7 * Lp.shape[2]
+    J = np.zeros((B, 1, n_eq, n_q), C.dtype)
+    for b in range(B):
+        G = product_rows(C[b], ABV[b], pb, is_point, side_ptr, side_prim, side_coef, n_q)
+        constraint_rows(J[b], G, Lp[b], cf[min(b, cf.shape[0] - 1)], eq_w, norm_w, prod_eq, norm_eq,
+                        norm_body, n_cp)
+    return J[:, 0]
+
+
+@inline
 def axial_rates(jx: Array, dx: Array, L: Any, Ld: Any, dL: Array, dLd: Array) -> None:
     """∂L/∂q and ∂L̇/∂q into dL, dLd from the rows ∂x/∂q (jx), ∂ẋ/∂q (dx) of x = d·d, L = √x."""
     for n in range(jx.shape[0]):
@@ -161,20 +201,7 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
     n_prod = ABV.shape[1]
     # --- constraint rows: J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows
     rows = np.zeros((3, n_lam, n_q), Lp.dtype)
-    for p in range(n_cp):
-        e = prod_eq[p]
-        for o in range(3):
-            for r in range(3):
-                kk = row_weight(eq_w, cf, p, o, r)
-                if kk != 0.0:
-                    for n in range(n_q):
-                        rows[o, e, n] += kk * G[p, r, n]
-    for i in range(norm_eq.shape[0]):
-        e = norm_eq[i]
-        b = norm_body[i]
-        for o in range(3):
-            for k in range(4):
-                rows[o, e, 7 * b + 3 + k] += norm_row_entry(norm_w, Lp, b, o, k)
+    constraint_rows(rows, G, Lp, cf, eq_w, norm_w, prod_eq, norm_eq, norm_body, n_cp)
     # --- R1_q: geometric stiffness Σ_p w_p ∂²x_p/∂q² (sides' value Jacobians are per body)
     R1_q = np.zeros((n_q, n_q), Lp.dtype)
     R1_qd = np.zeros((n_q, n_q), Lp.dtype)

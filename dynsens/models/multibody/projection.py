@@ -45,7 +45,9 @@ from ...case_keys import allowed
 from ...errors import ModelError, ProblemCollector
 from .._keys import check_keys
 from ..base import StepState
+from . import compiled_linearization as clin
 from .assembly import jacobian_rows
+from .kernel_compiled import CompiledKin
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
@@ -135,8 +137,9 @@ class Projection:
         """(ν, κ, M) of the converged projection, M = J_Φ(q*) J₀ᵀ its exact Newton matrix
         (factorized; kept for the step)."""
         if self._newton is None or self._newton[0] is not params:
-            eqs, t = self.model.eqs, self.t
-            M = jacobian_rows(eqs, self.projected.q, params, t) @ jacobian_rows(eqs, self.raw.q, params, t).T
+            t = self.t
+            J = _jacobians(self.model, t, np.stack([self.projected.q, self.raw.q], axis=1), params)
+            M = J[0] @ J[1].T
             self._newton = (params, (*self.multipliers, _Factored(M)))
         return self._newton[1]
 
@@ -178,6 +181,23 @@ class _Factored:
         return sla.lu_solve(self.lu, res[:, :, 0].T).T[:, :, None]
 
 
+def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> Array:
+    """J_Φ (k, n_eq, n_q) at the k configurations (columns of Q (n_q, k)) at time t (s): by the
+    compiled kernel, with the linearization's own arithmetic, when the model's kinematics are
+    compiled; term by term otherwise (complex-safe either way)."""
+    zeros = np.zeros_like(Q.T)
+    empty = np.zeros(0)
+    kin = model.kinematics(StepState(Q.T, zeros, zeros, empty, empty, empty), params)
+    if not isinstance(kin, CompiledKin):
+        return jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)
+    cl, lay = kin.arrays, model.layout
+    cf, _ = model.coefficients(t, kin.kp)
+    return clin.constraint_jacobians(
+        kin.C, kin.ABV, kin.Lp, np.ascontiguousarray(cf, kin.dtype), cl.pb, cl.is_point, cl.side_ptr,
+        cl.side_prim, cl.side_coef, lay.n_cp, cl.prod_eq, model.eq_row_weights, model.norm_row_weights,
+        cl.norm_eq, cl.norm_body, model.traits.n_lam)
+
+
 def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
     """(Φ, Φ̇, Φ̈) (k, n_eq, 3) at the k states (columns of Q, QD (n_q, k)), q̈ = 0."""
     zeros = np.zeros(0)
@@ -199,7 +219,7 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     to convergence.  With ``start`` = (ν, κ, M) of the converged projection of a nearby state:
     Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ — one for complex steps of that state
     (it gives the imaginary parts exactly), two for a real perturbation δ (converged to O(δ⁴))."""
-    J0 = jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)       # (k, n_eq, n_q)
+    J0 = _jacobians(model, t, Q, params)                                 # (k, n_eq, n_q)
     J0T = J0.transpose(0, 2, 1)
     if start is None:
         A = _Factored(J0 @ J0T)
