@@ -325,24 +325,10 @@ class MultibodyModel(Model):
 
     def diagnose_singular(self, t: float, s: StepState, params: MBParams, rel_tol: float = 1e-9) -> str:
         """Name the joints whose equations became linearly dependent at (t, s) (a dead-centre
-        or change-point configuration), from the rank of J_Φ; '' when J_Φ has full rank.
-
-        The iteration matrix is judged singular at a pivot ratio of 1e-14; J_Φ at the same
-        iterate is rank-deficient to the looser 1e-9·σ_max (it is met one Newton correction
-        away from the singular configuration itself).  A looser ``rel_tol`` (e.g. 1e-2) names
-        the joints of a pose *near* a singular one (a mechanism that locks).
-        """
-        from .assembly import dependent_equations, jacobian_rows
-        J = jacobian_rows(self.eqs, np.real(s.q), params, t)
-        dep = dependent_equations(J, self.eq_owner, rel_tol=rel_tol)
-        if dep is None:
-            return ""
-        rank, involved, owners = dep
-        names = {jt.name for jt in self.joints}
-        joints = [o for o in owners if o in names] or owners   # not the normalisations' bodies
-        return (f"joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} lose rank: the "
-                f"constraint Jacobian has rank {rank} < {J.shape[0]} (dependent equations "
-                f"{', '.join(involved)})")
+        or change-point configuration), from the rank of J_Φ; '' when J_Φ has full rank
+        (:func:`.drift.diagnose_singular`)."""
+        from .drift import diagnose_singular
+        return diagnose_singular(self, t, s, params, rel_tol)
 
     drift_limit: float | None = None
     #: ``model.projection`` (None: off): each step's end state projected onto Φ = 0, Φ̇ = 0
@@ -378,24 +364,9 @@ class MultibodyModel(Model):
 
     def describe_equation(self, k: int) -> str:
         """A body coordinate with its body's YAML entry and the forces naming it, or a
-        constraint equation with its joint's YAML entry."""
-        n_q, n_lam = self.traits.n_q, self.traits.n_lam
-        paths = self.entry_paths
-        if 0 <= k < n_q:
-            body = self.bodies[k // 7].name
-            forces = paths.get("forces", {}).get(body, [])
-            return (f"coordinate {self.dof_labels()[k]} of body '{body}' ({paths.get('bodies', 'model.bodies')}.{body})"
-                    + (f", acted on by {', '.join(forces)}" if forces else ""))
-        if n_q <= k < n_q + n_lam:
-            owner = self.eq_owner[k - n_q]
-            jt = next((j for j in self.joints if k - n_q in j.rows), None)
-            name = jt.name if jt is not None else owner.rsplit(".", 1)[0]    # else: a normalization
-            joint = paths.get("joints", {}).get(name)
-            owner_body = next((b.name for b in self.bodies if name in (b.name, f"{b.name}.orientation")), None)
-            if joint is None and owner_body is not None:     # Euler normalization, a point mass's lock
-                joint = f"body '{owner_body}' ({paths.get('bodies', 'model.bodies')}.{owner_body})"
-            return f"constraint {owner}" + (f" of {joint}" if joint else "")
-        return super().describe_equation(k)
+        constraint equation with its joint's YAML entry (:func:`.drift.describe_equation`)."""
+        from .drift import describe_equation
+        return describe_equation(self, k) or super().describe_equation(k)
 
     def multiplier_labels(self) -> list[str]:
         """Names of the constraint equations / multipliers, in λ order."""
