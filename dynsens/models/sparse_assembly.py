@@ -115,9 +115,16 @@ class _Union:
 
     def fits(self, mats: list[sp.csc_matrix]) -> bool:
         """Whether the matrices have exactly the patterns this union was made of."""
-        return len(mats) == len(self.patterns) and all(
-            (A.indptr is s[0] or np.array_equal(A.indptr, p)) and (A.indices is s[1] or np.array_equal(A.indices, i))
-            for A, (p, i), s in zip(mats, self.patterns, self._seen))
+        if len(mats) != len(self.patterns):
+            return False
+        if all(A.indptr is s[0] and A.indices is s[1] for A, s in zip(mats, self._seen)):
+            return True
+        if not all(np.array_equal(A.indptr, p) and np.array_equal(A.indices, i)
+                   for A, (p, i) in zip(mats, self.patterns)):
+            return False
+        # the same patterns in new arrays (the next run of the same model): recognise these
+        self._seen = [(A.indptr, A.indices) for A in mats]
+        return True
 
     def place(self, values: np.ndarray, k: int, dtype: Any) -> np.ndarray:
         """The entries ``values`` of matrix k on the union pattern (zero where it has none)."""

@@ -77,7 +77,8 @@ class Factor:
         self._lu: Any = None   # the factor: of the kind below
         counters.factorizations += 1
         plan = None
-        if sp.issparse(S) and not dense_general:
+        is_sparse = sp.issparse(S)
+        if is_sparse and not dense_general:
             S = S if S.format == "csc" and S.has_canonical_format else sp.csc_matrix(S)
             plan = sparse_plan(S, _SPARSE_PLANS)
             # only a matrix of band width 1 can be diagonal
@@ -95,7 +96,7 @@ class Factor:
         band = None
         if plan is not None:
             band = plan.band
-        elif not sp.issparse(S):
+        elif not is_sparse:
             band = dense_band_plan(S, _DENSE_PLANS)
         if band is not None:
             # the stored entries (a dense S has every nonzero, NaN and Inf too, inside its band)

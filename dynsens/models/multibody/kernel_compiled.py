@@ -74,7 +74,7 @@ class CompiledKin(Kin):
         self.arrays = cl = lay.compiled_arrays()
         self.params = ck = compiled_params(kp, dt)
         # contiguous, in one dtype: one compiled specialization per dtype
-        q, qd, qdd = (np.ascontiguousarray(v, dt) for v in (q, qd, qdd))
+        q, qd, qdd = np.ascontiguousarray(q, dt), np.ascontiguousarray(qd, dt), np.ascontiguousarray(qdd, dt)
         self.q, self.qd = q, qd
         args = (q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,
                 cl.norm_body)
@@ -149,7 +149,9 @@ class KinCache:
         for _, src, kin in self._items:
             if src[0] is q and src[1] is qd and src[2] is qdd and kin.kp is kp:
                 return kin
-        q2, qd2, qdd2 = (v if v.ndim == 2 else v[None] for v in (q, qd, qdd))
+        q2 = q if q.ndim == 2 else q[None]
+        qd2 = qd if qd.ndim == 2 else qd[None]
+        qdd2 = qdd if qdd.ndim == 2 else qdd[None]
         key = (id(kp), q2.shape, q2.dtype.char, qd2.dtype.char, qdd2.dtype.char,
                q2.tobytes(), qd2.tobytes(), qdd2.tobytes())
         for k, _, kin in self._items:

@@ -228,7 +228,9 @@ class MultibodyModel(Model):
         if last is not None and last[1].kin is kin and last[1].t == t and \
                 last[2][0] is s.lam and last[2][1] is s.p and last[2][2] is s.pd:
             return last[1]        # the same state objects (residual, then linearize)
-        lam, p, pd = (v if v.ndim == 2 else v[None] for v in (s.lam, s.p, s.pd))
+        lam = s.lam if s.lam.ndim == 2 else s.lam[None]
+        p = s.p if s.p.ndim == 2 else s.p[None]
+        pd = s.pd if s.pd.ndim == 2 else s.pd[None]
         key = (id(kin), t, lam.tobytes(), p.tobytes(), pd.tobytes(), lam.dtype.char, p.dtype.char)
         if last is not None and last[0] == key and last[1].kin is kin:
             return last[1]

@@ -101,15 +101,25 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
             ext[k, :, i] = el.external(t, kp.pv)
     forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
     steady = all(pf.fn.kind == "constant" for pf, _ in forces)
-    f_ext = np.zeros((B * (1 if steady else K) if forces else 1, lay.n_t, 3), dt)
-    for pf, j in forces:
-        for k, t in enumerate(ts[:1] if steady else ts):
-            f_ext[k * B:(k + 1) * B, j] -= point_force(pf, t, kp.pv)
-    g = kp.__dict__.setdefault("_gravity", {}).get(dt.char)
-    if g is None:                                        # gravity does not depend on t
+    # what does not depend on t is formed once per parameter sets and dtype: gravity, and the
+    # point forces when all of them are constant in time (never written to: the kernel reads
+    # them, and numba would compile another specialization for read-only arrays)
+    kept = kp.__dict__.setdefault("_steady_inputs", {}).get(dt.char)
+    if kept is None:
         g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
             else np.zeros((1, 3), dt)
-        kp.__dict__["_gravity"][dt.char] = g
+        f0 = None
+        if steady:
+            f0 = np.zeros((B if forces else 1, lay.n_t, 3), dt)
+            for pf, j in forces:
+                f0[:, j] -= point_force(pf, 0.0, kp.pv)
+        kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0)
+    g, f_ext = kept
+    if f_ext is None:
+        f_ext = np.zeros((B * K, lay.n_t, 3), dt)
+        for pf, j in forces:
+            for k, t in enumerate(ts):
+                f_ext[k * B:(k + 1) * B, j] -= point_force(pf, t, kp.pv)
     return ext.reshape(K * B, -1), f_ext, g
 
 
@@ -135,7 +145,8 @@ class Evaluation:
         self._given_inputs = inputs
         # the compiled kernel in the kinematics' dtype (complex holds real multipliers too)
         self.compiled = (isinstance(kin, CompiledKin) and model.layout.compiled_laws
-                         and (kin.dtype.kind == "c" or not any(v.dtype.kind == "c" for v in (lam, p, pd))))
+                         and (kin.dtype.kind == "c" or (lam.dtype.kind != "c" and p.dtype.kind != "c"
+                                                        and pd.dtype.kind != "c")))
         if self.compiled:
             self._compiled_forces_and_residual()
             return
@@ -181,7 +192,8 @@ class Evaluation:
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                 cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
-                *(np.ascontiguousarray(v, dt) for v in (self.lam, self.p, self.pd)), float(m.scale), float(m.alpha),
+                np.ascontiguousarray(self.lam, dt), np.ascontiguousarray(self.p, dt),
+                np.ascontiguousarray(self.pd, dt), float(m.scale), float(m.alpha),
                 float(m.beta), cc.TG)
         if m.other_forces and self._given_inputs is None:
             # (a block of steps at different times: Model.residual_batch_steps adds them per step)
