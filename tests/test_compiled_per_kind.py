@@ -6,8 +6,9 @@ no shipped case uses is compared too.  At random states (off any solution, so ev
 residual is of its own size), real and complex (a complex parameter set and complex states, as
 complex-step partials evaluate them): the residual F_R and the exact linearization blocks
 R_z, R_q, R_q̇, R_p agree to 1e-12 relative to each block's scale, and so does the constraint
-Jacobian J_Φ the projection takes from the compiled kernel with the term-by-term rows of the
-assembly (two configurations at once, as the projection batches them).
+Jacobian J_Φ the projection takes from the compiled kernel — dense, and on the sparse path's
+pattern — with the term-by-term rows of the assembly (two configurations at once, as the
+projection batches them).
 """
 from __future__ import annotations
 
@@ -96,8 +97,9 @@ FORCES = {
 }
 
 
-def _case(joints: list, forces: list, kernel: str, monkeypatch) -> dynsens.Case:
+def _case(joints: list, forces: list, kernel: str, monkeypatch, linear_algebra: str = "dense") -> dynsens.Case:
     d = copy.deepcopy(BASE)
+    d["model"]["linear_algebra"] = linear_algebra
     d["model"]["joints"] = copy.deepcopy(joints) or [{"name": "jb", "type": "spherical", "body_1": "ground",
                                                        "body_2": "b", "point": [1.2, 0.0, 0.2]}]
     d["model"]["forces"] = copy.deepcopy(forces)
@@ -115,6 +117,7 @@ def _close(a, b, what: str) -> None:
 
 def _compare(joints: list, forces: list, label: str, monkeypatch) -> None:
     ref = _case(joints, forces, "numpy", monkeypatch)
+    sparse = _case(joints, forces, "compiled", monkeypatch, "sparse")
     cmp_ = _case(joints, forces, "compiled", monkeypatch)
     tr = ref.model.traits
     rng = np.random.default_rng(abs(hash(label)) % 2 ** 32)
@@ -140,8 +143,10 @@ def _compare(joints: list, forces: list, label: str, monkeypatch) -> None:
                 if b is not None:
                     _close(a, b, f"{block} of {what}")
             Q = np.stack([s.q, q0 + rnd(tr.n_q, 1e-2)], axis=1)
-            _close(_jacobians(cmp_.model, t, Q, pc), jacobian_rows(ref.model.eqs, Q, pr, t).transpose(2, 0, 1),
-                   f"J_Φ of {what}")
+            rows = jacobian_rows(ref.model.eqs, Q, pr, t).transpose(2, 0, 1)
+            _close(_jacobians(cmp_.model, t, Q, pc).dense, rows, f"J_Φ of {what}")
+            on_pattern = _jacobians(sparse.model, t, Q, sparse.model.parameters(x)).sparse
+            _close(np.stack([J.toarray() for J in on_pattern]), rows, f"sparse J_Φ of {what}")
 
 
 @pytest.mark.parametrize("kind", list(JOINTS))

@@ -92,12 +92,19 @@ def test_cut_steps_with_projection_against_complex_step(mode):
     assert res.monitors["constraint_position"].max() <= 1e-13
 
 
-def test_projection_on_the_sparse_multibody_path():
+@pytest.mark.parametrize("sparse_rows", [False, True])
+def test_projection_on_the_sparse_multibody_path(sparse_rows, monkeypatch):
     """The N-four-bar (3 loops, redundant equations left out) on sparse linear algebra: exact
-    gradients with projection, and the same run as on the dense path."""
+    gradients with projection, and the same run as on the dense path; the projection with dense
+    J_Φ (the default below 200 equations) and with sparse J_Φ and SuperLU (forced here)."""
+    from dynsens.models.multibody import projection
+    monkeypatch.setattr(projection, "SPARSE_MIN_EQ", 0 if sparse_rows else 10 ** 9)
     sets = ["integrator.t_end=0.15", "model.projection={mode: state}"]
     case = dynsens.load_case(CASES / "n_four_bar.yaml", [*sets, "model.linear_algebra=sparse"])
     assert case.model.traits.sparse
+    q0 = case.model.initial_state(case.model.parameters(case.x0))[0]
+    rows = projection._jacobians(case.model, 0.0, q0[:, None], case.model.parameters(case.x0))
+    assert (rows.sparse is not None) == sparse_rows
     res = _check(case, 1e-9, min_checked=3)
     assert res.monitors["constraint_position"].max() <= 1e-13
     dense = dynsens.run_case(dynsens.load_case(CASES / "n_four_bar.yaml", [*sets, "model.linear_algebra=dense"]))

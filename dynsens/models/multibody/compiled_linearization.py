@@ -120,6 +120,50 @@ def constraint_rows(rows: Array, G: Array, Lp: Array, cf: Array, eq_w: Array, no
                 rows[o, e, 7 * b + 3 + k] += norm_row_entry(norm_w, Lp, b, o, k)
 
 
+@inline
+def compact_constraint_rows(Jc: Array, G: Array, Lp: Array, cf: Array, eq_w: Array, norm_w: Array,
+                            prod_eq: Array, prod_nb: Array, eq_slot: Array, norm_eq: Array,
+                            norm_body: Array, n_cp: int) -> None:
+    """:func:`constraint_rows` in the compact form of the sparse path (:mod:`.sparse`): Jc[o, e]
+    holds equation e's row on the 7 columns of each of its bodies (slot eq_slot[p, s] of product
+    p's body s), from product rows G on the products' own bodies."""
+    n_o = Jc.shape[0]
+    for p in range(n_cp):
+        e = prod_eq[p]
+        for o in range(n_o):
+            for r in range(3):
+                kk = row_weight(eq_w, cf, p, o, r)
+                if kk != 0.0:
+                    for s in range(prod_nb[p]):
+                        a, b = 7 * eq_slot[p, s], 7 * s
+                        for c in range(7):
+                            Jc[o, e, a + c] += kk * G[p, r, b + c]
+    for i in range(norm_eq.shape[0]):               # a normalisation's only body is its slot 0
+        for o in range(n_o):
+            for k in range(4):
+                Jc[o, norm_eq[i], 3 + k] += norm_row_entry(norm_w, Lp, norm_body[i], o, k)
+
+
+@jit
+def compact_constraint_jacobians(C: Array, ABV: Array, Lp: Array, cf: Array, is_point: Array,
+                                 side_ptr: Array, side_prim: Array, side_coef: Array, side_slot: Array,
+                                 prod_nb: Array, n_cp: int, prod_eq: Array, eq_slot: Array,
+                                 n_eq_slots: int, eq_w: Array, norm_w: Array, norm_eq: Array,
+                                 norm_body: Array, n_lam: int) -> Array:
+    """J_Φ of each of the B entries of the kinematics in the compact form of the sparse path:
+    (B, n_λ, 7·n_eq_slots), the first output row of :func:`compact_constraint_rows`."""
+    B, PB = C.shape[0], eq_slot.shape[1]
+    Jc = np.zeros((B, 1, n_lam, 7 * n_eq_slots), C.dtype)
+    side_col = 7 * side_slot
+    for b in range(B):
+        G = np.zeros((n_cp, 3, 7 * PB), C.dtype)     # the constraint products' rows only
+        for p in range(n_cp):
+            product_row(G, p, C[b], ABV[b], is_point, side_ptr, side_prim, side_coef, side_col)
+        compact_constraint_rows(Jc[b], G, Lp[b], cf[min(b, cf.shape[0] - 1)], eq_w, norm_w, prod_eq,
+                                prod_nb, eq_slot, norm_eq, norm_body, n_cp)
+    return Jc[:, 0]
+
+
 @jit
 def constraint_jacobians(C: Array, ABV: Array, Lp: Array, cf: Array, pb: Array, is_point: Array,
                          side_ptr: Array, side_prim: Array, side_coef: Array, n_cp: int,

@@ -40,6 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ...case_keys import allowed
 from ...errors import ModelError, ProblemCollector
@@ -54,6 +56,11 @@ if TYPE_CHECKING:  # pragma: no cover
 
 Array = np.ndarray
 _H = 1e-30          # complex step of the state columns
+# constraint equations from which a model on the sparse path projects with sparse J_Φ and
+# SuperLU; below, dense J_Φ and LAPACK cost less (N-four-bar, direct mode with projection:
+# dense ahead at 146 equations, sparse at 286; BENCHMARKS.md)
+SPARSE_MIN_EQ = 200
+MAP_BLOCK = 64      # columns of the adjoint's projection map taken in one batch
 
 
 @dataclass(frozen=True)
@@ -110,11 +117,16 @@ class Projection:
 
     def linear_map(self, partials: Any) -> ProjectionMap:
         """The projection's derivative at the run's design (``partials``: DesignPartials), once:
-        A by 2 n_q complex-step columns (the adjoint's transpose needs all of it)."""
+        A by 2 n_q complex-step columns (the adjoint's transpose needs all of it), in blocks of
+        MAP_BLOCK columns (each column holds its own J_Φ while it is projected)."""
         if self._map is None:
             n_q = self.raw.q.shape[0]
             I = np.eye(2 * n_q)
-            A = np.concatenate(self._state_directions(I[:n_q], I[n_q:], partials.params0))
+            A = np.empty((2 * n_q, 2 * n_q))
+            for c in range(0, 2 * n_q, MAP_BLOCK):
+                cols = slice(c, min(c + MAP_BLOCK, 2 * n_q))
+                dq, dqd = self._state_directions(I[:n_q, cols], I[n_q:, cols], partials.params0)
+                A[:n_q, cols], A[n_q:, cols] = dq, dqd
             self._map = ProjectionMap(A, self._design_columns(partials))
         return self._map
 
@@ -139,8 +151,7 @@ class Projection:
         if self._newton is None or self._newton[0] is not params:
             t = self.t
             J = _jacobians(self.model, t, np.stack([self.projected.q, self.raw.q], axis=1), params)
-            M = J[0] @ J[1].T
-            self._newton = (params, (*self.multipliers, _Factored(M)))
+            self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J.at(1).T)))
         return self._newton[1]
 
     def _state_directions(self, dQ: Array, dQD: Array, params: Any) -> tuple[Array, Array]:
@@ -167,35 +178,89 @@ class Projection:
 
 
 class _Factored:
-    """A (n, n), or a stack (k, n, n), factorized once: the chord and Newton iterations solve
-    with the same matrix every iteration, and one matrix serves all k columns at once."""
+    """A (n, n) dense or sparse, or a list of k such, factorized once: the chord and Newton
+    iterations solve with the same matrix every iteration, and one matrix serves all k columns
+    at once."""
 
-    def __init__(self, A: Array):
-        self.stacked = A.ndim == 3
-        self.lu = [sla.lu_factor(a) for a in A] if self.stacked else sla.lu_factor(A)
+    def __init__(self, A: Any):
+        self.stacked = isinstance(A, list) or (isinstance(A, np.ndarray) and A.ndim == 3)
+        self.lu = [_factor(a) for a in A] if self.stacked else _factor(A)
 
     def solve(self, res: Array) -> Array:
         """x (k, n, 1) for the right-hand sides res (k, n, 1)."""
         if self.stacked:
-            return np.stack([sla.lu_solve(lu, r) for lu, r in zip(self.lu, res)])
-        return sla.lu_solve(self.lu, res[:, :, 0].T).T[:, :, None]
+            return np.stack([_solve(lu, r) for lu, r in zip(self.lu, res)])
+        return _solve(self.lu, res[:, :, 0].T).T[:, :, None]
 
 
-def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> Array:
-    """J_Φ (k, n_eq, n_q) at the k configurations (columns of Q (n_q, k)) at time t (s): by the
-    compiled kernel, with the linearization's own arithmetic, when the model's kinematics are
-    compiled; term by term otherwise (complex-safe either way)."""
+def _factor(A: Any) -> Any:
+    """LU of a dense (LAPACK) or sparse (SuperLU) square matrix."""
+    return spla.splu(sp.csc_matrix(A)) if sp.issparse(A) else sla.lu_factor(A)
+
+
+def _solve(lu: Any, rhs: Array) -> Array:
+    """x with A x = rhs ((n,) or (n, k)) for A's factor; a complex rhs of a real sparse factor
+    as its real and imaginary parts."""
+    if not isinstance(lu, spla.SuperLU):
+        return sla.lu_solve(lu, rhs)
+    if np.iscomplexobj(rhs) and lu.U.dtype.kind != "c":
+        return lu.solve(np.ascontiguousarray(rhs.real)) + 1j * lu.solve(np.ascontiguousarray(rhs.imag))
+    return lu.solve(np.ascontiguousarray(rhs, dtype=np.result_type(rhs, lu.U.dtype)))
+
+
+class _Jacobians:
+    """J_Φ (n_eq, n_q) at k configurations: ``dense`` (k, n_eq, n_q), or ``sparse``, k CSC
+    matrices (a model on the sparse path: J_Φ has a row per equation on its bodies' columns)."""
+
+    def __init__(self, dense: Array | None = None, sparse: list[Any] | None = None):
+        self.dense, self.sparse = dense, sparse
+        first = dense if dense is not None else sparse[0]        # type: ignore[index]
+        self.k = dense.shape[0] if dense is not None else len(sparse)  # type: ignore[arg-type]
+        self.n_eq, self.dtype = first.shape[-2], first.dtype
+
+    def at(self, b: int) -> Any:
+        """J_Φ at configuration b."""
+        return self.dense[b] if self.dense is not None else self.sparse[b]   # type: ignore[index]
+
+    def normal(self) -> "_Factored":
+        """J_b J_bᵀ of every configuration b, factorized."""
+        if self.dense is not None:
+            return _Factored(self.dense @ self.dense.transpose(0, 2, 1))
+        return _Factored([J @ J.T for J in self.sparse])     # type: ignore[union-attr]
+
+    def transpose_times(self, nu: Array) -> Array:
+        """(n_q, k): column b is J_bᵀ ν_b for the multipliers nu (k or 1, n_eq, 1; one set of
+        multipliers serves every configuration)."""
+        if self.dense is not None:
+            return (self.dense.transpose(0, 2, 1) @ nu)[:, :, 0].T
+        last = nu.shape[0] - 1
+        return np.stack([J.T @ nu[min(b, last), :, 0] for b, J in enumerate(self.sparse)], axis=1)  # type: ignore[arg-type]
+
+
+def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> _Jacobians:
+    """J_Φ at the k configurations (columns of Q (n_q, k)) at time t (s): by the compiled kernel,
+    with the linearization's own arithmetic, when the model's kinematics are compiled (as CSC
+    matrices on the sparse path's pattern when the model is linearized sparse); term by term
+    otherwise (complex-safe either way)."""
     zeros = np.zeros_like(Q.T)
     empty = np.zeros(0)
     kin = model.kinematics(StepState(Q.T, zeros, zeros, empty, empty, empty), params)
     if not isinstance(kin, CompiledKin):
-        return jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1)
+        return _Jacobians(dense=jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1))
     cl, lay = kin.arrays, model.layout
     cf, _ = model.coefficients(t, kin.kp)
-    return clin.constraint_jacobians(
-        kin.C, kin.ABV, kin.Lp, np.ascontiguousarray(cf, kin.dtype), cl.pb, cl.is_point, cl.side_ptr,
-        cl.side_prim, cl.side_coef, lay.n_cp, cl.prod_eq, model.eq_row_weights, model.norm_row_weights,
-        cl.norm_eq, cl.norm_body, model.traits.n_lam)
+    cf = np.ascontiguousarray(cf, kin.dtype)
+    if model.traits.sparse and model.traits.n_lam >= SPARSE_MIN_EQ:
+        st = model.sparse_structure()
+        side_slot, prod_nb, _, _, _, n_cp, prod_eq, eq_slot, n_eq_slots = st.args
+        Jc = clin.compact_constraint_jacobians(
+            kin.C, kin.ABV, kin.Lp, cf, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef, side_slot,
+            prod_nb, n_cp, prod_eq, eq_slot, n_eq_slots, model.eq_row_weights, model.norm_row_weights,
+            cl.norm_eq, cl.norm_body, model.traits.n_lam)
+        return _Jacobians(sparse=st.constraint_jacobians(Jc))
+    return _Jacobians(dense=clin.constraint_jacobians(
+        kin.C, kin.ABV, kin.Lp, cf, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef, lay.n_cp,
+        cl.prod_eq, model.eq_row_weights, model.norm_row_weights, cl.norm_eq, cl.norm_body, model.traits.n_lam))
 
 
 def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
@@ -219,16 +284,15 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     to convergence.  With ``start`` = (ν, κ, M) of the converged projection of a nearby state:
     Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ — one for complex steps of that state
     (it gives the imaginary parts exactly), two for a real perturbation δ (converged to O(δ⁴))."""
-    J0 = _jacobians(model, t, Q, params)                                 # (k, n_eq, n_q)
-    J0T = J0.transpose(0, 2, 1)
+    J0 = _jacobians(model, t, Q, params)                                 # k times (n_eq, n_q)
     if start is None:
-        A = _Factored(J0 @ J0T)
-        nu = np.zeros(J0.shape[:2] + (1,), J0.dtype)
+        A = J0.normal()
+        nu = np.zeros((J0.k, J0.n_eq, 1), J0.dtype)
         kappa = np.zeros_like(nu)
     else:
         nu, kappa, A = start
     complex_parts = np.iscomplexobj(Q) or np.iscomplexobj(QD) or np.iscomplexobj(params.pv)
-    Qs, QDs = Q + (J0T @ nu)[:, :, 0].T, QD - (J0T @ kappa)[:, :, 0].T
+    Qs, QDs = Q + J0.transpose_times(nu), QD - J0.transpose_times(kappa)
     for level in (0, 1):                       # positions, then velocities at the projected positions
         done = 0                               # iterations until the real parts converged
         for it in range(settings.max_iterations if start is None else 1 if complex_parts else 2):
@@ -236,11 +300,11 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
             d = A.solve(res)
             if level == 0:
                 nu = nu - d
-                new = Q + (J0T @ nu)[:, :, 0].T
+                new = Q + J0.transpose_times(nu)
                 step, Qs = new - Qs, new
             else:
                 kappa = kappa + d
-                new = QD - (J0T @ kappa)[:, :, 0].T
+                new = QD - J0.transpose_times(kappa)
                 step, QDs = new - QDs, new
             if start is not None:
                 done = it + 1

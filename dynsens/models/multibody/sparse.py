@@ -112,20 +112,7 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
         clin.product_row(G, p, C, ABV, is_point, side_ptr, side_prim, side_coef, side_col)
     # --- constraint rows
     Jc = np.zeros((3, n_lam, 7 * n_eq_slots), dt)
-    for p in range(n_cp):
-        e = prod_eq[p]
-        for o in range(3):
-            for r in range(3):
-                kk = clin.row_weight(eq_w, cf, p, o, r)
-                if kk != 0.0:
-                    for s in range(prod_nb[p]):
-                        a, b = 7 * eq_slot[p, s], 7 * s
-                        for c in range(7):
-                            Jc[o, e, a + c] += kk * G[p, r, b + c]
-    for i in range(norm_eq.shape[0]):               # a normalisation's only body is its slot 0
-        for o in range(3):
-            for k in range(4):
-                Jc[o, norm_eq[i], 3 + k] += clin.norm_row_entry(norm_w, Lp, norm_body[i], o, k)
+    clin.compact_constraint_rows(Jc, G, Lp, cf, eq_w, norm_w, prod_eq, prod_nb, eq_slot, norm_eq, norm_body, n_cp)
     # --- R1 body blocks: geometric stiffness, ∂²(A s̄)/∂p²·f, normalisations, inertia
     Bq = np.zeros((n_blk, 7, 7), dt)
     Bqd = np.zeros((n_blk, 7, 7), dt)
@@ -325,6 +312,7 @@ class SparseStructure:
         self.R_q = _CSCGather((n_z, n_q), np.concatenate([blk_r, n_q + j_row, r3_row]),
                               np.concatenate([blk_c, j_col, r3_col_f]))
         self.R_qd = self.R_q
+        self.J = _CSCGather((n_lam, n_q), j_row, j_col)       # J_Φ alone (the projection's)
         self.R_p = _CSCGather((n_z, n_p), np.concatenate([r1p_row, hp_row]), np.concatenate([r1p_col, hp_col]))
         self._union: Any = None
         self._ones = np.ones(n_p)
@@ -340,6 +328,10 @@ class SparseStructure:
         R_qd = self.R_qd.matrix(np.concatenate([Bqd.ravel(), scale * J[2], r3qd]))
         R_p = self.R_p.matrix(np.concatenate([R1p.ravel()[self._r1p_take], -h_p.ravel()])) if self.n_p else None
         return BlockSparseLinearization(R_z, R_q, R_qd, R_p, structure=self)
+
+    def constraint_jacobians(self, Jc: Array) -> list[sp.csc_matrix]:
+        """J_Φ (n_λ, n_q) as CSC of each entry of the compact rows Jc (B, n_λ, 7·EB)."""
+        return [self.J.matrix(Jc[b].ravel()[self._j_take]) for b in range(Jc.shape[0])]
 
     def from_dense(self, lin: Linearization) -> "BlockSparseLinearization":
         """A dense linearization's entries at the pattern's positions (the numpy kernel's path)."""
