@@ -17,7 +17,7 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("loads", "list", "external loads", item="structural.load"),
         _k("initial", "section", "initial displacement and velocity", item="structural.initial"),
         _k("damping", "section", "Rayleigh damping", item="structural.damping"),
-        _k("linear_algebra", "enum", "solver storage (auto: sparse above 200 DOFs)",
+        _k("linear_algebra", "enum", "solver storage (auto: sparse above 100 DOFs)",
            values=("auto", "dense", "sparse"), default="auto"),
     )),
     "structural.node": Section("model.nodes.NAME", "A node.", (

@@ -37,7 +37,10 @@ from .timefunctions import TimeFunction
 
 GROUND = "ground"
 AXES = ("x", "y", "z")
-SPARSE_THRESHOLD = 200  # DOFs above which the sparse (splu) path is chosen
+# DOFs above which ``linear_algebra: auto`` chooses the sparse path: the measured break-even on
+# the Duffing chain (dense and sparse equal at 100 DOFs, sparse 8 % ahead at 120 and 27 % at
+# 200) and about the same on the tower frame (144 DOFs: equal; BENCHMARKS.md)
+SPARSE_THRESHOLD = 100
 
 
 @dataclass
