@@ -194,3 +194,27 @@ def test_adjoint_equals_direct_on_sparse_models(factor: str, monkeypatch) -> Non
             g = np.asarray(rv.gradient)
             assert np.linalg.norm(np.asarray(ra.gradient) - g) <= 1e-10 * np.linalg.norm(g), name
     assert factor in kinds
+
+
+def test_union_pattern_recognises_new_arrays_of_its_pattern_and_refuses_others() -> None:
+    """The kept union of an iteration matrix's terms: the same patterns in new index arrays (the
+    next run of the same model builds them anew) fit and are recognised by identity from then on;
+    another pattern does not fit, and the cache builds the union of the new matrices."""
+    import scipy.sparse as sp
+
+    from dynsens.models.sparse_assembly import UnionCache
+
+    M = sp.diags([1.0, 2.0, 3.0], format="csc")
+    K = sp.csc_matrix(np.array([[2.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 2.0]]))
+    cache = UnionCache()
+    u = cache.get([M, K])
+    M2, K2 = M.copy(), K.copy()                     # same patterns, new arrays
+    assert M2.indptr is not M.indptr
+    assert cache.get([M2, K2]) is u
+    assert all(s[0] is A.indptr and s[1] is A.indices for A, s in zip((M2, K2), u._seen))
+    total = cache.add([M2, K2]).toarray()
+    assert np.array_equal(total, (M + K).toarray())
+    K3 = sp.csc_matrix(np.array([[2.0, 0.0, -1.0], [0.0, 2.0, 0.0], [-1.0, 0.0, 2.0]]))
+    u3 = cache.get([M2, K3])
+    assert u3 is not u
+    assert np.array_equal(cache.add([M2, K3]).toarray(), (M2 + K3).toarray())
