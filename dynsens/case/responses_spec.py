@@ -14,8 +14,8 @@ from ..expressions import RESERVED_NAMES, ExpressionError, compile_expression
 from ..march import RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output
-from ..responses import (Combination, EventSpec, EventTime, ExpressionIntegral, Response,
-                         StructuralMass, TimeIntegral, ValueAt)
+from ..responses import EventSpec, EventTime, ExpressionIntegral, Response, TimeIntegral, ValueAt
+from ..responses_final import Combination, StructuralMass
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
 
