@@ -23,6 +23,7 @@ from dynsens.models.multibody import compiled
 from dynsens.models.multibody.assembly import jacobian_rows
 from dynsens.models.multibody.kernel import Layout
 from dynsens.models.multibody.kernel_compiled import CompiledKin
+from dynsens.models.multibody import projection
 from dynsens.models.multibody.projection import _jacobians
 
 pytestmark = pytest.mark.skipif(not compiled.HAVE_NUMBA, reason="numba is not installed")
@@ -118,6 +119,7 @@ def _close(a, b, what: str) -> None:
 def _compare(joints: list, forces: list, label: str, monkeypatch) -> None:
     ref = _case(joints, forces, "numpy", monkeypatch)
     sparse = _case(joints, forces, "compiled", monkeypatch, "sparse")
+    monkeypatch.setattr(projection, "SPARSE_MIN_EQ", 0)     # sparse J_Φ for these small models too
     cmp_ = _case(joints, forces, "compiled", monkeypatch)
     tr = ref.model.traits
     rng = np.random.default_rng(abs(hash(label)) % 2 ** 32)
