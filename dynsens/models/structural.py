@@ -363,48 +363,6 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
         return R.transpose(0, 2, 1)
 
-    def design_pattern(self) -> list[np.ndarray]:
-        """Rows of the residual each design variable reaches through the elements whose
-        parameters depend on it (masses, springs, dampers, bars with their lumped masses
-        and coordinates, loads with their time functions); Rayleigh coefficients reach all."""
-        n = self.n
-        rows_of_param: dict[int, set[int]] = {}
-
-        def touch(params: Any, dofs: Any) -> None:
-            dof_set = {int(d) for d in np.ravel(dofs) if d < n}
-            for p in np.ravel(params):
-                rows_of_param.setdefault(int(p), set()).update(dof_set)
-
-        for d, p in zip(self.mass_dof, self.mass_idx):
-            touch(p, d)
-        for e, dofs in enumerate(self.spring_dofs):
-            touch([k[e] for k in (self.k1, self.k2, self.k3) if len(k)], dofs)
-        for e, dofs in enumerate(self.damper_dofs):
-            touch(self.c[e], dofs)
-        for e, dofs in enumerate(self.bar_dofs):
-            touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
-            # inertia and effective length enter outputs only (buckling), not F_R: no rows
-            touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
-        for params, dofs in self.beams.design_touch() + self.frames.design_touch() \
-                + self.nl_dampers.design_touch() \
-                + self.followers.design_touch():
-            touch(params, dofs)
-        for dof, amp, fn in self.loads:
-            touch([amp, *fn.idx], dof)
-        if self.rayleigh is not None:
-            # αM + βK0: every row of the mass and stiffness; the other parameters of M and K0
-            # already reach their own rows
-            touch(list(self.rayleigh), np.arange(n))
-        # initial conditions do not enter F_R; any other entry not listed above (a future
-        # element's) is taken to reach every row, so the colouring stays correct, only coarser
-        initial = {int(i) for _, i in list(self.init_q) + list(self.init_qd)}
-        every = set(range(n))
-
-        def rows_of(p: int) -> set[int]:
-            return rows_of_param.get(p, set() if p in initial else every)
-        return [np.array(sorted(set().union(*(rows_of(p) for p in params))), int)
-                for params in self.table.design_dependents()]
-
     def structural_mass(self, params: dict[str, Any]) -> Any:
         """Sum of point masses, bar and beam masses ρAL (mass unit of the case); a mass on a
         node counts once, not once per direction."""

@@ -1,6 +1,7 @@
 """The matrices of a structural model (method.md §3): tangent stiffness, damping and mass,
 assembled from element entries (dense, or sparse on patterns kept per call site), and the
-linearization the Newton matrix and the sensitivity step are built from.  A mixin of
+linearization the Newton matrix and the sensitivity step are built from, and the residual rows
+each design variable reaches (the pattern of the design partials).  A mixin of
 :class:`~dynsens.models.structural.StructuralModel`; its element arrays live there."""
 from __future__ import annotations
 
@@ -34,6 +35,21 @@ class StructuralMatrices:
     nl_dampers: Any
     rotating_mass: bool
     frame_mass: bool
+    mass_dof: Any
+    mass_idx: Any
+    k1: np.ndarray
+    k2: np.ndarray
+    k3: np.ndarray
+    bar_A: np.ndarray
+    bar_E: np.ndarray
+    bar_rho: np.ndarray
+    bar_X: np.ndarray
+    bar_I: np.ndarray
+    bar_K: np.ndarray
+    loads: list[Any]
+    init_q: Any
+    init_qd: Any
+    table: Any
     _assembly_plans: dict[str, Any]
     _patterns: dict[str, Any]
     _sums: dict[str, Any]
@@ -182,3 +198,45 @@ class StructuralMatrices:
                 total = total + term
             return total
         return self._sums.setdefault(site, UnionCache()).add(terms)
+
+    def design_pattern(self) -> list[np.ndarray]:
+        """Rows of the residual each design variable reaches through the elements whose
+        parameters depend on it (masses, springs, dampers, bars with their lumped masses
+        and coordinates, loads with their time functions); Rayleigh coefficients reach all."""
+        n = self.n
+        rows_of_param: dict[int, set[int]] = {}
+
+        def touch(params: Any, dofs: Any) -> None:
+            dof_set = {int(d) for d in np.ravel(dofs) if d < n}
+            for p in np.ravel(params):
+                rows_of_param.setdefault(int(p), set()).update(dof_set)
+
+        for d, p in zip(self.mass_dof, self.mass_idx):
+            touch(p, d)
+        for e, dofs in enumerate(self.spring_dofs):
+            touch([k[e] for k in (self.k1, self.k2, self.k3) if len(k)], dofs)
+        for e, dofs in enumerate(self.damper_dofs):
+            touch(self.c[e], dofs)
+        for e, dofs in enumerate(self.bar_dofs):
+            touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
+            # inertia and effective length enter outputs only (buckling), not F_R: no rows
+            touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
+        for params, dofs in self.beams.design_touch() + self.frames.design_touch() \
+                + self.nl_dampers.design_touch() \
+                + self.followers.design_touch():
+            touch(params, dofs)
+        for dof, amp, fn in self.loads:
+            touch([amp, *fn.idx], dof)
+        if self.rayleigh is not None:
+            # αM + βK0: every row of the mass and stiffness; the other parameters of M and K0
+            # already reach their own rows
+            touch(list(self.rayleigh), np.arange(n))
+        # initial conditions do not enter F_R; any other entry not listed above (a future
+        # element's) is taken to reach every row, so the colouring stays correct, only coarser
+        initial = {int(i) for _, i in list(self.init_q) + list(self.init_qd)}
+        every = set(range(n))
+
+        def rows_of(p: int) -> set[int]:
+            return rows_of_param.get(p, set() if p in initial else every)
+        return [np.array(sorted(set().union(*(rows_of(p) for p in params))), int)
+                for params in self.table.design_dependents()]
