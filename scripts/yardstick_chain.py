@@ -112,7 +112,7 @@ def run(n: int, steps: int, x: np.ndarray = X0, solver: str = "superlu", gradien
             q, v = qp + h2b * a, vp + hg * a
             dq = np.diff(q, prepend=0.0)
             dv = np.diff(v, prepend=0.0)
-            R = m * a + spread(k * dq + k3 * dq ** 3 + c * dv) - fext
+            R = m * a + spread(k * dq + k3 * dq * dq * dq + c * dv) - fext
             kt = k + 3.0 * k3 * dq * dq
             e = hg * c + h2b * kt                      # per element: its share of S
             diag = m + e
@@ -137,7 +137,7 @@ def run(n: int, steps: int, x: np.ndarray = X0, solver: str = "superlu", gradien
         dq = np.diff(q, prepend=0.0)
         dv = np.diff(v, prepend=0.0)
         # explicit partials ∂R/∂(m, c, k, k3) at the converged state, then the state terms
-        P = np.column_stack([a, spread(dv), spread(dq), spread(dq ** 3)])
+        P = np.column_stack([a, spread(dv), spread(dq), spread(dq * dq * dq)])
         kt = k + 3.0 * k3 * dq * dq
         P += spread_rows(kt[:, None] * np.diff(Xqp, axis=0, prepend=0.0)) \
             + spread_rows(c * np.diff(Xvp, axis=0, prepend=0.0))

