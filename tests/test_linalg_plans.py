@@ -169,3 +169,39 @@ def test_chain_run_on_band_factorization_matches_dense_and_sparse(n, monkeypatch
         assert abs(a.value - r.value) <= 1e-13 * abs(r.value)
         assert np.max(np.abs(a.gradient - r.gradient)) <= 1e-12 * np.max(np.abs(r.gradient))
     assert res.counters["factorizations"] == ref.counters["factorizations"]
+
+
+def test_a_models_pattern_lets_the_band_plan_skip_the_scan_only_when_it_holds(monkeypatch) -> None:
+    """A dense matrix with the positions its model can fill (``within``): the band is made to hold
+    them and, once S is seen inside them, the plan serves that array without counting S's
+    nonzeros; a pattern that S leaves (a wrong claim) or a new array is checked again."""
+    n = 100
+    A = _band(n, 1).toarray()
+    A[5, 6] = 0.0                                         # zero now, inside the model's pattern
+    i, j = np.nonzero(_band(n, 1).toarray())
+    within = np.unique(i * n + j)
+    cache: dict = {}
+    plan = banded.dense_band_plan(A, cache, within)
+    assert plan is not None and plan.within is within and plan.tridiagonal
+    counted = []
+    monkeypatch.setattr(banded.np, "count_nonzero", lambda *a, **k: counted.append(1) or np.sum(np.asarray(a[0]) != 0))
+    assert banded.dense_band_plan(A, cache, within) is plan and not counted
+    assert banded.dense_band_plan(A, cache, within.copy()) is plan and counted   # another array: checked
+    monkeypatch.undo()
+    # a claim that S contradicts: an entry outside the claimed positions is seen, no vouching
+    B = A.copy()
+    B[0, 60] = 0.5
+    narrow = np.unique(np.r_[within, 0])                  # (0, 0) is already in the band
+    cache = {}
+    assert banded.dense_band_plan(B, cache, narrow) is None   # B's band is too wide: dense LU
+    f = Factor(B, Counters(), within=narrow)
+    assert f.kind == "dense"
+    b = np.arange(1.0, n + 1.0)
+    assert _residual(B, f.solve(b), b) < 1e-14
+    C = A.copy()
+    C[10, 12] = 0.25                                      # inside a band of width 2, outside `within`
+    cache = {}
+    plan = banded.dense_band_plan(C, cache, within)
+    assert plan is not None and plan.within is None       # built, but not trusted for `within`
+    x = Factor(C, Counters(), within=within).solve(b)
+    assert _residual(C, x, b) < 1e-14

@@ -85,13 +85,16 @@ class Linearization:
     """Partial derivatives of F_R at one state.  ``None`` marks a structurally zero block.
 
     R_z (n_z, n_z) = ∂F_R/∂z, R_q (n_z, n_q) = ∂F_R/∂q, R_qd (n_z, n_q) = ∂F_R/∂q̇,
-    R_p (n_z, n_p) = ∂F_R/∂p.
+    R_p (n_z, n_p) = ∂F_R/∂p.  ``dense_pattern``: for dense blocks, the flat (row-major)
+    positions outside which every block is zero by construction, the same array object for as
+    long as that holds (the solver then keeps its band plan without scanning the matrix).
     """
 
     R_z: Matrix
     R_q: Matrix | None = None
     R_qd: Matrix | None = None
     R_p: Matrix | None = None
+    dense_pattern: np.ndarray | None = None
 
     def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Matrix:
         """S = dF_R/dz when q = q_pred + c_q q̈, q̇ = q̇_pred + c_qd q̈, p = p_pred + c_p ṗ (method.md §3)."""

@@ -136,6 +136,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         self._sums: dict[str, UnionCache] = {}                   # sparse models: per _add site
         self._unions = UnionCache()                              # sparse iteration matrices
         self._diag_mass: tuple[np.ndarray, Any] | None = None    # (mass vector, its sparse diag(M))
+        self._pattern_kept: tuple[int, np.ndarray] | None = None  # dense models: see _dense_pattern
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> RightProduct:
         """The product with the scatter matrix Gᵀ: nodal forces = element values @ Gᵀ.

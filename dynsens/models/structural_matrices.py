@@ -55,6 +55,7 @@ class StructuralMatrices:
     _sums: dict[str, Any]
     _unions: Any
     _diag_mass: tuple[Any, Any] | None
+    _pattern_kept: tuple[int, np.ndarray] | None
     _spring_state: Any
     _bar_state: Any
     _ext: Any
@@ -172,8 +173,20 @@ class StructuralMatrices:
         M, K = self._add("M", Ms), self._add("K", Ks)
         D = self._add("D", Ds) if Ds else None
         if not self.traits.sparse:
-            return Linearization(R_z=M, R_q=K, R_qd=D)
+            return Linearization(R_z=M, R_q=K, R_qd=D, dense_pattern=self._dense_pattern())
         return SparseLinearization(R_z=M, R_q=K, R_qd=D, unions=self._unions)
+
+    def _dense_pattern(self) -> np.ndarray:
+        """Flat (row-major) positions where the dense M, K and D can be nonzero: the diagonal
+        (lumped masses) and the positions of every assembly site (element tangents, damping,
+        consistent masses; Rayleigh damping and the sums of :meth:`_add` stay within them).
+        The same array until a site is added."""
+        kept = self._pattern_kept
+        if kept is None or kept[0] != len(self._assembly_plans):
+            n = self.n
+            flat = [np.arange(n) * (n + 1)] + [plan[3] for plan in self._assembly_plans.values()]
+            kept = self._pattern_kept = (len(self._assembly_plans), np.unique(np.concatenate(flat)))
+        return kept[1]
 
     def _diagonal_mass(self, params: dict[str, Any]) -> Any:
         """diag(M) of the point, bar and lumped beam masses, made once per design (read-only)."""

@@ -58,6 +58,7 @@ class BandPlan:
     def __init__(self, n: int, i: np.ndarray, j: np.ndarray, perm: np.ndarray | None,
                  src: np.ndarray | None = None):
         self.n, self.perm, self.src = n, perm, src
+        self.within: np.ndarray | None = None    # a model's pattern this band holds (dense plans)
         if perm is not None:
             inv = np.empty(n, dtype=np.intp)
             inv[perm] = np.arange(n)
@@ -174,18 +175,30 @@ def _permuted_solve(factor: "BandFactor | TridiagonalFactor", rhs: np.ndarray, t
     return out
 
 
-def dense_band_plan(S: np.ndarray, cache: dict[Any, BandPlan | None]) -> BandPlan | None:
+def dense_band_plan(S: np.ndarray, cache: dict[Any, BandPlan | None],
+                    within: np.ndarray | None = None) -> BandPlan | None:
     """The band plan of a dense square matrix S if it pays (else None), kept per shape in
-    ``cache`` and re-used while S has no entry outside the kept band (one count, exact)."""
+    ``cache`` and re-used while S has no entry outside the kept band (one count, exact).
+
+    ``within``: flat (row-major) positions outside which S is zero by construction (a model's
+    assembly pattern, the same array while it holds).  The band is then made to hold all of
+    them, checked against S once, and a plan made for that array serves it without a count."""
     n = S.shape[0]
     if n < DENSE_BAND_MIN_N:
         return None
     key = (n, S.dtype.kind)
     plan = cache.get(key)
+    if plan is not None and within is not None and plan.within is within:
+        return plan
     nnz = np.count_nonzero(S)
     if plan is not None and np.count_nonzero(S.ravel()[plan.src]) == nnz:
+        if within is not None and _holds(plan, within, S, nnz):
+            plan.within = within
         return plan
     i, j = np.nonzero(S)
+    if within is not None:
+        # the positions that may be nonzero later too (S's own are among them, checked below)
+        i, j = np.concatenate([i, within // n]), np.concatenate([j, within % n])
     lower = int(np.max(i - j, initial=0))
     upper = int(np.max(j - i, initial=0))
     if lower + upper + 1 > DENSE_BAND_FRACTION * n:
@@ -198,8 +211,18 @@ def dense_band_plan(S: np.ndarray, cache: dict[Any, BandPlan | None]) -> BandPla
     ok = (ii >= 0) & (ii < n)
     ii, jj = ii[ok], jj[ok]
     plan = BandPlan(n, ii, jj, None, src=ii * n + jj)
+    if within is not None and _holds(plan, within, S, nnz):
+        plan.within = within
     cache[key] = plan
     return plan
+
+
+def _holds(plan: BandPlan, within: np.ndarray, S: np.ndarray, nnz: Any) -> bool:
+    """Whether every flat position of ``within`` lies in the (unpermuted) band of ``plan`` and
+    S (nnz nonzeros) has none outside ``within`` (the model's claim, checked on this S)."""
+    i, j = within // plan.n, within % plan.n
+    return bool(np.all(i - j <= plan.kl) and np.all(j - i <= plan.ku)
+                and np.count_nonzero(S.ravel()[within]) == nnz)
 
 
 class SparsePlan:

@@ -69,9 +69,12 @@ class Factor:
 
     ``dense_general`` skips the test for a diagonal matrix: a caller that has seen the
     structure of its matrices (a dense, non-diagonal iteration matrix stays one) says so.
+    ``within``: the flat positions outside which a dense S is zero by construction
+    (:attr:`~dynsens.models.base.Linearization.dense_pattern`), for the band test.
     """
 
-    def __init__(self, S: Any, counters: Counters, dense_general: bool = False):
+    def __init__(self, S: Any, counters: Counters, dense_general: bool = False,
+                 within: np.ndarray | None = None):
         self.counters = counters
         self.n = S.shape[0]
         self._lu: Any = None   # the factor: of the kind below
@@ -97,7 +100,7 @@ class Factor:
         if plan is not None:
             band = plan.band
         elif not is_sparse:
-            band = dense_band_plan(S, _DENSE_PLANS)
+            band = dense_band_plan(S, _DENSE_PLANS, within)
         if band is not None:
             # the stored entries (a dense S has every nonzero, NaN and Inf too, inside its band)
             entries = band.entries(S.data if plan is not None else S)

@@ -122,7 +122,7 @@ class StepSolver:
         lin = self.model.linearize(t, s, params)
         S = lin.iteration_matrix(*coeffs, n_q=self.model.traits.n_q)
         self._S = S
-        factor = Factor(S, self.counters, dense_general=self._dense_general)
+        factor = Factor(S, self.counters, dense_general=self._dense_general, within=lin.dense_pattern)
         # the structure of S does not change: a dense S that was not diagonal stays so
         self._dense_general = factor.kind == "dense" or (factor.kind == "banded" and isinstance(S, np.ndarray))
         if coeffs != (0.0, 0.0, 0.0):
