@@ -25,8 +25,9 @@ def _point(rd: Reader, body: BodyDef, spec: Any, path: str, key: str) -> Point |
 
 
 def read_forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, springs: list) -> None:
-    """Append the elements of the ``forces`` list ``spec`` at ``path`` to ``forces`` (and the
-    cylinders and spring-dampers also to ``cylinders``, ``springs``); problems go to rd.problems."""
+    """Read the ``forces`` list ``spec`` at ``path``: point forces, torques and rotational
+    spring-dampers are appended to ``forces``, hydraulic cylinders to ``cylinders``,
+    spring-dampers to ``springs``; problems go to rd.problems."""
     if not isinstance(spec, list):
         rd.problems.add(path, "expected a list of force elements")
         return
