@@ -100,7 +100,6 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
         for k, t in enumerate(ts):
             ext[k, :, i] = el.external(t, kp.pv)
     forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
-    steady = all(pf.fn.kind == "constant" for pf, _ in forces)
     # what does not depend on t is formed once per parameter sets and dtype: gravity, and the
     # point forces when all of them are constant in time (never written to: the kernel reads
     # them, and numba would compile another specialization for read-only arrays)
@@ -109,7 +108,7 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
         g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
             else np.zeros((1, 3), dt)
         f0 = None
-        if steady:
+        if all(pf.fn.kind == "constant" for pf, _ in forces):
             f0 = np.zeros((B if forces else 1, lay.n_t, 3), dt)
             for pf, j in forces:
                 f0[:, j] -= point_force(pf, 0.0, kp.pv)
