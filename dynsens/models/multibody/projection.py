@@ -18,11 +18,13 @@ outputs, responses, events and monitors.
 
 Derivatives.  The projection is a map (q, q̇, x) → (q*, q̇*) of the step's end state and the
 design, so the procedure the gradient differentiates is "Newmark step, then projection".  Its
-Jacobian with respect to (q, q̇) is taken by batched complex step of the projection itself
-(Newton iterations from the converged solution with its exact matrix: the implicit-function
-derivative of the converged equations, exact to round-off) — in direct mode only along the m
-sensitivity columns, for the adjoint's transpose all 2 n_q columns —, its design partials — Φ and J_Φ
-depend on the design through lengths, points and axes — by the run's design-partials method:
+Jacobian with respect to (q, q̇) comes from the linearized equations of the converged projection
+(implicit-function theorem, :mod:`.projection_adjoint`): the direct mode applies it along its m
+sensitivity columns, the adjoint its transpose along its r bars, neither forming it.  Without
+compiled kinematics it is taken by batched complex step of the projection itself (Newton
+iterations from the converged solution with its matrix M; for the adjoint all 2 n_q columns).
+Its design partials — Φ and J_Φ depend on the design through lengths, points and axes — are
+taken by the run's design-partials method:
 
     [∇q*; ∇q̇*] = A [∇q; ∇q̇] + B_x
 
@@ -39,9 +41,6 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.linalg as sla
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ...case_keys import allowed
 from ...errors import ModelError, ProblemCollector
@@ -50,6 +49,7 @@ from ..base import StepState
 from . import compiled_linearization as clin
 from .assembly import jacobian_rows
 from .kernel_compiled import CompiledKin
+from .projection_factor import _Factored
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
@@ -113,7 +113,7 @@ class Projection:
     multipliers: tuple[Array, Array]      # the converged (ν, κ), each (1, n_eq, 1)
     _map: ProjectionMap | None = field(default=None, repr=False)
     _design: Array | None = field(default=None, repr=False)
-    _newton: tuple[Any, tuple[Array, Array, "_Factored"]] | None = field(default=None, repr=False)
+    _newton: tuple[Any, tuple[Array, Array, "_Factored"], "_Jacobians"] | None = field(default=None, repr=False)
 
     def linear_map(self, partials: Any) -> ProjectionMap:
         """The projection's derivative at the run's design (``partials``: DesignPartials), once:
@@ -132,17 +132,28 @@ class Projection:
 
     def apply(self, ds: StepState, partials: Any) -> StepState:
         """Direct mode: sensitivities (n_q, m per leaf) of the projected state from those of the
-        solved one.  Only A·[∇q; ∇q̇] is needed: m complex-step columns along the sensitivities
-        themselves (the directional derivative, as exact as A's columns) instead of A's 2 n_q."""
+        solved one: A·[∇q; ∇q̇] along the m columns themselves (:func:`.projection_adjoint.apply_state`;
+        m complex-step columns without compiled kinematics) plus B_x."""
         if self._map is not None or np.iscomplexobj(ds.q) or np.iscomplexobj(ds.qd):
             return self.linear_map(partials).apply(ds)
         n_q = ds.q.shape[0]
-        dq, dqd = self._state_directions(ds.q, ds.qd, partials.params0)
+        from .projection_adjoint import apply_state
+        found = apply_state(self, ds.q, ds.qd, partials.params0)
+        dq, dqd = found if found is not None else self._state_directions(ds.q, ds.qd, partials.params0)
         Bx = self._design_columns(partials)
         return ds._replace(q=dq + Bx[:n_q], qd=dqd + Bx[n_q:])
 
     def transpose(self, q_bar: Array, qd_bar: Array, partials: Any) -> tuple[Array, Array, Array]:
-        """Adjoint mode: see :meth:`ProjectionMap.transpose`."""
+        """Adjoint mode: bars (n_q, r) of the projected q*, q̇* → bars of the solved q, q̇ and x̄
+        (m, r).  With compiled kinematics Aᵀ is applied without forming A
+        (:func:`.projection_adjoint.transpose_state`: a few constraint-row evaluations and two
+        transposed solves instead of 2 n_q projected columns); otherwise as
+        :meth:`ProjectionMap.transpose`."""
+        if self._map is None:
+            from .projection_adjoint import transpose_state
+            back = transpose_state(self, q_bar, qd_bar, partials.params0)
+            if back is not None:
+                return back[0], back[1], self._design_columns(partials).T @ np.concatenate([q_bar, qd_bar])
         return self.linear_map(partials).transpose(q_bar, qd_bar)
 
     def _start(self, params: Any) -> tuple[Array, Array, "_Factored"]:
@@ -151,8 +162,14 @@ class Projection:
         if self._newton is None or self._newton[0] is not params:
             t = self.t
             J = _jacobians(self.model, t, np.stack([self.projected.q, self.raw.q], axis=1), params)
-            self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J.at(1).T)))
+            self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J.at(1).T)), J)
         return self._newton[1]
+
+    def jacobians(self, params: Any) -> tuple[Any, Any]:
+        """(J_Φ(q*), J₀ = J_Φ(q)) of the converged projection (kept with its Newton matrix)."""
+        self._start(params)
+        J = self._newton[2]                        # type: ignore[index]
+        return J.at(0), J.at(1)
 
     def _state_directions(self, dQ: Array, dQD: Array, params: Any) -> tuple[Array, Array]:
         """The derivative of (q*, q̇*) along the k directions (dQ, dQD) (n_q, k each) of the
@@ -175,37 +192,6 @@ class Projection:
 
             self._design = partials.of(projected)
         return self._design
-
-
-class _Factored:
-    """A (n, n) dense or sparse, or a list of k such, factorized once: the chord and Newton
-    iterations solve with the same matrix every iteration, and one matrix serves all k columns
-    at once."""
-
-    def __init__(self, A: Any):
-        self.stacked = isinstance(A, list) or (isinstance(A, np.ndarray) and A.ndim == 3)
-        self.lu = [_factor(a) for a in A] if self.stacked else _factor(A)
-
-    def solve(self, res: Array) -> Array:
-        """x (k, n, 1) for the right-hand sides res (k, n, 1)."""
-        if self.stacked:
-            return np.stack([_solve(lu, r) for lu, r in zip(self.lu, res)])
-        return _solve(self.lu, res[:, :, 0].T).T[:, :, None]
-
-
-def _factor(A: Any) -> Any:
-    """LU of a dense (LAPACK) or sparse (SuperLU) square matrix."""
-    return spla.splu(sp.csc_matrix(A)) if sp.issparse(A) else sla.lu_factor(A)
-
-
-def _solve(lu: Any, rhs: Array) -> Array:
-    """x with A x = rhs ((n,) or (n, k)) for A's factor; a complex rhs of a real sparse factor
-    as its real and imaginary parts."""
-    if not isinstance(lu, spla.SuperLU):
-        return sla.lu_solve(lu, rhs)
-    if np.iscomplexobj(rhs) and lu.U.dtype.kind != "c":
-        return lu.solve(np.ascontiguousarray(rhs.real)) + 1j * lu.solve(np.ascontiguousarray(rhs.imag))
-    return lu.solve(np.ascontiguousarray(rhs, dtype=np.result_type(rhs, lu.U.dtype)))
 
 
 class _Jacobians:
@@ -242,11 +228,19 @@ def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> _Jac
     with the linearization's own arithmetic, when the model's kinematics are compiled (as CSC
     matrices on the sparse path's pattern when the model is linearized sparse); term by term
     otherwise (complex-safe either way)."""
-    zeros = np.zeros_like(Q.T)
+    rows = level_rows(model, t, Q, np.zeros_like(Q), params, model.eq_row_weights, model.norm_row_weights)
+    return rows if rows is not None else _Jacobians(dense=jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1))
+
+
+def level_rows(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any, eq_w: Array,
+               norm_w: Array) -> _Jacobians | None:
+    """Constraint rows at the k states (columns of Q, QD (n_q, k)) at time t (s), weighted as
+    output row 0 of ``eq_w``, ``norm_w`` (see ``compiled_linearization.constraint_rows``; the
+    model's own weights give J_Φ); None when the model's kinematics are not compiled."""
     empty = np.zeros(0)
-    kin = model.kinematics(StepState(Q.T, zeros, zeros, empty, empty, empty), params)
+    kin = model.kinematics(StepState(Q.T, QD.T, np.zeros_like(Q.T), empty, empty, empty), params)
     if not isinstance(kin, CompiledKin):
-        return _Jacobians(dense=jacobian_rows(model.eqs, Q, params, t).transpose(2, 0, 1))
+        return None
     cl, lay = kin.arrays, model.layout
     cf, _ = model.coefficients(t, kin.kp)
     cf = np.ascontiguousarray(cf, kin.dtype)
@@ -255,12 +249,12 @@ def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> _Jac
         side_slot, prod_nb, _, _, _, n_cp, prod_eq, eq_slot, n_eq_slots = st.args
         Jc = clin.compact_constraint_jacobians(
             kin.C, kin.ABV, kin.Lp, cf, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef, side_slot,
-            prod_nb, n_cp, prod_eq, eq_slot, n_eq_slots, model.eq_row_weights, model.norm_row_weights,
-            cl.norm_eq, cl.norm_body, model.traits.n_lam)
+            prod_nb, n_cp, prod_eq, eq_slot, n_eq_slots, eq_w, norm_w, cl.norm_eq, cl.norm_body,
+            model.traits.n_lam)
         return _Jacobians(sparse=st.constraint_jacobians(Jc))
     return _Jacobians(dense=clin.constraint_jacobians(
         kin.C, kin.ABV, kin.Lp, cf, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim, cl.side_coef, lay.n_cp,
-        cl.prod_eq, model.eq_row_weights, model.norm_row_weights, cl.norm_eq, cl.norm_body, model.traits.n_lam))
+        cl.prod_eq, eq_w, norm_w, cl.norm_eq, cl.norm_body, model.traits.n_lam))
 
 
 def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
