@@ -1,4 +1,5 @@
-r"""The transpose of a step's projection (:mod:`.projection`) applied without forming it.
+r"""The derivative of a step's projection (:mod:`.projection`) and its transpose, applied
+without forming the map.
 
 The converged projection of the solved state v = (q, q̇) is the solution u = (q*, ν, q̇*, κ) of
 

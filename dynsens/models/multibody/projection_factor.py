@@ -34,13 +34,7 @@ class _Factored:
 
     def solve_transposed(self, rhs: Array) -> Array:
         """x (n, r) with Aᵀ x = rhs (n, r) for the one matrix A (not stacked)."""
-        lu = self.lu
-        if not isinstance(lu, spla.SuperLU):
-            return sla.lu_solve(lu, rhs, trans=1)
-        if np.iscomplexobj(rhs) and lu.U.dtype.kind != "c":
-            return lu.solve(np.ascontiguousarray(rhs.real), trans="T") + \
-                1j * lu.solve(np.ascontiguousarray(rhs.imag), trans="T")
-        return lu.solve(np.ascontiguousarray(rhs, dtype=np.result_type(rhs, lu.U.dtype)), trans="T")
+        return _solve(self.lu, rhs, transposed=True)
 
 
 def _factor(A: Any) -> Any:
@@ -48,11 +42,13 @@ def _factor(A: Any) -> Any:
     return spla.splu(sp.csc_matrix(A)) if sp.issparse(A) else sla.lu_factor(A)
 
 
-def _solve(lu: Any, rhs: Array) -> Array:
-    """x with A x = rhs ((n,) or (n, k)) for A's factor; a complex rhs of a real sparse factor
-    as its real and imaginary parts."""
+def _solve(lu: Any, rhs: Array, transposed: bool = False) -> Array:
+    """x with A x = rhs (or Aᵀ x = rhs) ((n,) or (n, k)) for A's factor; a complex rhs of a real
+    sparse factor as its real and imaginary parts."""
     if not isinstance(lu, spla.SuperLU):
-        return sla.lu_solve(lu, rhs)
+        return sla.lu_solve(lu, rhs, trans=1 if transposed else 0)
+    trans = "T" if transposed else "N"
     if np.iscomplexobj(rhs) and lu.U.dtype.kind != "c":
-        return lu.solve(np.ascontiguousarray(rhs.real)) + 1j * lu.solve(np.ascontiguousarray(rhs.imag))
-    return lu.solve(np.ascontiguousarray(rhs, dtype=np.result_type(rhs, lu.U.dtype)))
+        return lu.solve(np.ascontiguousarray(rhs.real), trans=trans) + \
+            1j * lu.solve(np.ascontiguousarray(rhs.imag), trans=trans)
+    return lu.solve(np.ascontiguousarray(rhs, dtype=np.result_type(rhs, lu.U.dtype)), trans=trans)
