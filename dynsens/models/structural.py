@@ -192,7 +192,9 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out)
         if self.traits.has_damping:
             # viscous and Rayleigh damping depend on the design only: assemble once per design
-            out["D"] = self._damping(out, pv.dtype)
+            out["D"] = D = self._damping(out, pv.dtype)
+            if sp.issparse(D):
+                D.data.flags.writeable = False      # constant for the run: kept scaled per step size
         return out
 
     def _inertia(self, params: dict[str, Any], s: Any) -> np.ndarray:
@@ -311,7 +313,9 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if len(self.spring_names):
             # a single state: the tangent at it is asked for next (Newton), batches need none
             fs, _ = self._spring_state(q, params, tangent=q.ndim == 1)
-            f = f + self._spring_scatter(fs)
+            fs = self._spring_scatter(fs)
+            # the first term as it is, where its shape and dtype are the sum's (0 + x is x)
+            f = fs if fs.shape == f.shape and fs.dtype == f.dtype else f + fs
         if len(self.bar_names):
             bs = self._bar_state(q, params)
             fe = (bs["N"] / params["L0"])[..., None] * bs["d"]

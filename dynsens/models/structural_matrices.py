@@ -194,8 +194,7 @@ class StructuralMatrices:
         kept = self._diag_mass          # read once: the pair stays consistent
         if kept is None or kept[0] is not mass:
             M = sp.diags(mass).tocsc() if self.traits.sparse else np.diag(mass)
-            if not self.traits.sparse:
-                M.flags.writeable = False
+            (M.data if self.traits.sparse else M).flags.writeable = False
             kept = self._diag_mass = (mass, M)
         return kept[1]
 

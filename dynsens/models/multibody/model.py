@@ -31,6 +31,7 @@ from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, StepState, Traits
 from ..parameters import ParameterTable
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
+from .drift import check_drift, constraint_residuals, describe_equation, diagnose_singular, norm2
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
@@ -309,7 +310,6 @@ class MultibodyModel(Model):
         if self.redundant:          # first: a change of rank also shows as drift, less specifically
             from .redundancy import check_dependency
             check_dependency(self, t, s, params)
-        from .drift import check_drift
         check_drift(self, t, s, params)
         for el in self.other_forces:
             check = getattr(el, "check", None)      # rotational spring-dampers: the angle's range
@@ -329,7 +329,6 @@ class MultibodyModel(Model):
         """Name the joints whose equations became linearly dependent at (t, s) (a dead-centre
         or change-point configuration), from the rank of J_Φ; '' when J_Φ has full rank
         (:func:`.drift.diagnose_singular`)."""
-        from .drift import diagnose_singular
         return diagnose_singular(self, t, s, params, rel_tol)
 
     drift_limit: float | None = None
@@ -348,10 +347,9 @@ class MultibodyModel(Model):
         """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`); with
         ``model.projection`` also those of the state Newton solved before the projection
         (``*_solved``: in mode output the state the integration continues from)."""
-        from .drift import constraint_residuals
         Phi = constraint_residuals(self, t, s, params)
-        out = {"constraint_position": float(np.linalg.norm(np.real(Phi[:, 0]))),
-               "constraint_velocity": float(np.linalg.norm(np.real(Phi[:, 1])))}
+        out = {"constraint_position": norm2(np.real(Phi[:, 0])),
+               "constraint_velocity": norm2(np.real(Phi[:, 1]))}
         if self.projection is not None:
             from .projection import solved_monitors
             out.update(solved_monitors(self, t, s, params, Phi))
@@ -367,7 +365,6 @@ class MultibodyModel(Model):
     def describe_equation(self, k: int) -> str:
         """A body coordinate with its body's YAML entry and the forces naming it, or a
         constraint equation with its joint's YAML entry (:func:`.drift.describe_equation`)."""
-        from .drift import describe_equation
         return describe_equation(self, k) or super().describe_equation(k)
 
     def multiplier_labels(self) -> list[str]:
