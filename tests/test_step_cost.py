@@ -104,3 +104,90 @@ def test_iteration_matrix_on_the_shared_pattern_equals_the_sparse_sums() -> None
         S = lin.iteration_matrix(*coeffs, n_q=n)
         generic = Linearization(lin.R_z, lin.R_q, lin.R_qd).iteration_matrix(*coeffs, n_q=n)
         assert np.array_equal(S.toarray(), generic.toarray()), coeffs
+    # the kept mass and c_q̇ D entries follow a new step size and a new design
+    for coeffs in ((2.5e-7, 5e-4, 5e-4), (1e-6, 2e-3, 2e-3), (2.5e-7, 5e-4, 5e-4)):
+        S = lin.iteration_matrix(*coeffs, n_q=n)
+        generic = Linearization(lin.R_z, lin.R_q, lin.R_qd).iteration_matrix(*coeffs, n_q=n)
+        assert np.array_equal(S.toarray(), generic.toarray()), coeffs
+    other = model.parameters(case.x0 * np.array([2.0, 3.0, 1.0, 1.0]))
+    lin2 = model.linearize(0.0, s, other)
+    S = lin2.iteration_matrix(2.5e-7, 5e-4, 5e-4, n_q=n)
+    generic = Linearization(lin2.R_z, lin2.R_q, lin2.R_qd).iteration_matrix(2.5e-7, 5e-4, 5e-4, n_q=n)
+    assert np.array_equal(S.toarray(), generic.toarray())
+
+
+def test_kept_constant_is_never_trusted_for_a_writable_array() -> None:
+    """UnionCache.constant keeps a value only for a read-only source: a writable one may change
+    in place between calls, so it is computed again every time."""
+    from dynsens.models.sparse_assembly import UnionCache
+    cache = UnionCache()
+    a = np.arange(4.0)
+    assert np.array_equal(cache.constant("x", a, 2.0, lambda: 2.0 * a), 2.0 * np.arange(4.0))
+    a[0] = 10.0
+    assert cache.constant("x", a, 2.0, lambda: 2.0 * a)[0] == 20.0
+    b = np.arange(4.0)
+    b.flags.writeable = False
+    first = cache.constant("x", b, 2.0, lambda: 2.0 * b)
+    assert cache.constant("x", b, 2.0, lambda: 2.0 * b) is first      # kept
+    assert cache.constant("x", b, 3.0, lambda: 3.0 * b)[1] == 3.0      # another factor
+    c = np.arange(4.0)
+    c.flags.writeable = False
+    assert cache.constant("x", c, 3.0, lambda: 5.0 * c)[1] == 5.0      # another array
+
+
+def test_on_pattern_is_a_shallow_copy_with_new_values() -> None:
+    """The matrix made on a kept pattern equals copy.copy of the pattern with new data: the same
+    attributes, the index arrays shared, the pattern itself untouched."""
+    import copy
+    from dynsens.models.sparse_assembly import on_pattern
+    rng = np.random.default_rng(5)
+    P = _random_csc(20, 0.2, rng)
+    P.sort_indices()
+    data = rng.standard_normal(P.nnz)
+    old = P.data.copy()
+    A, B = on_pattern(P, data), copy.copy(P)
+    B.data = data
+    assert type(A) is type(B) and A.__dict__.keys() == B.__dict__.keys()
+    assert A.indices is P.indices and A.indptr is P.indptr and A.data is data
+    assert np.array_equal(A.toarray(), B.toarray()) and np.array_equal(P.data, old)
+
+
+@pytest.mark.parametrize("kind", ["dense", "sparse", "complex"])
+def test_round_off_quick_rejection_decides_as_the_full_test(kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The round-off test rejects a residual above c·ε·‖S‖_F ‖z‖₂ without forming |S| |z|: it
+    must decide exactly as the entrywise test, for residuals on both sides of its threshold."""
+    from dynsens.solver.linalg import Counters
+    from dynsens.solver.newton import ROUNDOFF, NewtonSettings, StepSolver
+
+    class _Traits:
+        n_q, n_lam, n_p, n_z = 30, 0, 0, 30
+
+    class _Model:
+        traits = _Traits()
+
+    solver = StepSolver(_Model(), NewtonSettings(), Counters(), newton=True, refactor=True,   # type: ignore[arg-type]
+                        need_converged_factor=False)
+    import dynsens.solver.newton as newton_module
+    full_tests = []
+    monkeypatch.setattr(newton_module, "abs_product", lambda S, v: full_tests.append(1) or abs_product(S, v))
+    rng = np.random.default_rng(6)
+    decided = {True: 0, False: 0}
+    for trial in range(400):
+        S = _random_csc(30, 0.1, rng, complex_=kind == "complex")
+        if kind == "dense":
+            S = S.toarray()
+        z = rng.standard_normal(30) * 10.0 ** rng.uniform(-3, 3, 30)
+        terms = abs_product(S, np.abs(z.real))
+        # residuals at a factor f of the threshold in every row, or far above it in one row
+        f = 10.0 ** rng.uniform(-1.0, 1.0)
+        R = ROUNDOFF * terms * f * rng.choice([-1.0, 1.0], 30)
+        if trial % 3 == 0:
+            R[rng.integers(30)] *= 10.0 ** rng.uniform(0, 8)
+        full = bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
+        solver._S = S
+        got = solver._at_roundoff(R, z, float(np.linalg.norm(R.real)))
+        assert got == full, trial
+        decided[full] += 1
+    assert decided[True] > 50 and decided[False] > 50
+    # both paths ran: rejections without the entrywise test, and the entrywise test
+    assert 50 < len(full_tests) < 400 - 50

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import ConvergenceError, NonFiniteError
 from ..integrators.newmark import Prediction
@@ -26,6 +27,8 @@ from .linalg import Counters, Factor, SingularMatrixError, abs_product
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
 ROUNDOFF = 1e-13
+# the bound of the round-off test's quick rejection, widened by more than its rounding error
+ROUNDOFF_BOUND_MARGIN = 1.01
 # σ_min/σ_max of the constraint Jacobian below which a failing step is reported as a lock-up
 LOCK_RTOL = 1e-2
 # factors of a constant iteration matrix kept, one per coefficient triple (oldest dropped first)
@@ -152,7 +155,7 @@ class StepSolver:
             history.append(rnorm)
             if not math.isfinite(rnorm):
                 raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
-            if it > 1 and self._at_roundoff(R, z):
+            if it > 1 and self._at_roundoff(R, z, rnorm):
                 # each residual entry is within round-off of the terms that make it up (Oettli-
                 # Prager backward error): no correction can improve z, whatever the conditioning.
                 # The last factor is one correction dz away from z
@@ -201,11 +204,17 @@ class StepSolver:
             lin, factor = self._linearize_and_factor(t, s, params, coeffs)
         return StepOutcome(s, lin, factor, iterations)
 
-    def _at_roundoff(self, R: np.ndarray, z: np.ndarray) -> bool:
-        """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix."""
-        if self._S is None:
+    def _at_roundoff(self, R: np.ndarray, z: np.ndarray, rnorm: float) -> bool:
+        """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix; rnorm = ‖Re R‖₂."""
+        S = self._S
+        if S is None:
             return False
-        terms = abs_product(self._S, np.abs(z.real))
+        # the test implies ‖R‖₂ ≤ c·ε·‖|S| |z|‖₂ ≤ c·ε·‖S‖_F ‖z‖₂: a residual above that bound
+        # (with a margin for the bound's own rounding) fails it without forming |S| |z|
+        data = (S.data if sp.issparse(S) else S.reshape(-1)).real
+        if rnorm > ROUNDOFF_BOUND_MARGIN * ROUNDOFF * _real_norm(data) * _real_norm(z):
+            return False
+        terms = abs_product(S, np.abs(z.real))
         return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
