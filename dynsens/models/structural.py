@@ -296,7 +296,9 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if len(self.followers):
             R = R - self.followers.force(t, self._ext(s.q), params["pv"])[..., :self.n]
         if self.traits.has_damping:
-            R = R + params["D"] @ s.qd + self._nl_damper_force(s.qd, params)
+            R = R + params["D"] @ s.qd
+            if len(self.nl_dampers):
+                R = R + self._nl_damper_force(s.qd, params)
         return R
 
     def _nl_damper_force(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
