@@ -73,8 +73,7 @@ def on_pattern(pattern: sp.csc_matrix, data: np.ndarray) -> sp.csc_matrix:
     shallow copy sharing its index arrays, without the format checks of scipy's constructor
     (which cost more than the values of a step at a thousand unknowns).  The copy is made as
     ``copy.copy`` makes it, without its generic dispatch (a quarter of the time)."""
-    cls = type(pattern)
-    A = cls.__new__(cls)
+    A: Any = object.__new__(type(pattern))       # what cls.__new__(cls) is for scipy's matrices
     A.__dict__.update(pattern.__dict__)
     A.data = data
     return A

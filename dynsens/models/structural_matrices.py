@@ -194,7 +194,8 @@ class StructuralMatrices:
         kept = self._diag_mass          # read once: the pair stays consistent
         if kept is None or kept[0] is not mass:
             M = sp.diags(mass).tocsc() if self.traits.sparse else np.diag(mass)
-            (M.data if self.traits.sparse else M).flags.writeable = False
+            entries: Any = M.data if self.traits.sparse else M
+            entries.flags.writeable = False
             kept = self._diag_mass = (mass, M)
         return kept[1]
 
