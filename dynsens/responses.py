@@ -305,9 +305,14 @@ class ExpressionIntegral(TimeIntegral):
         self._value = 0.0
         self._grad = None
 
+    def _at(self, vals: dict[str, Any]) -> np.ndarray:
+        """f at every sample of ``vals`` (symbol → (k,) values); an expression that reads none of
+        its symbols (a constant) is broadcast to the samples."""
+        return self.expr.evaluate(vals) + 0.0 * next(iter(vals.values()))
+
     def integrand(self, samples: Samples) -> tuple[Any, np.ndarray | None]:
         vals = {n: samples.value[o][:, c] for n, o, c in self.symbols}
-        f = self.expr.evaluate(vals) + 0.0 * next(iter(vals.values()))
+        f = self._at(vals)
         grads: list[Any] = [samples.grad[o] for _, o, _ in self.symbols]
         if any(g is None for g in grads):
             return f, None
@@ -316,7 +321,7 @@ class ExpressionIntegral(TimeIntegral):
         for (n, _o, c), gj in zip(self.symbols, grads):
             shifted = dict(vals)
             shifted[n] = vals[n] + 1j * h
-            g = g + (np.imag(self.expr.evaluate(shifted)) / h)[:, None] * gj[:, c]
+            g = g + (np.imag(self._at(shifted)) / h)[:, None] * gj[:, c]
         return f, g
 
     def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
@@ -331,9 +336,9 @@ class ExpressionIntegral(TimeIntegral):
         for n, o, c in self.symbols:
             shifted: dict[str, Any] = dict(vals)
             shifted[n] = vals[n] + 1j * h
-            out[o][:, c] += tw * (np.imag(self.expr.evaluate(shifted)) / h)
+            out[o][:, c] += tw * (np.imag(self._at(shifted)) / h)
         if trace.event is not None and len(trace.t) >= 2:     # the last interval ends at the event
-            f = np.real(self.expr.evaluate(vals) + 0.0 * next(iter(vals.values())))
+            f = np.real(self._at(vals))
             out["dt_dx"] = 0.5 * (f[-2] + f[-1])
         return out
 

@@ -74,3 +74,23 @@ def test_quadratic_index_adjoint_equals_direct():
     adjoint = dynsens.run_case(_case(resp, over=["sensitivity.method=adjoint"]))
     assert adjoint.method == "adjoint"
     assert rel_err(adjoint.responses["J"].gradient, direct.responses["J"].gradient) < 1e-10
+
+
+@pytest.mark.parametrize("method", ["direct", "adjoint"])
+def test_constant_integrand_is_broadcast_to_the_samples(method):
+    """An expression that reads none of its symbols (a constant c) integrates to c·T: on the
+    point pendulum, which stops at its event, T is the event time and the gradient c·∇T; the
+    same as the form that reads its symbol with a zero factor."""
+    import yaml
+    raw = yaml.safe_load((CASES / "point_pendulum.yaml").read_text())
+    x = {"quantity": {"body": "bob", "kind": "position"}, "component": "bob.x"}
+    raw["responses"] = [{"name": "half_period", "type": "event_time", "event": "far_side"},
+                        {"name": "C", "type": "integral", "expression": "2", "symbols": {"x": x}},
+                        {"name": "Z", "type": "integral", "expression": "2 + 0*x", "symbols": {"x": x}}]
+    case = dynsens.load_case_dict(raw, source="pendulum.yaml", overrides=[f"sensitivity.method={method}"])
+    res = dynsens.run_case(case).responses
+    T = res["half_period"]
+    assert res["C"].value == pytest.approx(2.0 * T.value, rel=1e-12)
+    assert rel_err(res["C"].gradient, 2.0 * T.gradient) < 1e-12
+    assert rel_err(res["C"].gradient, res["Z"].gradient) < 1e-14
+    assert np.any(res["C"].gradient != 0.0)
