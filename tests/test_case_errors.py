@@ -160,8 +160,10 @@ def test_unknown_integration_scheme_is_reported_at_its_own_path():
     (lambda r: r["responses"][1].__setitem__("rho", "lots"), "responses[1].rho", "lots"),
     (lambda r: r["model"].__setitem__("elements", {"type": "mass"}), "model.elements", "list"),
     (lambda r: r.__setitem__("responses", {"name": "x"}), "responses", "list"),
+    (lambda r: r["responses"][0].__setitem__("unit", {"a": 1}), "responses[0].unit", "{'a': 1}"),
+    (lambda r: r["responses"][1].__setitem__("unit", -1), "responses[1].unit", "-1"),
 ], ids=["dt_str", "dofs_str", "mass_bool", "k_list", "enabled_str", "max_iter_float", "rho_str",
-        "elements_map", "responses_map"])
+        "elements_map", "responses_map", "unit_map", "unit_number"])
 def test_wrong_type_names_path(mutate, path, fragment):
     err = case_error(mutate)
     assert_problem(err, path, "expected", fragment)

@@ -154,7 +154,10 @@ def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_
             pc.add(f"{p}.name", reserved_message(name))
         # register the name first: a later expression using it must not report it again
         names.append(name)
-        unit = str(r.get("unit", ""))
+        unit = r.get("unit", "")
+        if not isinstance(unit, str):
+            pc.add(f"{p}.unit", f"expected text such as 'N' or 'm*s' (quote a number: '1'), found {unit!r}")
+            unit = ""
         if kind == "value":
             check_keys(r, p, allowed("response.value"), pc,
                        required=("quantity",))
