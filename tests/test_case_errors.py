@@ -484,3 +484,30 @@ def test_nan_parameter_names_where_it_first_appeared():
 
 def test_version_is_exposed():
     assert isinstance(dynsens.__version__, str) and dynsens.__version__
+
+
+def test_overflowing_body_position_is_a_clear_error_not_a_failed_svd():
+    """A position of −1e300 made the redundancy analysis' SVD fail to converge (a traceback)."""
+    from conftest import CASES
+    raw = yaml.safe_load((CASES / "cart_pole.yaml").read_text())
+    raw["model"]["bodies"]["pole"]["position"][1] = -1e300
+    with pytest.raises(dynsens.DynsensError) as info, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        load_case_dict(raw, source="bad.yaml")
+    assert "not finite" in str(info.value) and "positions" in str(info.value)
+
+
+def test_output_folder_that_cannot_be_made_is_a_clear_error(tmp_path, monkeypatch):
+    """A folder the path checks cannot foresee (creating it fails) is an OutputPathError naming
+    the path, with no temporary file left behind."""
+    from pathlib import Path
+    from dynsens.io.paths import OutputPathError, atomic_path
+
+    def refuse(self, *a, **k):
+        raise FileNotFoundError(2, "No such file or directory")
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    with pytest.raises(OutputPathError) as info:
+        with atomic_path(tmp_path / "sub" / "x.h5"):
+            pass
+    assert "sub" in str(info.value) and "No such file" in str(info.value)
+    assert not list(tmp_path.iterdir())

@@ -48,3 +48,15 @@ def test_parameters_a_scheme_ignores_are_errors(over, named):
         dynsens.load_case(CASES / "sdof_step.yaml", over)
     msg = str(exc.value)
     assert f"{named} given, but the" in msg and "does not use" in msg, msg
+
+
+@pytest.mark.parametrize("over, named", [(["integrator.beta=1e300"], "integrator.beta = 1e+300"),
+                                         (["integrator.beta=1.5"], "integrator.beta = 1.5"),
+                                         (["integrator.gamma=2.0"], "integrator.gamma = 2.0")])
+def test_newmark_parameters_above_one_are_refused(over, named):
+    """β = 1e300 used to run to a finite, meaningless answer (q̈ lost to round-off in q_pred + βΔt²q̈,
+    gradient and finite differences disagreeing entirely): β, γ > 1 are load errors."""
+    with pytest.raises(CaseError) as exc:
+        dynsens.load_case(CASES / "sdof_step.yaml", over)
+    assert named in str(exc.value) and "must be <= 1" in str(exc.value)
+    make_scheme("newmark", beta=1.0, gamma=1.0)      # the edge of the range is allowed (with warnings)

@@ -170,6 +170,12 @@ def make_scheme(name: str, beta: float | None = None, gamma: float | None = None
                          "negative numerical damping and an unstable scheme)")
     if beta < 0:
         raise ValueError(f"integrator.beta = {beta}: must be >= 0")
+    if beta > 1.0 or gamma > 1.0:
+        # q = q_pred + β Δt² q̈: a huge β makes q̈ round-off, and the run's numbers and gradients
+        # meaningless while they stay finite (β = 1e300 ran "successfully")
+        name, value = ("beta", beta) if beta > 1.0 else ("gamma", gamma)
+        raise ValueError(f"integrator.{name} = {value}: must be <= 1 (Newmark's useful range: beta in "
+                         "[gamma/2, 1], gamma in [1/2, 1]; the trapezoidal rule is beta = 1/4, gamma = 1/2)")
     if beta < gamma / 2:
         warnings.warn(f"integrator.beta = {beta} < gamma/2 = {gamma / 2}: Newmark is only "
                       "conditionally stable; keep dt below the stability limit or use beta = 1/4",

@@ -113,8 +113,12 @@ def atomic_path(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
     path = Path(path)
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path} exists: pass --overwrite to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:      # a folder the checks could not foresee (e.g. under /proc)
+        raise OutputPathError(f"{path}: expected a folder that can be created and written, found "
+                              f"{path.parent} refused ({exc.strerror or exc})") from None
     os.close(fd)
     tmp = Path(name)
     try:

@@ -89,6 +89,10 @@ def least_squares_pose(model: "MultibodyModel", params: Any, iterations: int = 6
 def _rank(J: Array) -> int:
     if J.shape[0] == 0:
         return 0
+    if not np.all(np.isfinite(J)):
+        # overflowing coordinates (|q| ~ 1e300): the SVD would fail to converge
+        raise ModelError("the constraint Jacobian at the initial configuration is not finite: check the "
+                         "bodies' positions, markers and joint points for overflowing values")
     sv = np.linalg.svd(J, compute_uv=False)
     return int(np.sum(sv > RANK_TOL * max(sv[0], 1e-300)))
 
