@@ -104,10 +104,8 @@ class Newmark:
                 dt: float) -> StepState:
         """New state from the prediction and the new unknowns z = (q̈, λ, ṗ)."""
         c_q, c_qd, c_p = self.coefficients(dt)
-        # a model without first-order states (pd empty) keeps the predicted empty p: two numpy
-        # calls fewer per Newton iteration, where per-call cost dominates small models
-        p = pred.p + c_p * pd if pd.size else pred.p
-        return StepState(pred.q + c_q * qdd, pred.qd + c_qd * qdd, qdd, lam, p, pd)
+        q, qd, p = correct_arrays(pred.q, pred.qd, pred.p, c_q, c_qd, c_p, qdd, pd)
+        return StepState(q, qd, qdd, lam, p, pd)
 
     def advance(self, pred: Prediction, s: StepState) -> Aux:
         """Algorithmic accelerations of the new step."""
@@ -115,6 +113,16 @@ class Newmark:
         if c == 1.0:
             return Aux(pred.a_rest + s.qdd, pred.b_rest + s.pd)
         return Aux(pred.a_rest + c * s.qdd, pred.b_rest + c * s.pd)
+
+
+def correct_arrays(q_pred: np.ndarray, qd_pred: np.ndarray, p_pred: np.ndarray, c_q: float, c_qd: float,
+                   c_p: float, qdd: np.ndarray, pd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, q̇, p) = (q_pred + c_q q̈, q̇_pred + c_q̇ q̈, p_pred + c_p ṗ): the corrector of every
+    scheme here (also compiled into a model's step)."""
+    # a model without first-order states (pd empty) keeps the predicted empty p: two numpy
+    # calls fewer per Newton iteration, where per-call cost dominates small models
+    p = p_pred + c_p * pd if pd.size else p_pred
+    return q_pred + c_q * qdd, qd_pred + c_qd * qdd, p
 
 
 SCHEMES = ("newmark", "hht", "generalized_alpha")

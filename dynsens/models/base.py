@@ -247,6 +247,13 @@ class Model(ABC):
         relative to the largest singular value ('' if unknown)."""
         return ""
 
+    def compiled_step(self, newton: bool, refactor: bool) -> Callable[..., Any] | None:
+        """A compiled Newton iteration for this model's steps, when it has one
+        (:mod:`dynsens.solver.newton_core`): a function of (t, prediction, params, coefficients)
+        giving the step's compiled operations, or None for a step it does not serve; None here
+        (every step iterates in Python)."""
+        return None
+
     def monitors(self, t: float, s: StepState, params: Any) -> dict[str, float]:
         """Scalar per-step diagnostics stored with the results (e.g. constraint drift)."""
         return {}

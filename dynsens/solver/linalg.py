@@ -64,6 +64,10 @@ class Counters:
         return d
 
 
+# smallest |pivot| relative to the largest of a factor judged regular
+PIVOT_RATIO = 1e-14
+
+
 class Factor:
     """A factorized square matrix; ``solve(rhs)`` for rhs (n,) or (n, k).
 
@@ -136,8 +140,19 @@ class Factor:
         if udiag.size:
             a = np.abs(udiag)
             lo, scale = np.minimum.reduce(a), np.maximum.reduce(a)
-            if lo <= 1e-14 * scale or scale == 0.0:
+            if lo <= PIVOT_RATIO * scale or scale == 0.0:
                 raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
+
+    @classmethod
+    def from_dense_lu(cls, lu: np.ndarray, piv: np.ndarray, counters: Counters) -> "Factor":
+        """The factor of a dense real matrix from LAPACK getrf's lu (column-major) and 0-based
+        piv, factored elsewhere (the compiled step; it counts its factorizations itself)."""
+        self = cls.__new__(cls)
+        self.counters, self.n = counters, lu.shape[0]
+        self._kind, self._complex = "dense", False
+        _, self._getrs = _lapack(lu.dtype)
+        self._lu = (lu, piv)
+        return self
 
     @property
     def nbytes(self) -> int:

@@ -12,7 +12,6 @@ converged state handed back by :func:`solve_step`.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -23,12 +22,12 @@ from ..errors import ConvergenceError, NonFiniteError
 from ..integrators.newmark import Prediction
 from ..models.base import Linearization, Model, StepState
 from .linalg import Counters, Factor, SingularMatrixError, abs_product
+from .newton_core import (AT_ROUNDOFF, CONVERGED, NOT_FINITE, ROUNDOFF, ROUNDOFF_BOUND_MARGIN, SINGULAR,
+                          SOLVED_LINEAR, newton_iterations, real_norm as _real_norm)
+
+__all__ = ["ROUNDOFF", "ROUNDOFF_BOUND_MARGIN", "NewtonSettings", "StepOutcome", "StepSolver"]
 
 
-# Componentwise backward error below which a residual is round-off (≈ 500 ε).
-ROUNDOFF = 1e-13
-# the bound of the round-off test's quick rejection, widened by more than its rounding error
-ROUNDOFF_BOUND_MARGIN = 1.01
 # σ_min/σ_max of the constraint Jacobian below which a failing step is reported as a lock-up
 LOCK_RTOL = 1e-2
 # factors of a constant iteration matrix kept, one per coefficient triple (oldest dropped first)
@@ -58,20 +57,6 @@ class StepOutcome:
     lin: Linearization | None
     factor: Factor | None
     iterations: int
-
-
-def _real_norm(v: np.ndarray) -> float:
-    """2-norm of the real part, scaled so that huge entries do not overflow the sum of squares."""
-    if not v.size:
-        return 0.0
-    r = v.real
-    n = math.sqrt(float(r @ r))
-    if 0.0 < n < 1e150:             # the common case: no overflow or underflow to guard
-        return n
-    big = float(np.max(np.abs(r)))
-    if big == 0.0 or not np.isfinite(big):
-        return big
-    return big * float(np.linalg.norm(r / big))
 
 
 class StepSolver:
@@ -108,7 +93,11 @@ class StepSolver:
                         slice(t.n_q + t.n_lam, t.n_z)]
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._starts = np.array([self._blocks[k].start for k in self._present], dtype=np.intp)
-        self._scales = [0.0, 0.0, 0.0]   # largest block norms of z so far
+        self._present_array = np.array(self._present, dtype=np.intp)
+        self._scales = np.zeros(3)   # largest block norms of z so far
+        # the model's compiled step, when it has one for real runs (None: the iteration in Python)
+        offer = getattr(model, "compiled_step", None)     # (a model outside the Model base may lack it)
+        self._compiled_step = offer(newton, refactor) if offer is not None else None
         self._cache: dict[tuple[float, float, float], tuple[Linearization, Factor]] = {}
         self._S: Any = None  # the last iteration matrix, for the round-off test
         self._dense_general = False
@@ -140,46 +129,51 @@ class StepSolver:
                    coeffs: tuple[float, float, float],
                    correct: Callable[[Prediction, np.ndarray, np.ndarray, np.ndarray], StepState]
                    ) -> StepOutcome:
-        """Solve the step equation at time t (s) starting from the guess z0 (n_z,)."""
+        """Solve the step equation at time t (s) starting from the guess z0 (n_z,): the
+        iteration of :func:`.newton_core.newton_iterations`, compiled when the model offers a
+        compiled step for it (a step with the scheme's corrector, coefficients not all zero)."""
         st = self.settings
-        z = z0.copy()
-        history: list[float] = []
-        lin: Linearization | None = None
-        factor: Factor | None = None
-        dz = np.zeros_like(z)   # the last correction; read only from the second iteration on
-        for it in range(1, st.max_iterations + 1):
-            s = correct(pred, *self._split(z))
-            R = self.model.residual(t, s, params)
-            self.counters.residual_evaluations += 1
-            rnorm = _real_norm(R)
-            history.append(rnorm)
-            if not math.isfinite(rnorm):
-                raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
-            if it > 1 and self._at_roundoff(R, z, rnorm):
-                # each residual entry is within round-off of the terms that make it up (Oettli-
-                # Prager backward error): no correction can improve z, whatever the conditioning.
-                # The last factor is one correction dz away from z
-                fresh = self.sensitivities and self._within(z, dz, self.reuse_tolerance)
-                return self._accept(t, s, params, coeffs, lin, factor, it - 1, fresh=fresh)
-            try:
-                lin, factor = self._linearize_and_factor(t, s, params, coeffs)
-            except SingularMatrixError as exc:
-                why = self.model.diagnose_singular(t, s, params)
-                raise ConvergenceError(
-                    f"singular iteration matrix ({exc}{'; ' + why if why else ''})", t=t, step=step,
-                    iterations=it, residual_history=history,
-                    hint="a mechanism at a singular (e.g. dead-centre) configuration, redundant "
-                         "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
-                         "change the geometry or the joint set") from None
-            dz = factor.solve(-R)
-            z = z + dz
-            self.counters.newton_iterations += 1
-            if not self.newton:
-                s = correct(pred, *self._split(z))
-                return StepOutcome(s, lin, factor, it)
-            if self._converged(z, dz) or self._stagnated(history, z, dz):
-                s = correct(pred, *self._split(z))
-                return self._accept(t, s, params, coeffs, lin, factor, it, fresh=True)
+        history = np.empty(st.max_iterations)
+        compiled = None
+        if self._compiled_step is not None and coeffs != (0.0, 0.0, 0.0):
+            compiled = self._compiled_step(t, pred, params, coeffs)
+        args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton,
+                self.sensitivities, self._scales, self._present_array, history)
+        if compiled is None:
+            ops = _PythonStep(self, t, pred, params, coeffs, correct)
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = newton_iterations(ops, z0.copy(), *args)
+            lin, factor = lf if lf is not None else (None, None)
+        else:
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = compiled.iterate(z0.copy(), *args)
+            s = compiled.state(s)
+            lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters)
+            c = self.counters
+            c.linearizations += n_lin
+            c.factorizations += n_lin
+            c.step_factorizations += n_lin
+            solves = n_lin - (status == SINGULAR)
+            c.solves += solves
+            c.solve_columns += solves
+        self.counters.residual_evaluations += n_res
+        self.counters.newton_iterations += n_lin - (status == SINGULAR)
+        if status == CONVERGED:
+            return self._accept(t, s, params, coeffs, lin, factor, it, fresh=True)
+        if status == AT_ROUNDOFF:
+            return self._accept(t, s, params, coeffs, lin, factor, it, fresh=fresh)
+        if status == SOLVED_LINEAR:
+            return StepOutcome(s, lin, factor, it)
+        if status == NOT_FINITE:
+            raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
+        residual_history = history[:it].tolist()
+        if status == SINGULAR:
+            reason = ops.error if compiled is None else compiled.singular_reason(lf)
+            why = self.model.diagnose_singular(t, s, params)
+            raise ConvergenceError(
+                f"singular iteration matrix ({reason}{'; ' + why if why else ''})", t=t, step=step,
+                iterations=it, residual_history=residual_history,
+                hint="a mechanism at a singular (e.g. dead-centre) configuration, redundant "
+                     "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
+                     "change the geometry or the joint set")
         # a mechanism that locks (near-dependent constraint equations at the step's start) is not
         # helped by a smaller step: say so instead
         locked = ""
@@ -187,7 +181,7 @@ class StepSolver:
             locked = self.model.diagnose_singular(t, correct(pred, *self._split(z0)), params, rel_tol=LOCK_RTOL)
         raise ConvergenceError(
             "Newton-Raphson did not converge", t=t, step=step, iterations=st.max_iterations,
-            residual_history=history,
+            residual_history=residual_history,
             hint=(f"the mechanism locks here, near a singular pose ({locked}); a smaller time step "
                   "does not help: check the geometry, the joint set and the driving motion" if locked else
                   "reduce the time step, check that the loads and parameters are physical, "
@@ -244,47 +238,54 @@ class StepSolver:
         return ([_real_norm(z[self._blocks[k]]) for k in self._present],
                 [_real_norm(dz[self._blocks[k]]) for k in self._present])
 
-    def _converged(self, z: np.ndarray, dz: np.ndarray) -> bool:
-        return self._within(z, dz, self.settings.rtol)
-
-    def _within(self, z: np.ndarray, dz: np.ndarray, rtol: float) -> bool:
-        """The block test of :class:`NewtonSettings` with relative tolerance rtol (updates the
-        block scales)."""
-        ok = True
-        zn, dzn = self._block_norms(z, dz)
-        scales = self._scales
-        atol = self.settings.atol
-        for i, k in enumerate(self._present):
-            scales[k] = max(scales[k], zn[i])
-            # a block that has been exactly zero so far (accelerations of a static start) has
-            # no scale of its own: measure its correction against the whole unknown vector
-            ref = max(zn[i], scales[k]) if scales[k] > 0 else _real_norm(z)
-            if dzn[i] > rtol * ref + atol:
-                ok = False
-        return ok
-
-    def _stagnated(self, history: list[float], z: np.ndarray, dz: np.ndarray) -> bool:
-        """Newton at the noise floor: the last two residual norms are not below half the best
-        one before them, while the whole correction is within the tolerance of ‖z‖.  A block
-        that is nothing but round-off (the accelerations of a static start, ~1e-11 against
-        multipliers of 1e7) can meet neither its own relative test nor the round-off test."""
-        if len(history) < 3:
-            return False
-        floor = 0.5 * min(history[:-2])
-        st = self.settings
-        return history[-1] > floor and history[-2] > floor and \
-            _real_norm(dz) <= st.rtol * _real_norm(z) + st.atol
-
     def snapshot(self) -> tuple[list[float], Any, bool]:
         """What the next steps' convergence decisions depend on (block scales, the last
         iteration matrix of the round-off test, the factor kind): a run restarted from a
         checkpoint with it repeats the same iterations bit for bit."""
-        return list(self._scales), self._S, self._dense_general
+        return self._scales.tolist(), self._S, self._dense_general
 
     def restore(self, snap: tuple[list[float], Any, bool]) -> None:
         """Return to a :meth:`snapshot`."""
-        self._scales, self._S, self._dense_general = list(snap[0]), snap[1], snap[2]
+        self._scales, self._S, self._dense_general = np.array(snap[0]), snap[1], snap[2]
 
     def solve_sensitivity(self, factor: Factor, pseudo_load: np.ndarray) -> np.ndarray:
         """∇z (n_z, m) from S ∇z = −P with the factor of the converged step."""
         return factor.solve(-pseudo_load)
+
+
+class _PythonStep:
+    """The step operations of :mod:`.newton_core` for any model, run as Python: the model's
+    residual and linearization, :class:`~.linalg.Factor` and the solver's tests."""
+
+    __slots__ = ("solver", "t", "pred", "params", "coeffs", "correct_fn", "error")
+
+    def __init__(self, solver: StepSolver, t: float, pred: Prediction, params: Any,
+                 coeffs: tuple[float, float, float],
+                 correct: Callable[[Prediction, np.ndarray, np.ndarray, np.ndarray], StepState]):
+        self.solver, self.t, self.pred, self.params = solver, t, pred, params
+        self.coeffs, self.correct_fn = coeffs, correct
+        self.error = ""        # why S was singular
+
+    def correct(self, z: np.ndarray) -> StepState:
+        return self.correct_fn(self.pred, *self.solver._split(z))
+
+    def residual(self, s: StepState) -> tuple[np.ndarray, None]:
+        return self.solver.model.residual(self.t, s, self.params), None
+
+    def factor_solve(self, s: StepState, evaluation: None, rhs: np.ndarray
+                     ) -> tuple[bool, tuple[Linearization, Factor] | None, np.ndarray]:
+        try:
+            lin, factor = self.solver._linearize_and_factor(self.t, s, self.params, self.coeffs)
+        except SingularMatrixError as exc:
+            self.error = str(exc)
+            return False, None, rhs
+        return True, (lin, factor), factor.solve(rhs)
+
+    def no_factor(self) -> None:
+        return None
+
+    def at_roundoff(self, lf: Any, R: np.ndarray, z: np.ndarray, rnorm: float) -> bool:
+        return self.solver._at_roundoff(R, z, rnorm)
+
+    def block_norms(self, z: np.ndarray, dz: np.ndarray) -> tuple[list[float], list[float]]:
+        return self.solver._block_norms(z, dz)

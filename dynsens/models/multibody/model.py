@@ -294,6 +294,11 @@ class MultibodyModel(Model):
         self._lin = (ev, lin)
         return lin
 
+    def compiled_step(self, newton: bool, refactor: bool) -> Callable[..., Any] | None:
+        """The compiled Newton iteration of :mod:`.compiled_step`, where it serves this model."""
+        from .compiled_step import step_factory
+        return step_factory(self, newton, refactor)
+
     def sparse_structure(self) -> SparseStructure:
         """The positions of the sparse linearization's entries (built on first use)."""
         if self._sparse is None:

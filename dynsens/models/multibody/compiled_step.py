@@ -1,0 +1,336 @@
+r"""The Newton iteration of a step of a compiled mechanism, without returning to the interpreter.
+
+:func:`dynsens.solver.newton_core.newton_iterations` is compiled for :class:`StepData`, a
+named tuple of a step's arrays: the prediction and coefficients of the scheme's corrector, the
+compiled kernel's layout and parameters (:mod:`.compiled`) and the time inputs of the step.
+The step operations are overloaded here for it:
+
+* the state is the scheme's corrector (:func:`dynsens.integrators.newmark.correct_arrays`);
+* F_R is :func:`.compiled.kinematics` and :func:`.compiled.forces_and_residual`, and its
+  linearization and S are :mod:`.compiled_linearization`'s: the functions the Python path calls;
+* S is factored and solved by LAPACK gesv (getrf, then getrs: the calls, and so the numbers, of
+  the Python path's :class:`~dynsens.solver.linalg.Factor`), with the same tests of regularity.
+
+It serves a mechanism whose every force element has a compiled law (no Python force elements),
+in real arithmetic, with a dense iteration matrix; other runs take the same iteration in Python.
+numba caches it on disk: the types of its arguments, not the model, select the overloads.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from ...integrators.newmark import correct_arrays
+from ...solver import newton_core as core
+from ...solver.banded import DENSE_BAND_MIN_N
+from ...solver.linalg import PIVOT_RATIO, Counters, Factor
+from ...solver.newton_core import ROUNDOFF, ROUNDOFF_BOUND_MARGIN
+from ..base import StepState
+from . import compiled as cc
+from . import compiled_linearization as clin
+from .residual import CompiledLinearization, time_inputs
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import MultibodyModel
+
+Array = np.ndarray
+
+# regularity of S as the iteration leaves it in lf[-1]: (code, column or 0, pivot ratio)
+REGULAR, NON_FINITE_ENTRIES, ZERO_PIVOT, SMALL_PIVOT = 0, 1, 2, 3
+
+
+class StepData(NamedTuple):
+    """What one step of a compiled mechanism reads (see :mod:`.compiled`): the step's own
+    arrays first, then those of the model and design (kept between steps).  Every array but the
+    prediction is read-only, so that all mechanisms share one compiled signature."""
+
+    q_pred: Array
+    qd_pred: Array
+    p_pred: Array
+    coeffs: Array            # (c_q, c_q̇, c_p)
+    cf: Array                # time coefficients and shifts of the constraints
+    shift: Array
+    ext: Array               # element inputs and applied point forces at t
+    f_ext: Array
+    sizes: Array             # (n_q, n_λ, n_p, n_cp)
+    blocks: Array            # (start, stop) of the present blocks of z, (k, 2)
+    pb: Array
+    is_point: Array
+    Ts4: Array
+    side_ptr: Array
+    side_prim: Array
+    side_coef: Array
+    cAB: Array
+    norm_body: Array
+    norm_eq: Array
+    prod_eq: Array
+    ax_kind: Array
+    ax_pidx: Array
+    ax_c: Array
+    mass: Array
+    J: Array
+    gravity: Array
+    weights: Array           # (scale, α, β) of the constraint rows
+    eq_row_weights: Array
+    norm_row_weights: Array
+    ax_prod: Array
+    p_owner: Array
+    TG: Array
+
+
+def _read_only(a: Any, dtype: Any = None) -> Array:
+    """a as a C-contiguous read-only array (a view when it is one already in that dtype)."""
+    a = np.ascontiguousarray(a, dtype)
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
+
+
+def _is_step_data(ops: Any) -> bool:
+    from numba import types
+    return isinstance(ops, types.BaseNamedTuple) and ops.instance_class is StepData
+
+
+def _register() -> None:
+    """The overloads of the step operations for StepData (numba only)."""
+    from numba import types
+    from numba.extending import overload
+    from numba.np.linalg import _LAPACK, ensure_lapack
+
+    ensure_lapack()
+    gesv = _LAPACK().numba_xgesv(types.float64)
+    kind = np.int8(ord("d"))   # LAPACK type character, as numba.np.linalg passes it
+    real_norm = cc.jit(core.real_norm)
+    correct = cc.inline(correct_arrays)
+
+    @overload(core.step_correct)
+    def _correct(ops, z):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, z):  # type: ignore[no-untyped-def]
+            n_q, n_lam = ops.sizes[0], ops.sizes[1]
+            c = ops.coeffs
+            q, qd, p = correct(ops.q_pred, ops.qd_pred, ops.p_pred, c[0], c[1], c[2], z[:n_q],
+                               z[n_q + n_lam:])
+            return q, qd, z[:n_q], z[n_q:n_q + n_lam], p, z[n_q + n_lam:]
+        return impl
+
+    @overload(core.step_residual)
+    def _residual(ops, s):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, s):  # type: ignore[no-untyped-def]
+            q, qd, qdd, lam, p, pd = s
+            Lp, Lr, C, PV, ABV, X, N = cc.kinematics(
+                q.reshape(1, -1), qd.reshape(1, -1), np.ascontiguousarray(qdd).reshape(1, -1), ops.pb,
+                ops.is_point, ops.Ts4, ops.side_ptr, ops.side_prim, ops.side_coef, ops.cAB, ops.norm_body)
+            w = ops.weights
+            R, Phi, W, F, AX, Pp, H, HL, HLd, Hp = cc.forces_and_residual(
+                Lp, Lr, C, ABV, X, N, ops.pb, ops.is_point, ops.side_ptr, ops.side_prim, ops.side_coef,
+                ops.prod_eq, ops.cf, ops.shift, ops.norm_eq, ops.norm_body, ops.ax_kind, ops.ax_pidx,
+                ops.ax_c, ops.ext, ops.f_ext, ops.mass, ops.J, ops.gravity, np.ascontiguousarray(lam).reshape(1, -1),
+                np.ascontiguousarray(p).reshape(1, -1), np.ascontiguousarray(pd).reshape(1, -1), w[0], w[1],
+                w[2], ops.TG)
+            return R[0], (Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp)
+        return impl
+
+    @overload(core.step_no_factor)
+    def _no_factor(ops):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops):  # type: ignore[no-untyped-def]
+            e2 = np.zeros((0, 0))
+            return e2, e2, e2, e2, e2, e2, np.zeros(0, np.int32), np.zeros(0), np.zeros(3)
+        return impl
+
+    @overload(core.step_factor_solve)
+    def _factor_solve(ops, s, evaluation, rhs):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, s, evaluation, rhs):  # type: ignore[no-untyped-def]
+            lam = s[3]
+            Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp = evaluation
+            n_q, n_cp = ops.sizes[0], ops.sizes[3]
+            G = clin.product_rows(C[0], ABV[0], ops.pb, ops.is_point, ops.side_ptr, ops.side_prim,
+                                  ops.side_coef, n_q)
+            R_z, R_q, R_qd, R_p = clin.linearization(
+                Lp[0], C[0], ABV[0], G, ops.pb, ops.is_point, ops.Ts4[0], ops.side_ptr, ops.side_prim,
+                ops.side_coef, n_cp, ops.prod_eq, ops.cf[0], ops.eq_row_weights, ops.norm_row_weights,
+                ops.norm_eq, ops.norm_body, ops.weights[0], W[0], F[0], np.ascontiguousarray(lam), ops.mass[0],
+                ops.J[0], ops.TG, ops.ax_prod, AX[0], Pp[0], ops.p_owner, HL[0], HLd[0], Hp[0])
+            c = ops.coeffs
+            S = clin.iteration_matrix(R_z, R_q, R_qd, R_p, c[0], c[1], c[2])
+            n = S.shape[0]
+            lu = S.T.copy()                  # S in column-major order: LAPACK's
+            piv = np.zeros(n, np.int32)
+            x = rhs.copy()
+            test = np.zeros(3)
+            if not np.isfinite(S.sum()) and not np.all(np.isfinite(S)):
+                test[0] = NON_FINITE_ENTRIES
+                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
+            info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
+            if info > 0:
+                test[0], test[1] = ZERO_PIVOT, info
+                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
+            lo, scale = np.inf, 0.0
+            for i in range(n):
+                a = abs(lu[i, i])
+                lo, scale = min(lo, a), max(scale, a)
+            if lo <= PIVOT_RATIO * scale or scale == 0.0:
+                test[0], test[2] = SMALL_PIVOT, lo / max(scale, 1e-300)
+                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
+            return True, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
+        return impl
+
+    @overload(core.step_at_roundoff)
+    def _at_roundoff(ops, lf, R, z, rnorm):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, lf, R, z, rnorm):  # type: ignore[no-untyped-def]
+            S = lf[4]
+            if S.size == 0:
+                return False
+            if rnorm > ROUNDOFF_BOUND_MARGIN * ROUNDOFF * real_norm(S.ravel()) * real_norm(z):
+                return False
+            terms = np.abs(S) @ np.abs(z)
+            return bool(np.all(np.abs(R) <= ROUNDOFF * terms))
+        return impl
+
+    @overload(core.step_block_norms)
+    def _block_norms(ops, z, dz):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, z, dz):  # type: ignore[no-untyped-def]
+            k = ops.blocks.shape[0]
+            zn, dzn = np.empty(k), np.empty(k)
+            for i in range(k):
+                a, b = ops.blocks[i, 0], ops.blocks[i, 1]
+                zn[i], dzn[i] = real_norm(z[a:b]), real_norm(dz[a:b])
+            return zn, dzn
+        return impl
+
+
+def _sources_stamp() -> str:
+    """A hash of every source compiled into the step.  numba's cache checks only the file of the
+    function it compiles; this one inlines the iteration, the overloads above and the kernels,
+    so a change to any of them must select another cache entry (the stamp is part of the
+    entry's key, as the contents of a closure are)."""
+    import hashlib
+    import inspect
+    from ...integrators import newmark
+    from . import forces, hydraulics
+    h = hashlib.sha256()
+    for module in (core, newmark, cc, clin, forces, hydraulics, sys.modules[__name__]):
+        h.update(Path(inspect.getfile(module)).read_bytes())
+    return h.hexdigest()
+
+
+def _compiled_iteration(stamp: str) -> Any:
+    """The iteration compiled for StepData, its cache entries keyed by ``stamp``."""
+
+    def iterate(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,  # type: ignore[no-untyped-def]
+                scales, present, history):
+        stamp          # noqa: B018 - a closure variable: part of numba's cache key
+        return core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
+                                      scales, present, history)
+    return cc.jit(iterate)
+
+
+_ITERATE: Any = None
+
+
+def _iterate() -> Any:
+    """The compiled iteration (the overloads registered first)."""
+    global _ITERATE
+    if _ITERATE is None:
+        _register()
+        _ITERATE = _compiled_iteration(_sources_stamp())
+    return _ITERATE
+
+
+def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
+    """For :meth:`.model.MultibodyModel.compiled_step`: the :class:`CompiledStep` of a step, or
+    None for a step it does not serve (complex data); None for a model it does not serve: not
+    the compiled kernel with a compiled law for every force element, no constraints (then S
+    may be diagonal), a sparse S or one that the Python path would factor as a band."""
+    tr = model.traits
+    if not (newton and refactor and cc.enabled() and model.layout.compiled_laws and not model.other_forces
+            and not tr.sparse and tr.n_lam > 0 and tr.n_z < DENSE_BAND_MIN_N):
+        return None
+    from .kernel import kernel_params
+    from .kernel_compiled import compiled_params
+    lay = model.layout
+    sizes = (tr.n_q, tr.n_lam, tr.n_p)
+    starts = np.cumsum((0,) + sizes)
+    blocks = np.array([(starts[k], starts[k + 1]) for k in range(3) if sizes[k]], dtype=np.intp)
+    kept: dict[int, tuple[Any, tuple[Array, ...]]] = {}      # per parameter set: its kept fields
+
+    def design_fields(params: Any, kp: Any, g: Array) -> tuple[Array, ...]:
+        hit = kept.get(id(params))
+        if hit is not None and hit[0] is params:
+            return hit[1]
+        cl, ck = lay.compiled_arrays(), compiled_params(kp, np.float64)
+        fields = tuple(_read_only(a) for a in (
+            np.array([tr.n_q, tr.n_lam, tr.n_p, lay.n_cp]), blocks, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr,
+            cl.side_prim, cl.side_coef, ck.cAB, cl.norm_body, cl.norm_eq, cl.prod_eq, cl.ax_kind, cl.ax_pidx,
+            ck.ax_c, ck.mass, ck.J, g, np.array([model.scale, model.alpha, model.beta], float),
+            model.eq_row_weights, model.norm_row_weights, cl.ax_prod, cl.p_owner, cc.TG))
+        kept.clear()        # one design at a time (a run's)
+        kept[id(params)] = (params, fields)
+        return fields
+
+    def make(t: float, pred: Any, params: Any, coeffs: tuple[float, float, float]) -> CompiledStep | None:
+        kp = kernel_params(lay, params)
+        if kp.pv.dtype != np.float64 or not all(a.dtype == np.float64 for a in (pred.q, pred.qd, pred.p)):
+            return None
+        cf, shift = model.coefficients(t, kp)
+        ext, f_ext, g = time_inputs(model, kp, t, np.float64)      # (g: the same at every t)
+        step = (pred.q, pred.qd, pred.p, np.array(coeffs), _read_only(cf, np.float64),
+                _read_only(shift, np.float64), _read_only(ext), _read_only(f_ext))
+        return CompiledStep(model, StepData._make(step + design_fields(params, kp, g)))
+    return make
+
+
+class CompiledStep:
+    """One step of a mechanism for :func:`.newton_core.newton_iterations`, compiled: the data
+    of the step, and the conversion of what the iteration returns."""
+
+    def __init__(self, model: "MultibodyModel", data: StepData):
+        self.model, self.data = model, data
+
+    def iterate(self, *args: Any) -> tuple:
+        """:func:`.newton_core.newton_iterations` with this step's data (same arguments after ops)."""
+        return _iterate()(self.data, *args)
+
+    @staticmethod
+    def state(s: tuple) -> StepState:
+        """The StepState of the iteration's state tuple."""
+        return StepState(*s)
+
+    def linearization_and_factor(self, lf: tuple, counters: Counters) -> tuple[Any, Factor | None, Array]:
+        """(Linearization, Factor, S) of the iteration's last linearization (Factor None when S
+        was not regular)."""
+        R_z, R_q, R_qd, R_p, S, lu, piv, _, test = lf
+        lin = CompiledLinearization(R_z, R_q, R_qd, R_p if self.model.traits.n_p else None)
+        factor = Factor.from_dense_lu(lu.T, piv - 1, counters) if test[0] == REGULAR and S.size else None
+        return lin, factor, S
+
+    @staticmethod
+    def singular_reason(lf: tuple) -> str:
+        """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor`."""
+        code, col, ratio = lf[-1]
+        if code == NON_FINITE_ENTRIES:
+            return "matrix has non-finite entries"
+        if code == ZERO_PIVOT:
+            return f"exactly zero pivot in column {int(col)}"
+        return f"pivot ratio {ratio:.1e}"

@@ -1,0 +1,183 @@
+"""The compiled Newton iteration of a mechanism's step against the same iteration run as Python.
+
+Both run :func:`dynsens.solver.newton_core.newton_iterations`; compiled, its step operations
+are the overloads of :mod:`dynsens.models.multibody.compiled_step`.  They call the same kernels
+and the same LAPACK routines, so the runs agree bit for bit: responses, gradients, counters,
+and the errors of a step that fails.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dynsens
+from dynsens.errors import ConvergenceError, NonFiniteError
+from dynsens.integrators.newmark import Prediction
+from dynsens.models.base import StepState
+from dynsens.models.multibody import compiled as cc
+from dynsens.models.multibody.compiled_step import step_factory
+from dynsens.models.multibody.model import MultibodyModel
+from dynsens.solver.linalg import Counters
+from dynsens.solver.newton import NewtonSettings, StepSolver
+
+CASES = Path(__file__).resolve().parent.parent / "cases"
+# the shipped mechanisms the compiled step serves (real runs), and those it leaves to Python
+SERVED = ["cart_pole", "hydraulic_lever", "pendulum_3d", "pendulum_projection", "point_pendulum",
+          "rheonomic", "slider_crank", "tyrolean_weir"]
+NOT_SERVED = {"four_bar": "a Python force element (torque)", "torsional_pair": "Python force elements",
+              "bricard": "n_z = 69, where the Python path tries a band",
+              "n_four_bar": "n_z = 97, where the Python path tries a band"}
+
+compiled_only = pytest.mark.skipif(
+    not cc.enabled(), reason=f"DYNSENS_KERNEL={os.environ.get('DYNSENS_KERNEL')}: the numpy kernel, no compiled step")
+
+
+def _python_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(MultibodyModel, "compiled_step", lambda self, newton, refactor: None)
+
+
+def _short(name: str, steps: int, *extra: str) -> dynsens.case.load.Case:
+    case = dynsens.load_case(CASES / f"{name}.yaml")
+    return dynsens.load_case(CASES / f"{name}.yaml",
+                             [f"integrator.t_end={case.plan.t0 + steps * case.plan.dt!r}", *extra])
+
+
+def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.case.load.Case, **kw):  # type: ignore[no-untyped-def]
+    compiled = dynsens.run_case(case, **kw)
+    with monkeypatch.context() as m:
+        _python_iteration(m)
+        python = dynsens.run_case(case, **kw)
+    return compiled, python
+
+
+@compiled_only
+def test_the_shipped_mechanisms_served_are_the_expected_ones():
+    for name in SERVED:
+        model = dynsens.load_case(CASES / f"{name}.yaml").model
+        assert step_factory(model, newton=True, refactor=True) is not None, name
+    for name, why in NOT_SERVED.items():
+        model = dynsens.load_case(CASES / f"{name}.yaml").model
+        assert step_factory(model, newton=True, refactor=True) is None, (name, why)
+
+
+@compiled_only
+@pytest.mark.parametrize("name", SERVED)
+def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, name):
+    case = _short(name, 150)
+    compiled, python = _both(monkeypatch, case, sensitivities=True)
+    assert compiled.counters == python.counters
+    assert compiled.responses.keys() == python.responses.keys()
+    for key, r in compiled.responses.items():
+        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
+        if r.gradient is not None:
+            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
+    for field in ("q", "lam", "p"):
+        a, b = compiled.history.get(field), python.history.get(field)
+        if a is not None:
+            np.testing.assert_array_equal(a, b, err_msg=field)
+
+
+@compiled_only
+def test_the_compiled_step_runs_and_counts_its_work(monkeypatch):
+    """The compiled iteration is what runs (not the Python one): count its calls."""
+    from dynsens.models.multibody import compiled_step
+    calls = []
+    original = compiled_step.CompiledStep.iterate
+    monkeypatch.setattr(compiled_step.CompiledStep, "iterate",
+                        lambda self, *a: calls.append(1) or original(self, *a))
+    res = dynsens.run_case(_short("slider_crank", 40), sensitivities=False)
+    assert len(calls) == res.counters["steps"] == 40
+    assert res.counters["newton_iterations"] >= 40 and res.counters["factorizations"] >= 40
+
+
+@compiled_only
+def test_adjoint_gradients_follow_the_compiled_steps(monkeypatch):
+    case = _short("tyrolean_weir", 120, "sensitivity.method=adjoint")
+    compiled, python = _both(monkeypatch, case, sensitivities=True)
+    for key, r in compiled.responses.items():
+        if r.gradient is not None:
+            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
+
+
+def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-def]
+    """(type, message) of the error of run() with the compiled step and with the Python one."""
+    out = []
+    for python in (False, True):
+        with monkeypatch.context() as m:
+            if python:
+                _python_iteration(m)
+            with pytest.raises((ConvergenceError, NonFiniteError)) as err:
+                run()
+            out.append((type(err.value), str(err.value), getattr(err.value, "residual_history", None)))
+    return out
+
+
+@compiled_only
+def test_a_step_that_does_not_converge_fails_alike(monkeypatch):
+    case = _short("tyrolean_weir", 20, "integrator.solver.max_iterations=1", "integrator.max_step_cuts=0")
+    compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
+    assert compiled == python
+    assert "did not converge" in compiled[1]
+
+
+@compiled_only
+def test_a_singular_iteration_matrix_fails_alike(monkeypatch):
+    """The link of tests/test_multibody_singular.py at its dead centre, in a step (coefficients
+    not zero): the same reason, pose and joints from both iterations."""
+    from test_multibody_singular import CASE, _apex_state
+    case = dynsens.case.load.load_case_text(CASE.replace("AMP", "0.5"), "link_apex.yaml")
+
+    def step() -> None:
+        model = case.model
+        params = model.parameters(case.x0)
+        st = _apex_state(model)
+        solver = StepSolver(model, NewtonSettings(), Counters(), newton=True, refactor=True,
+                            need_converged_factor=False)
+        pred = Prediction(st.q, st.qd, st.p, 0.0, 0.0)
+        h = 1e-3
+        solver.solve_step(1.0, 100, pred, np.zeros(model.traits.n_z), params, (0.25 * h * h, 0.5 * h, 0.5 * h),
+                          lambda pr, qdd, lam, pd: StepState(pr.q + 0.25 * h * h * qdd, pr.qd + 0.5 * h * qdd,
+                                                             qdd, lam, pr.p, pd))
+    compiled, python = _failure(monkeypatch, step)
+    assert compiled == python
+    assert "singular iteration matrix" in compiled[1] and "lose rank" in compiled[1]
+
+
+@compiled_only
+def test_a_non_finite_residual_fails_alike(monkeypatch):
+    """A first-order state that overflows: the same step, iteration and equation named."""
+    case = _short("hydraulic_lever", 30)
+
+    def run() -> None:
+        model = case.model
+        params = model.parameters(case.x0)
+        solver = StepSolver(model, NewtonSettings(), Counters(), newton=True, refactor=True,
+                            need_converged_factor=False)
+        q0, qd0, p0 = model.initial_state(params)
+        pred = Prediction(q0, qd0, np.full_like(p0, np.inf), 0.0, 0.0)
+        h = 1e-3
+        z0 = np.zeros(model.traits.n_z)
+        solver.solve_step(h, 1, pred, z0, params, (0.25 * h * h, 0.5 * h, 0.5 * h),
+                          lambda pr, qdd, lam, pd: StepState(pr.q + 0.25 * h * h * qdd, pr.qd + 0.5 * h * qdd,
+                                                             qdd, lam, pr.p + 0.5 * h * pd, pd))
+    compiled, python = _failure(monkeypatch, run)
+    assert compiled == python
+    assert compiled[0] is NonFiniteError
+
+
+@compiled_only
+def test_complex_runs_take_the_python_iteration():
+    """A complex-step run of the whole simulation: the factory declines complex data."""
+    case = _short("slider_crank", 5)
+    model = case.model
+    make = step_factory(model, newton=True, refactor=True)
+    params = model.parameters(case.x0.astype(complex))
+    q0, qd0, p0 = model.initial_state(params)
+    pred = Prediction(q0, qd0, p0, 0.0, 0.0)
+    assert make(0.002, pred, params, (1e-6, 1e-3, 1e-3)) is None
+    real = model.parameters(case.x0)
+    q0, qd0, p0 = model.initial_state(real)
+    assert make(0.002, Prediction(q0, qd0, p0, 0.0, 0.0), real, (1e-6, 1e-3, 1e-3)) is not None
