@@ -9,6 +9,12 @@ with (c_q, c_q̇, c_p) = (βΔt², γΔt, γΔt) for Newmark and (0, 0, 0) for t
 solve at t0.  The sensitivity step (method.md §4) is the same linear system with the
 matrix right-hand side −P: :func:`solve_sensitivity` uses the factor of S at the
 converged state handed back by :func:`solve_step`.
+
+The iteration itself is :func:`.newton_core.newton_iterations`, defined once: here it runs as
+Python on the model's methods and :class:`~.linalg.Factor` (:class:`_PythonStep`), or compiled
+when the model offers a compiled step (:meth:`~dynsens.models.base.Model.compiled_step`); this
+module keeps the solver's memory between steps and turns how an iteration ended into the
+outcome or the error.
 """
 from __future__ import annotations
 
