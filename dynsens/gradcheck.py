@@ -21,6 +21,10 @@ from .simulation import run_case
 from .step_sequence import replaying
 
 SCHEMES = ("forward", "central", "complex")
+#: accepted relative steps h per scheme, [smallest, largest): below 1e-15 a real step moves x by
+#: a few rounding units (the difference is round-off), below 1e-100 a complex step's imaginary
+#: parts can underflow on the way through the run; h >= 1 steps by |x| or more (across zero)
+STEP_RANGE = {"forward": (1e-15, 1.0), "central": (1e-15, 1.0), "complex": (1e-100, 1.0)}
 log = logging.getLogger(__name__)
 DEFAULT_WORKERS = 2
 
@@ -91,6 +95,14 @@ def _values_task(job: tuple[str, str, np.ndarray, np.ndarray | None]) -> tuple[d
     return _values(cached_case(text, source), x, times)
 
 
+def step_problem(step: float, scheme: str) -> str | None:
+    """Why the relative step ``step`` is meaningless for ``scheme`` (see STEP_RANGE); None when fine."""
+    low, high = STEP_RANGE[scheme]
+    if np.isfinite(step) and low <= step < high:
+        return None
+    return f"expected relative steps in [{low:g}, {high:g}) for the {scheme} scheme, found {step!r}"
+
+
 def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
     """‖fd − sa‖ / ‖sa‖ (absolute difference when ‖sa‖ = 0)."""
     ref = float(np.linalg.norm(sa))
@@ -111,6 +123,10 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     """
     if scheme not in SCHEMES:
         raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
+    for h in steps:
+        why = step_problem(h, scheme)
+        if why:
+            raise ValueError(f"steps: {why}")
     x = case.x0 if x is None else np.asarray(x, dtype=float)
     m = x.size
     from .warmup import warm_case

@@ -162,8 +162,10 @@ def test_unknown_integration_scheme_is_reported_at_its_own_path():
     (lambda r: r.__setitem__("responses", {"name": "x"}), "responses", "list"),
     (lambda r: r["responses"][0].__setitem__("unit", {"a": 1}), "responses[0].unit", "{'a': 1}"),
     (lambda r: r["responses"][1].__setitem__("unit", -1), "responses[1].unit", "-1"),
+    (lambda r: r["integrator"].__setitem__("solver", {"max_iterations": True}),
+     "integrator.solver.max_iterations", "True"),
 ], ids=["dt_str", "dofs_str", "mass_bool", "k_list", "enabled_str", "max_iter_float", "rho_str",
-        "elements_map", "responses_map", "unit_map", "unit_number"])
+        "elements_map", "responses_map", "unit_map", "unit_number", "max_iter_bool"])
 def test_wrong_type_names_path(mutate, path, fragment):
     err = case_error(mutate)
     assert_problem(err, path, "expected", fragment)
@@ -193,7 +195,18 @@ def test_wrong_type_message_says_what_was_found(value, shown):
     (lambda r: r["responses"][1].__setitem__("rho", -3.0), "responses[1].rho", "positive"),
     (lambda r: r["model"]["loads"][0]["function"].__setitem__("t1", -1.0), "model.loads[0].function.t1",
      "greater than t0"),
-], ids=["dt_neg", "dt_inf", "t_end", "mass", "damper", "design_value", "scale", "rho", "ramp_t1"])
+    # like rtol, atol is a tolerance: non-negative and finite
+    (lambda r: r["integrator"].__setitem__("solver", {"atol": -1e-8}), "integrator.solver.atol",
+     "expected a non-negative finite number, found -1e-08"),
+    (lambda r: r["integrator"].__setitem__("solver", {"atol": float("nan")}), "integrator.solver.atol",
+     "expected a non-negative finite number, found nan"),
+    (lambda r: r.__setitem__("optimization", {"objective": "combo", "ftol": float("nan")}), "optimization.ftol",
+     "expected a positive finite number, found nan"),
+    (lambda r: r.__setitem__("optimization", {"objective": "combo", "constraints": [
+        {"response": "tip_end", "upper": float("nan")}]}), "optimization.constraints[0].upper",
+     "expected a finite number, found nan"),
+], ids=["dt_neg", "dt_inf", "t_end", "mass", "damper", "design_value", "scale", "rho", "ramp_t1",
+        "atol_neg", "atol_nan", "ftol_nan", "bound_nan"])
 def test_out_of_range_value_names_path(mutate, path, fragment):
     err = case_error(mutate)
     assert_problem(err, path, fragment)
@@ -486,15 +499,57 @@ def test_version_is_exposed():
     assert isinstance(dynsens.__version__, str) and dynsens.__version__
 
 
-def test_overflowing_body_position_is_a_clear_error_not_a_failed_svd():
-    """A position of −1e300 made the redundancy analysis' SVD fail to converge (a traceback)."""
+@pytest.mark.parametrize("case, body, value", [("cart_pole", "pole", -1e300), ("pendulum_3d", "bob", 1e200)])
+def test_overflowing_body_position_is_a_clear_error_not_a_failed_svd(case, body, value):
+    """A position of −1e300 made the redundancy analysis' SVD fail to converge (a traceback), then
+    a ModelError without the case file; 1e200 still failed in the SVD (a traceback)."""
     from conftest import CASES
-    raw = yaml.safe_load((CASES / "cart_pole.yaml").read_text())
-    raw["model"]["bodies"]["pole"]["position"][1] = -1e300
-    with pytest.raises(dynsens.DynsensError) as info, warnings.catch_warnings():
+    raw = yaml.safe_load((CASES / f"{case}.yaml").read_text())
+    raw["model"]["bodies"][body]["position"][0] = value
+    with pytest.raises(CaseError) as info, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         load_case_dict(raw, source="bad.yaml")
-    assert "not finite" in str(info.value) and "positions" in str(info.value)
+    assert "bad.yaml" in str(info.value)
+    assert_problem(info.value, "model.bodies", "not finite", f"body '{body}' at position [{value:.3g}",
+                   "magnitude below 1e+150")
+
+
+def _four_bar(**crank) -> dict:
+    from conftest import CASES
+    raw = yaml.safe_load((CASES / "four_bar.yaml").read_text())
+    raw["model"]["bodies"]["crank"].update(crank)
+    return raw
+
+
+@pytest.mark.parametrize("crank, path, fragment", [
+    ({"mass": "1/0"}, "model.bodies.crank.mass", "expression '1/0' cannot be evaluated: division by zero"),
+    ({"mass": "a/0"}, "model.bodies.crank.mass", "at a = 0.15: division by zero"),
+    ({"markers": {"O": ["-0.5*a", 0, 0], "A": ["1/0", 0, 0]}}, "model.bodies.crank.markers.A[0]", "division by zero"),
+    ({"position": ["log(a - 1)", 0, 0]}, "model.bodies.crank.position[0]", "outside a function's domain"),
+    ({"mass": "m_crank"}, "model.bodies.crank.mass", "unknown symbol 'm_crank'"),
+], ids=["mass_const", "mass_design", "marker", "position", "unknown_symbol"])
+def test_mechanism_expression_errors_name_file_and_path(crank, path, fragment):
+    """An expression without a value at the start design stopped the mechanism's redundancy
+    analysis with a bare ExpressionError (no file, no path); a structural case said both."""
+    with pytest.raises(CaseError) as info:
+        load_case_dict(_four_bar(**crank), source="mech.yaml")
+    assert "mech.yaml" in str(info.value)
+    assert_problem(info.value, path, fragment)
+
+
+@pytest.mark.parametrize("key, value, path", [
+    ("stabilization", {"alpha": float("nan")}, "model.stabilization.alpha"),
+    ("constraint_scale", float("inf"), "model.constraint_scale"),
+    ("drift_limit", float("nan"), "model.drift_limit"),
+    ("initial", {"hold": ["crank.angle_z"], "tolerance": float("nan")}, "model.initial.tolerance"),
+])
+def test_mechanism_settings_are_finite(key, value, path):
+    """nan passed the `< 0` / `<= 0` range tests of these settings (every comparison is false)."""
+    raw = _four_bar()
+    raw["model"][key] = value
+    with pytest.raises(CaseError) as info:
+        load_case_dict(raw, source="mech.yaml")
+    assert_problem(info.value, path, "expected a finite number")
 
 
 def test_output_folder_that_cannot_be_made_is_a_clear_error(tmp_path, monkeypatch):

@@ -414,6 +414,45 @@ def test_check_gradients_bad_options(runner, case_file, args):
     assert "Error:" in result.stderr
 
 
+@pytest.mark.parametrize("args, fragment", [
+    (("--rtol", "nan"), "Invalid value for '--rtol': expected a finite number > 0, found 'nan'"),
+    (("--rtol", "-1e-3"), "Invalid value for '--rtol': expected a finite number > 0, found '-1e-3'"),
+    (("--rtol", "inf"), "found 'inf'"),
+    (("--steps", "1e-300"), "Invalid value for '--steps': expected relative steps in [1e-15, 1) for the "
+                            "forward scheme, found 1e-300"),
+    (("--steps", "1e-300", "--scheme", "complex"), "in [1e-100, 1) for the complex scheme, found 1e-300"),
+    (("--steps", "2"), "in [1e-15, 1) for the forward scheme, found 2.0"),
+    (("--steps", "1e-6,,1e-4"), "Invalid value for '--steps': expected comma-separated positive finite "
+                                "numbers, found an empty entry in '1e-6,,1e-4'"),
+    (("--steps", "1e-4,nan"), "found 'nan' in '1e-4,nan'"),
+], ids=["rtol_nan", "rtol_negative", "rtol_inf", "steps_underflow", "steps_complex_underflow", "steps_large",
+        "steps_empty_entry", "steps_nan"])
+def test_check_gradients_meaningless_numbers_are_usage_errors(runner, case_file, args, fragment):
+    """These were accepted: nan or a negative rtol made every check fail, 1e-300 gave a column of
+    round-off, an empty entry was skipped silently."""
+    result = run_check(runner, case_file, *args)
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and fragment in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (("optimize", "--ftol", "nan"), "Invalid value for '--ftol': expected a finite number > 0, found 'nan'"),
+    (("optimize", "--ftol", "inf"), "'--ftol': expected a finite number > 0, found 'inf'"),
+    (("optimize", "-x", "m=nan"), "'-x' / '--x0': expected NAME=VALUE with a finite number VALUE, found 'm=nan'"),
+    (("optimize", "--seed", "-1"), "'--seed': -1 is not in the range 0<=x<=9223372036854775807"),
+    (("study", "--seed", "-1"), "'--seed': -1 is not in the range"),
+    (("convergence", "--dt", "nan"), "'--dt': expected comma-separated positive finite numbers, found 'nan'"),
+], ids=["ftol_nan", "ftol_inf", "x0_nan", "optimize_seed", "study_seed", "convergence_dt"])
+def test_other_numeric_options_refuse_meaningless_values(runner, case_file, tmp_path, args, fragment):
+    """--ftol nan/inf ran SLSQP with it, --seed -1 ended in a numpy traceback, --dt nan was
+    reported as a problem of the case's integrator.dt."""
+    import dynsens.cli.convergence, dynsens.cli.optimize, dynsens.cli.study  # noqa: F401,E401
+    result = invoke(runner, args[0], case_file, "-o", tmp_path / "out", *args[1:])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and fragment in result.stderr, result.stderr
+    assert leftovers(tmp_path) == []
+
+
 def test_check_gradients_bad_case_is_clean(runner, tmp_path):
     raw = yaml.safe_load(yaml.safe_dump(CASE))
     raw["responses"][0]["quantity"]["dof"] = "uu"

@@ -132,7 +132,19 @@ def test_set_and_x_address_the_family_or_one_member(tmp_path: Path) -> None:
     ({"members": {"diag9": {"value": 1.0}}}, "design.families[0].members.diag9", "not a member"),
     ({"members": {"diag1": {"value": 1.0}}}, "design.families[0].members.diag1.value", "A[diag1]: 1.0 is outside"),
     ({"members": {"diag1": {"valu": 1.0}}}, "design.families[0].members.diag1.valu", "unknown key"),
-    ({"assign": {"area": "A*B"}}, "model.elements[2].area", "unknown symbol 'B'"),
+    # a problem of an assigned entry is the family's: once, at its assign key, naming the members
+    ({"assign": {"area": "A*B"}}, "design.families[0].assign.area",
+     "A[bottom1] (model.elements[0].area): expression 'A[bottom1]*B' names unknown symbol 'B'"),
+    ({"assign": {"area": "-A"}}, "design.families[0].assign.area", "also fails for 15 more members"),
+    ({"value": -5.0, "lower": -10.0}, "design.families[0].assign.area", "expected > 0, found -5"),
+    ({"assign": {"areaa": "A"}}, "design.families[0].assign.areaa",
+     "unknown key of a bar element; did you mean 'area'"),
+    ({"assign": {"nodes": "A"}}, "design.families[0].assign.nodes", "not a numeric entry of a bar element"),
+    ({"assign": {"name": "A"}}, "design.families[0].assign.name", "not a numeric entry"),
+    ({"assign": {"area": True}}, "design.families[0].assign.area", "expected an expression of the family name"),
+    ({"value": "x"}, "design.families[0].value", "expected a number or a constant expression"),
+    ({"scale": -1.0}, "design.families[0].scale", "expected a positive finite number"),
+    ({"members": {"diag1": {"upper": float("nan")}}}, "design.families[0].members.diag1.upper", "finite number"),
     ({"name": "A b"}, "design.families[0].name", "identifier"),
     ({"colour": 1}, "design.families[0].colour", "unknown key"),
 ])
@@ -141,6 +153,28 @@ def test_bad_families_are_reported_with_their_path(change, path, needle) -> None
         load_case_dict(per_member(**change))
     msgs = [p.message for p in err.value.problems if p.path == path]
     assert any(needle in m for m in msgs), [str(p) for p in err.value.problems]
+
+
+def test_bad_family_entries_are_one_problem_each() -> None:
+    """Before, a family's bad entry came back once per member (16 times here), at expanded paths."""
+    with pytest.raises(CaseError) as err:
+        load_case_dict(per_member(value="x", assign={"area": "-A", "nodes": "A"}))
+    assert sorted(p.path for p in err.value.problems) == ["design.families[0].assign.nodes",
+                                                          "design.families[0].value"]
+    with pytest.raises(CaseError) as err:
+        load_case_dict(per_member(assign={"area": "-A", "inertia": "A"}))
+    assert [p.path for p in err.value.problems] == ["design.families[0].assign.area"]
+
+
+def test_a_placeholder_the_family_replaces_is_still_a_number() -> None:
+    raw = per_member()
+    raw["model"]["elements"][0]["area"] = [1.0, 2.0]     # replaced by A[bottom1], but not a value
+    with pytest.raises(CaseError) as err:
+        load_case_dict(raw, "truss.yaml")
+    assert [str(p) for p in err.value.problems] == [
+        "model.elements[0].area: expected a number or an expression (a placeholder that "
+        "design.families[0].assign replaces), found [1.0, 2.0]"]
+    assert "truss.yaml" in str(err.value)
 
 
 def test_family_member_of_an_unnameable_element_is_rejected() -> None:

@@ -19,6 +19,10 @@
 Expansion happens on the raw mapping before the model is built: each selected element's
 ``assign`` keys receive the expression with the family name replaced by the member's name, and
 the members join the design variables after the case's own ``variables`` (in element order).
+``assign`` may set only the numeric entries (expressions) of the selected element type, over a
+placeholder that must itself be a number or an expression; a problem the model or the start
+design finds in an assigned entry is reported once, at the family's ``assign`` key, naming the
+members concerned (:func:`fold_assigned_problems`).
 """
 from __future__ import annotations
 
@@ -26,9 +30,10 @@ import fnmatch
 import re
 from typing import Any, Callable
 
-from ..case_keys import allowed
-from ..errors import ProblemCollector
+from ..case_keys import SECTIONS, allowed
+from ..errors import Problem, ProblemCollector
 from ..models._keys import check_keys, did_you_mean
+from .responses_spec import read_number
 
 _FAMILY_KEYS = allowed("design.family")
 _MEMBER_KEYS = allowed("design.family.member")
@@ -36,6 +41,9 @@ _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _MEMBER_NAME = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[0-9]+)$")
 
 DesignReader = Callable[[Any, ProblemCollector], "tuple[list, tuple[str, ...]]"]
+#: element key path (model.elements[3].area) -> (the family's assign path, the member set there)
+Assigned = dict[str, tuple[str, str]]
+_NUMBERS = ("value", "lower", "upper", "scale")
 
 
 def member_name(family: str, element: str) -> str:
@@ -44,28 +52,82 @@ def member_name(family: str, element: str) -> str:
 
 
 def design_with_families(raw: dict, pc: ProblemCollector, read_design: DesignReader
-                         ) -> tuple[list, tuple[str, ...]]:
+                         ) -> tuple[list, tuple[str, ...], Assigned]:
     """Expand ``raw['design']['families']`` in place (member variables appended to the design
-    variables, element keys assigned) and read the design with ``read_design``."""
+    variables, element keys assigned) and read the design with ``read_design``; also returns
+    where each family assigned an element key (for :func:`fold_assigned_problems`)."""
     design = raw.get("design")
+    assigned: Assigned = {}
     if not isinstance(design, dict) or "families" not in design:
-        return read_design(raw.get("design", {"variables": []}), pc)
+        return (*read_design(raw.get("design", {"variables": []}), pc), assigned)
     families = design.pop("families")
     if not isinstance(families, list):
         pc.add("design.families", f"expected a list of families, found {families!r}")
         families = []
     if not isinstance(design.get("variables", []) or [], list):
-        return read_design(design, pc)   # the reader reports it
+        return (*read_design(design, pc), assigned)   # the reader reports it
     own = [v.get("name") for v in design.get("variables", []) or [] if isinstance(v, dict)]
     members: list[dict] = []
     taken = set(own)
     for i, fam in enumerate(families):
-        members += _expand(fam, f"design.families[{i}]", raw.get("model"), taken, pc)
+        members += _expand(fam, f"design.families[{i}]", raw.get("model"), taken, assigned, pc)
     design["variables"] = list(design.get("variables", []) or []) + members
-    return read_design(design, pc)
+    return (*read_design(design, pc), assigned)
 
 
-def _expand(fam: Any, path: str, model: Any, taken: set, pc: ProblemCollector) -> list[dict]:
+def fold_assigned_problems(pc: ProblemCollector, assigned: Assigned, start: int = 0) -> None:
+    """Problems at element keys a family assigned (from problem ``start`` on: those found in the
+    expanded model) become one problem per ``assign`` key, at that path: the first member's
+    message, then the other members where the entry also fails (the user wrote the entry once,
+    in the family, not at the expanded element)."""
+    out: list[Problem] = pc.problems[:start]
+    groups: dict[str, tuple[Problem, list[str]]] = {}
+    for p in pc.problems[start:]:
+        hit = assigned.get(p.path)
+        if hit is None:
+            out.append(p)
+        elif hit[0] in groups:
+            groups[hit[0]][1].append(hit[1])
+        else:
+            groups[hit[0]] = (Problem(hit[0], f"{hit[1]} ({p.path}): {p.message}"), [])
+            out.append(groups[hit[0]][0])
+    for first, more in groups.values():
+        if more:
+            first.message += (f"; this entry also fails for {len(more)} more member{'s' if len(more) > 1 else ''}"
+                              f" ({', '.join(more[:5])}{', ...' if len(more) > 5 else ''})")
+    pc.problems = out
+
+
+def _assignable(assign: Any, kind: Any, path: str, pc: ProblemCollector) -> dict[str, str]:
+    """The ``assign`` entries as text, each checked once: a numeric entry (expression) of element
+    type ``kind`` (not its name, nodes or type) set to a number or an expression."""
+    if not isinstance(assign, dict) or not assign:
+        pc.add(path, "expected a mapping element key -> expression of the family name")
+        return {}
+    section = SECTIONS.get(f"structural.{kind}")
+    numeric = [k.name for k in section.keys if k.kind == "expr"] if section else None
+    out = {}
+    for key, expr in assign.items():
+        if numeric is not None and key not in numeric:
+            what = "not a numeric entry" if key in allowed(f"structural.{kind}") else "unknown key"
+            pc.add(f"{path}.{key}", f"{what} of a {kind} element{did_you_mean(key, numeric)} "
+                                    f"(assign sets one of: {', '.join(numeric)})")
+        elif isinstance(expr, bool) or not isinstance(expr, (str, int, float)):
+            pc.add(f"{path}.{key}", f"expected an expression of the family name, found {expr!r}")
+        else:
+            out[str(key)] = str(expr)
+    return out
+
+
+def _numbers(spec: dict, keys: tuple[str, ...], path: str, pc: ProblemCollector) -> dict[str, float] | None:
+    """The numbers among ``keys`` of ``spec`` read once (not again for every member); None on a problem."""
+    n0 = len(pc.problems)
+    out = {k: read_number(spec[k], f"{path}.{k}", pc, positive=k == "scale") for k in keys if k in spec}
+    return None if len(pc.problems) > n0 else out  # type: ignore[return-value]
+
+
+def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
+            pc: ProblemCollector) -> list[dict]:
     """The member variables of one family; assigns the selected elements' keys."""
     if not check_keys(fam, path, _FAMILY_KEYS, pc, required=("name", "value", "assign")):
         return []
@@ -76,13 +138,14 @@ def _expand(fam: Any, path: str, model: Any, taken: set, pc: ProblemCollector) -
     if name in taken:
         pc.add(f"{path}.name", f"{name!r} is already a design variable or family")
     taken.add(name)
-    assign = fam.get("assign")
-    if not isinstance(assign, dict) or not assign:
-        pc.add(f"{path}.assign", "expected a mapping element key -> expression of the family name")
+    kind = fam.get("type", "bar")
+    assign = _assignable(fam.get("assign"), kind, f"{path}.assign", pc)
+    shared = _numbers(fam, _NUMBERS, path, pc)
+    if not assign or shared is None:
         return []
     elements = model.get("elements", []) if isinstance(model, dict) else []
     elements = elements if isinstance(elements, list) else []
-    kind = fam.get("type", "bar")
+    index = {id(el): k for k, el in enumerate(elements)}
     pool = [(str(el.get("name", f"{el.get('type')}{k}")), el) for k, el in enumerate(elements)
             if isinstance(el, dict) and el.get("type") == kind]
     chosen = _select(fam.get("elements", "all"), pool, kind, f"{path}.elements", pc)
@@ -108,18 +171,20 @@ def _expand(fam: Any, path: str, model: Any, taken: set, pc: ProblemCollector) -
         if member in taken:
             pc.add(f"{path}.elements", f"{member!r} is already a design variable")
         taken.add(member)
-        for key, expr in assign.items():
-            text = str(expr) if isinstance(expr, (str, int, float)) and not isinstance(expr, bool) else None
-            if text is None:
-                pc.add(f"{path}.assign.{key}", f"expected an expression, found {expr!r}")
-                continue
+        ep = f"model.elements[{index[id(el)]}]"
+        for key, text in assign.items():
+            old = el.get(key)      # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
+            if key in el and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
+                pc.add(f"{ep}.{key}", f"expected a number or an expression (a placeholder that "
+                                      f"{path}.assign replaces), found {old!r}")
             el[key] = symbol.sub(member, text)
-        var = {"name": member, **{k: fam[k] for k in ("value", "lower", "upper", "scale") if k in fam}}
+            assigned[f"{ep}.{key}"] = (f"{path}.assign.{key}", member)
+        var = {"name": member, **shared}
         entry = overrides.get(el_name)
         where = path
         if isinstance(entry, dict):
-            var.update({k: v for k, v in entry.items() if k in _MEMBER_KEYS})
             where = f"{path}.members.{el_name}"
+            var.update(_numbers(entry, _MEMBER_KEYS, where, pc) or {})   # a problem: reported, shared kept
         out.append(_checked(var, where, pc))
     return out
 
@@ -127,14 +192,13 @@ def _expand(fam: Any, path: str, model: Any, taken: set, pc: ProblemCollector) -
 def _checked(var: dict, path: str, pc: ProblemCollector) -> dict:
     """The member variable, its start inside its bounds (reported here, under the family's
     path, rather than at an index of the expanded variable list)."""
-    value, lo, up = var.get("value"), var.get("lower", float("-inf")), var.get("upper", float("inf"))
-    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (value, lo, up)):
-        if lo >= up:
-            pc.add(path, f"{var['name']}: lower >= upper ({lo} >= {up}): did you swap the bounds?")
-            return {"name": var["name"], "value": 0.0}
-        if not lo <= value <= up:
-            pc.add(f"{path}.value", f"{var['name']}: {value} is outside the bounds [{lo}, {up}]")
-            return {**var, "value": lo if value < lo else up}
+    value, lo, up = var["value"], var.get("lower", float("-inf")), var.get("upper", float("inf"))
+    if lo >= up:
+        pc.add(path, f"{var['name']}: lower >= upper ({lo} >= {up}): did you swap the bounds?")
+        return {"name": var["name"], "value": 0.0}
+    if not lo <= value <= up:
+        pc.add(f"{path}.value", f"{var['name']}: {value} is outside the bounds [{lo}, {up}]")
+        return {**var, "value": lo if value < lo else up}
     return var
 
 

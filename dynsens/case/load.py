@@ -33,7 +33,7 @@ from .derivative_keys import adjoint_problems, derivative_settings
 from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings
 from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
-from .families import design_with_families
+from .families import design_with_families, fold_assigned_problems
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 from .quantities import parse_quantities
@@ -155,7 +155,8 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     if len(pc.problems) > n_before:
         pc.raise_if_any()
     # families of per-element variables expand into design variables and element keys first
-    design, declared = design_with_families(raw, pc, _design)
+    design, declared, assigned = design_with_families(raw, pc, _design)
+    n_expanded = len(pc.problems)     # later problems at assigned keys are the families'
     # expressions may name every declared variable, even one whose entry has a problem
     # (that problem is reported once, not again at every use)
     table = ParameterTable(declared)
@@ -191,6 +192,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
     if plan is not None and not pc.problems:
         probe = ResponseSet(outputs, factory(), events, recorder=Recorder(quantities) if quantities else None)
         adjoint_problems(plan.method, adjoint_obstacles(plan, probe), pc)
+    fold_assigned_problems(pc, assigned, n_expanded)
     pc.raise_if_any()
     assert model is not None and scheme is not None and plan is not None
     ev = events
@@ -303,9 +305,9 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     newton = NewtonSettings()
     if check_keys(solver, "integrator.solver", allowed("integrator.solver"), pc):
         rtol = read_number(solver.get("rtol", newton.rtol), "integrator.solver.rtol", pc, positive=True)
-        atol = read_number(solver.get("atol", newton.atol), "integrator.solver.atol", pc)
+        atol = read_number(solver.get("atol", newton.atol), "integrator.solver.atol", pc, nonnegative=True)
         mi = solver.get("max_iterations", newton.max_iterations)
-        if not isinstance(mi, int) or mi < 1:
+        if isinstance(mi, bool) or not isinstance(mi, int) or mi < 1:   # YAML true is no count
             pc.add("integrator.solver.max_iterations", f"expected a positive integer, found {mi!r}")
             mi = newton.max_iterations
         if rtol is not None and atol is not None:

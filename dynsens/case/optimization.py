@@ -10,6 +10,7 @@ from typing import Any
 from ..errors import ProblemCollector
 from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
+from .responses_spec import read_number
 
 
 @dataclass(frozen=True)
@@ -54,14 +55,11 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
         name = c.get("response")
         if name not in response_names:
             pc.add(f"{p}.response", f"unknown response {name!r}{did_you_mean(name, response_names)}")
-        lo, up = c.get("lower"), c.get("upper")
-        for key, v in (("lower", lo), ("upper", up)):
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))):
-                pc.add(f"{p}.{key}", f"expected a number, found {v!r}")
-        if lo is None and up is None:
+        # a bound is finite (nan would hold for no value): no bound is a key left out
+        lo, up = (read_number(c[k], f"{p}.{k}", pc) if c.get(k) is not None else None for k in ("lower", "upper"))
+        if c.get("lower") is None and c.get("upper") is None:
             pc.add(p, "give 'upper' (response <= upper) and/or 'lower'")
-        elif lo is not None and up is not None and isinstance(lo, (int, float)) and isinstance(up, (int, float)) \
-                and lo > up:
+        elif lo is not None and up is not None and lo > up:
             pc.add(p, f"lower > upper ({lo} > {up}): did you swap the bounds?")
         cons.append(ConstraintSpec(str(name), lo, up))
     method = spec.get("method", "SLSQP")
@@ -70,9 +68,7 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
     maxiter = spec.get("maxiter", 100)
     if not isinstance(maxiter, int) or isinstance(maxiter, bool) or maxiter < 1:
         pc.add("optimization.maxiter", f"expected a positive integer, found {maxiter!r}")
-    ftol = spec.get("ftol", 1e-6)
-    if isinstance(ftol, bool) or not isinstance(ftol, (int, float)) or ftol <= 0:
-        pc.add("optimization.ftol", f"expected a positive number, found {ftol!r}")
+    ftol = read_number(spec.get("ftol", 1e-6), "optimization.ftol", pc, positive=True)
     if len(pc.problems) > n0:
         return None
-    return OptimizationSpec(str(obj), tuple(cons), method, maxiter, float(ftol))
+    return OptimizationSpec(str(obj), tuple(cons), method, maxiter, float(ftol or 0.0))   # None: returned above

@@ -22,8 +22,10 @@ from .checks import reserved_message
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
-def read_number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:
-    """A plain number (or a constant expression such as '1/3') found at ``path``."""
+def read_number(value: Any, path: str, pc: ProblemCollector, *, positive: bool = False,
+                nonnegative: bool = False) -> float | None:
+    """A plain finite number (or a constant expression such as '1/3') found at ``path``; with
+    ``positive`` it must be > 0, with ``nonnegative`` >= 0."""
     if isinstance(value, str):
         try:
             value = compile_expression(value, set()).evaluate({})
@@ -35,8 +37,9 @@ def read_number(value: Any, path: str, pc: ProblemCollector, *, positive: bool =
         pc.add(path, f"expected a number, found {found}")
         return None
     v = float(value)
-    if not np.isfinite(v) or (positive and v <= 0):
-        pc.add(path, f"expected a {'positive ' if positive else ''}finite number, found {value!r}")
+    if not np.isfinite(v) or (positive and v <= 0) or (nonnegative and v < 0):
+        what = "positive " if positive else "non-negative " if nonnegative else ""
+        pc.add(path, f"expected a {what}finite number, found {value!r}")
         return None
     return v
 

@@ -103,9 +103,9 @@ GENERAL_SECTIONS: dict[str, Section] = {
                default="t_end - t0"),
         )),
     "integrator.solver": Section("integrator.solver", "Newton–Raphson convergence test per block of z.", (
-        _k("rtol", "number", "relative tolerance on the correction", default=1e-10),
-        _k("atol", "number", "absolute tolerance on the correction", default=0.0),
-        _k("max_iterations", "integer", "iterations per step before a step cut", default=25),
+        _k("rtol", "number", "relative tolerance on the correction (> 0)", default=1e-10),
+        _k("atol", "number", "absolute tolerance on the correction (>= 0)", default=0.0),
+        _k("max_iterations", "integer", "iterations per step before a step cut (>= 1)", default=25),
     )),
     "sensitivity": Section("sensitivity", "Design sensitivities: direct differentiation or the adjoint.", (
         _k("enabled", "bool", "compute gradients", default=True),

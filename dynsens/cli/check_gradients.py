@@ -8,24 +8,29 @@ from pathlib import Path
 import click
 
 from ..case.load import load_case
-from ..gradcheck import SCHEMES, check_gradients, to_json, to_markdown
+from ..gradcheck import SCHEMES, STEP_RANGE, check_gradients, step_problem, to_json, to_markdown
 from ..io.paths import atomic_write_text, check_output_path
 from ..partials_audit import audit_json, audit_markdown
 from ..partials_audit import audit_partials as audit_partials_of
 from ..progress import Progress
 from .main import cli
-from .options import (case_argument, overwrite_option, parse_float_list, scheduler_option, set_option,
-                      verbosity_options, workers_option)
+from .options import (FiniteFloat, case_argument, overwrite_option, parse_float_list, scheduler_option,
+                      set_option, verbosity_options, workers_option)
+
+_RTOL = FiniteFloat(0.0)
 
 
 @cli.command("check-gradients")
 @case_argument
 @click.option("--steps", callback=parse_float_list, default="1e-3,1e-4,1e-5,1e-6", show_default=True,
-              help="Relative finite-difference steps h (Δx_j = h·|x_j|).")
+              help="Relative finite-difference steps h (Δx_j = h·|x_j|), comma-separated; each in "
+                   f"[{STEP_RANGE['forward'][0]:g}, 1) for forward and central differences (a smaller step "
+                   f"is round-off), in [{STEP_RANGE['complex'][0]:g}, 1) for complex steps.")
 @click.option("--scheme", type=click.Choice(SCHEMES), default="forward", show_default=True,
               help="Finite-difference scheme of the whole simulation.")
-@click.option("--rtol", type=float, default=None,
-              help="Exit with status 1 unless every gradient agrees within RTOL at its best step.")
+@click.option("--rtol", type=_RTOL, default=None, metavar="RTOL",
+              help=f"Exit with status 1 unless every gradient agrees within RTOL ({_RTOL.expected}) "
+                   "at its best step.")
 @click.option("-o", "--output", "report", type=click.Path(dir_okay=False), default=None,
               help="Report file stem: writes REPORT.md and REPORT.json.")
 @workers_option("2")
@@ -40,6 +45,10 @@ def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: f
                         report: str | None, workers: int | None, scheduler: str | None, audit_partials: bool,
                         overwrite: bool, overrides: tuple[str, ...]) -> None:
     """Compare the semi-analytical gradient of CASE_FILE with finite differences."""
+    for h in steps:     # the accepted range depends on --scheme: checked once both are known
+        why = step_problem(h, scheme)
+        if why:
+            raise click.BadParameter(why, param_hint="'--steps'")
     paths: list[Path] = []
     if report:
         stem = Path(report)

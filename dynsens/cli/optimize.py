@@ -1,6 +1,7 @@
 """``dynsens optimize``: SLSQP on the direct sensitivities, history appended to HDF5 per iteration."""
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
@@ -13,20 +14,21 @@ from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOu
 from ..optimize.summary import decision_summary
 from ..progress import Progress
 from .main import cli
-from .options import case_argument, overwrite_option, scheduler_option, set_option, verbosity_options
+from .options import (FiniteFloat, case_argument, overwrite_option, scheduler_option, seed_option, set_option,
+                      verbosity_options)
 
 
 def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]:
-    """click callback: ('A=3', 'B=4.5') -> {'A': 3.0, 'B': 4.5}."""
+    """click callback: ('A=3', 'B=4.5') -> {'A': 3.0, 'B': 4.5}; every VALUE finite."""
     out: dict[str, float] = {}
     for item in values:
         name, sep, val = item.partition("=")
         try:
-            if not sep or not name.strip():
+            if not sep or not name.strip() or not math.isfinite(float(val)):
                 raise ValueError
             out[name.strip()] = float(val)
         except ValueError:
-            raise click.BadParameter(f"expected NAME=VALUE, found {item!r}") from None
+            raise click.BadParameter(f"expected NAME=VALUE with a finite number VALUE, found {item!r}") from None
     return out
 
 
@@ -84,11 +86,12 @@ def format_verdict(o: StartOutcome) -> str:
               help="Start from this value of a design variable instead of the case's (repeatable).")
 @click.option("--maxiter", type=click.IntRange(min=1), default=None,
               help="SLSQP iteration limit [default: the case's optimization.maxiter].")
-@click.option("--ftol", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="SLSQP tolerance on the scaled objective [default: the case's optimization.ftol].")
+@click.option("--ftol", type=FiniteFloat(0.0), default=None, metavar="FTOL",
+              help="SLSQP tolerance on the scaled objective, a finite number > 0 "
+                   "[default: the case's optimization.ftol].")
 @click.option("--starts", type=click.IntRange(min=1), default=None,
               help="Number of starts: x0, then a Latin hypercube in the bounds [default: 1].")
-@click.option("--seed", type=int, default=None, help="Seed of the Latin hypercube [default: random, stored].")
+@seed_option("the Latin hypercube")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes for several starts [default: min(starts, CPUs)].")
 @scheduler_option

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import sys
 from typing import Any, Callable
 
@@ -24,17 +25,55 @@ def workers_option(default: str) -> Callable:
                              "Ignored with --scheduler.")
 
 
+class FiniteFloat(click.ParamType):
+    """A float option that must be finite and above ``minimum`` (click's FloatRange lets nan
+    through, every comparison with it being false, and inf through an open upper end)."""
+
+    name = "number"
+
+    def __init__(self, minimum: float = 0.0, strict: bool = True):
+        self.minimum, self.strict = minimum, strict
+
+    @property
+    def expected(self) -> str:
+        """What the option takes, for help texts and messages: 'a finite number > 0'."""
+        return f"a finite number {'>' if self.strict else '>='} {self.minimum:g}"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        """The float, or a usage error naming the option, what it takes and what was given."""
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            v = math.nan
+        if not (math.isfinite(v) and (v > self.minimum if self.strict else v >= self.minimum)):
+            self.fail(f"expected {self.expected}, found {value!r}", param, ctx)
+        return v
+
+
 def parse_float_list(ctx: Any, param: Any, value: str | None) -> list[float] | None:
-    """click callback: '1e-3,1e-4' -> [0.001, 0.0001]."""
+    """click callback: '1e-3,1e-4' -> [0.001, 0.0001]; every entry a positive finite number
+    (an empty entry, as in '1e-3,,1e-4', is refused: it is a typo, not a value)."""
     if value is None:
         return None
-    try:
-        out = [float(v) for v in value.split(",") if v.strip()]
-    except ValueError:
-        raise click.BadParameter(f"expected comma-separated numbers, found {value!r}") from None
-    if not out or any(v <= 0 for v in out):
-        raise click.BadParameter(f"expected positive numbers, found {value!r}")
+    out = []
+    for item in value.split(","):
+        try:
+            v = float(item)
+        except ValueError:
+            found = "an empty entry" if not item.strip() else repr(item.strip())
+            raise click.BadParameter(f"expected comma-separated positive finite numbers, found {found} "
+                                     f"in {value!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise click.BadParameter(f"expected comma-separated positive finite numbers, found "
+                                     f"{item.strip()!r} in {value!r}")
+        out.append(v)
     return out
+
+
+def seed_option(what: str) -> Callable:
+    """``--seed N``: a non-negative integer that fits the stored 64-bit attribute."""
+    return click.option("--seed", type=click.IntRange(min=0, max=2 ** 63 - 1), default=None,
+                        help=f"Seed of {what}, an integer >= 0 [default: random, stored].")
 
 
 def compose(*decorators: Callable) -> Callable:

@@ -10,7 +10,7 @@ import numpy as np
 from ..case.load import load_case
 from ..study import format_summary, plot_study, read_study, run_study
 from .main import cli
-from .options import case_argument, overwrite_option, scheduler_option, set_option, workers_option
+from .options import case_argument, overwrite_option, scheduler_option, seed_option, set_option, workers_option
 
 
 @cli.command()
@@ -21,7 +21,7 @@ from .options import case_argument, overwrite_option, scheduler_option, set_opti
               help="lhs:N (Latin hypercube), sobol:N (N = 2^k), grid:AxBx... (points per variable) in the "
                    "case's bounds, or a CSV file with a header of design-variable names. Required unless --resume.")
 @click.option("--gradients", is_flag=True, help="Also compute the design gradients (the case's sensitivity method).")
-@click.option("--seed", type=int, default=None, help="Seed of lhs/sobol [default: random, stored].")
+@seed_option("lhs/sobol")
 @workers_option("the number of CPUs")
 @scheduler_option
 @click.option("--resume", is_flag=True, help="Compute only the designs without a row in OUTPUT.")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import ProblemCollector
+from ...errors import ModelError, ProblemCollector
 from ...case_keys import allowed
 from .._keys import check_keys, did_you_mean
 from ..parameters import ParameterTable
@@ -54,21 +54,11 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     alpha = beta = 0.0
     st = spec.get("stabilization")
     if st is not None and check_keys(st, f"{path}.stabilization", allowed("multibody.stabilization"), problems):
-        for key in ("alpha", "beta"):
-            v = st.get(key, 0.0)
-            if not isinstance(v, (int, float)) or v < 0:
-                problems.add(f"{path}.stabilization.{key}", f"expected a number >= 0 (1/s), found {v!r}")
-        alpha, beta = float(st.get("alpha", 0.0)), float(st.get("beta", 0.0))
+        alpha = setting(st, "alpha", 0.0, f"{path}.stabilization", problems, ">= 0", "(1/s)")
+        beta = setting(st, "beta", 0.0, f"{path}.stabilization", problems, ">= 0", "(1/s)")
     projection = read_projection(spec.get("projection"), f"{path}.projection", problems)
-    scale = spec.get("constraint_scale", 1.0)
-    if not isinstance(scale, (int, float)) or scale <= 0:
-        problems.add(f"{path}.constraint_scale", f"expected a number > 0, found {scale!r}")
-        scale = 1.0
-    drift_limit = spec.get("drift_limit")
-    if drift_limit is not None and (isinstance(drift_limit, bool) or not isinstance(drift_limit, (int, float))
-                                    or drift_limit <= 0):
-        problems.add(f"{path}.drift_limit", f"expected a length > 0 (bound on ‖Φ‖), found {drift_limit!r}")
-        drift_limit = None
+    scale = setting(spec, "constraint_scale", 1.0, path, problems, "> 0")
+    drift_limit = setting(spec, "drift_limit", None, path, problems, "> 0", "(a length: bound on ‖Φ‖)")
     la = spec.get("linear_algebra", "auto")
     if la not in ("auto", "dense", "sparse"):
         problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
@@ -95,10 +85,15 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     if table.nominal is None or problems.problems:   # outside a case, or the design has problems:
         return model                                  # no initial design to analyse
     x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])
+    if table.check(x0):      # an entry without a value there: the loader reports it at its path
+        return model
     try:
         red = analyse(model, x0)
     except InconsistentRedundancy as exc:
         problems.add(f"{path}.joints", str(exc))
+        return None
+    except ModelError as exc:        # poses that overflow: reported with the case, not after it
+        problems.add(f"{path}.bodies", str(exc))
         return None
     if red is None:
         return model
@@ -218,17 +213,29 @@ def _entry_paths(spec: dict, path: str) -> dict[str, Any]:
     return {"joints": joints, "forces": forces, "bodies": f"{path}.bodies"}
 
 
+def setting(spec: dict, key: str, default: Any, path: str, problems: ProblemCollector, rule: str = "",
+            unit: str = "") -> Any:
+    """The number ``spec[key]`` (``default`` when absent): finite and, with ``rule`` '> 0' or
+    '>= 0', in range; otherwise a problem at ``path.key`` and the default."""
+    v = spec.get(key, default)
+    if v is default:
+        return v
+    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and bool(np.isfinite(v))
+    if ok and rule:                  # nan passes no comparison: refused above
+        ok = v > 0 if rule == "> 0" else v >= 0
+    if not ok:
+        problems.add(f"{path}.{key}", f"expected a finite number{' ' + rule if rule else ''}"
+                                      f"{' ' + unit if unit else ''}, found {v!r}")
+        return default
+    return float(v)
+
+
 def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
     a = Assembly()
     if not check_keys(spec, path, allowed("multibody.initial"), rd.problems):
         return a
-    for key, default in (("time", 0.0), ("tolerance", 1e-12)):
-        v = spec.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (key == "tolerance" and v <= 0):
-            rd.problems.add(f"{path}.{key}", f"expected a {'positive ' if key == 'tolerance' else ''}"
-                                             f"number, found {v!r}")
-    a.t0 = float(spec["time"]) if isinstance(spec.get("time"), (int, float)) else 0.0
-    a.tol = float(spec["tolerance"]) if isinstance(spec.get("tolerance"), (int, float)) else 1e-12
+    a.t0 = setting(spec, "time", 0.0, path, rd.problems)
+    a.tol = setting(spec, "tolerance", 1e-12, path, rd.problems, "> 0")
     one = const_coef(1.0)
     for i, h in enumerate(spec.get("hold", []) or []):
         hp = f"{path}.hold[{i}]"

@@ -49,6 +49,7 @@ Array = np.ndarray
 RANK_TOL = 1e-8          # singular values ≤ RANK_TOL σ_max count as zero at the assembled pose
 SPAN_TOL = 1e-6          # a row this close (relative) to the kept rows' span is dependent
 RUN_TOL = 1e-3           # during the run: a dropped row this far off the span has become independent
+HUGE_POSITION = 1e150    # beyond it squared lengths overflow (1.8e308): no constraint equation is finite
 
 
 @dataclass
@@ -84,6 +85,28 @@ def least_squares_pose(model: "MultibodyModel", params: Any, iterations: int = 6
         if np.linalg.norm(dq) <= 1e-14 * scale:
             break
     return q
+
+
+def check_poses(model: "MultibodyModel", params: Any) -> None:
+    """ModelError naming the bodies whose given pose is not finite or so large (|r| > HUGE_POSITION)
+    that the constraint equations overflow, or the joints whose equations at the given poses are
+    not finite (an overflowing marker or joint point): the rank of J_Φ has no meaning there."""
+    q = np.real(guess(model, params))
+    t0 = model.assembly.t0
+    with np.errstate(all="ignore"):
+        J = np.real(jacobian_rows(model.eqs, q, params, t0))
+        phi = np.real(model.constraint_values(_ctx(q, params, t0), model.eqs)[0][:, 0])
+    bad = [f"body '{b.name}' at position [{', '.join(f'{v:.3g}' for v in q[7 * k:7 * k + 3])}]"
+           for k, b in enumerate(model.bodies)
+           if not (np.all(np.isfinite(q[7 * k:7 * k + 7])) and np.max(np.abs(q[7 * k:7 * k + 3])) <= HUGE_POSITION)]
+    if not bad:
+        rows = np.flatnonzero(~(np.isfinite(phi) & np.all(np.isfinite(J), axis=1)))
+        bad = [f"joint '{j}'" for j in dict.fromkeys(model.eq_owner[i].split(".")[0] for i in rows)]
+    if bad:
+        raise ModelError(
+            f"the constraint equations at the initial configuration are not finite (they overflow) for "
+            f"{', '.join(bad)}: give body positions of magnitude below {HUGE_POSITION:g}, and markers "
+            "and joint points of the mechanism's size")
 
 
 def _rank(J: Array) -> int:
@@ -135,8 +158,10 @@ def smallest_dependent_joints(model: "MultibodyModel", J: Array) -> list[str]:
 def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
     """Redundant joint equations at the initial design x (module docstring); None when J_Φ has
     full rank there or the mechanism cannot be assembled (the run then reports why).
-    Raises InconsistentRedundancy for dependent equations that cannot all hold."""
+    Raises InconsistentRedundancy for dependent equations that cannot all hold, ModelError for
+    given poses whose equations overflow (:func:`check_poses`)."""
     params = model.parameters(np.asarray(x, float))
+    check_poses(model, params)
     try:
         q = least_squares_pose(model, params)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError):
