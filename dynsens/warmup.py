@@ -3,11 +3,12 @@
 The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on its first use on a
 machine, real and complex separately (≈ 25 s and ≈ 8 s on 2 cores), and so is the compiled step
 that calls it (``models/multibody/compiled_step.py``, ≈ 30 s; one signature for every mechanism);
-all are cached on disk beside the package.  ``make setup`` runs this module so that a user's first ``dynsens simulate`` takes as long
-as the second, and so that no reported timing includes compilation.  It runs a short piece
-(``--steps`` steps) of each multibody case with forward partials (real arithmetic), complex
-partials and a complex-step run of the whole simulation (complex arithmetic), which reaches every
-compiled function with every argument type the runs use.
+all are cached on disk beside the package.  ``make setup`` runs this module so that a user's
+first ``dynsens simulate`` takes as long as the second, and so that no reported timing includes
+compilation.  It runs a short piece (``--steps`` steps) of each multibody case with forward
+partials (real arithmetic), complex partials and a complex-step run of the whole simulation
+(complex arithmetic), which reaches every compiled function with every argument type the runs
+use.
 
 Usage: python -m dynsens.warmup [CASE.yaml ...] [--steps N]   (default: the shipped mechanisms)
 """
