@@ -100,7 +100,7 @@ class StepSolver:
         self._present = [k for k, n in enumerate((t.n_q, t.n_lam, t.n_p)) if n]
         self._starts = np.array([self._blocks[k].start for k in self._present], dtype=np.intp)
         self._present_array = np.array(self._present, dtype=np.intp)
-        self._scales = np.zeros(3)   # largest block norms of z so far
+        self._scales = [0.0, 0.0, 0.0]   # largest block norms of z so far
         # the model's compiled step, when it has one for real runs (None: the iteration in Python)
         offer = getattr(model, "compiled_step", None)     # (a model outside the Model base may lack it)
         self._compiled_step = offer(newton, refactor) if offer is not None else None
@@ -143,14 +143,17 @@ class StepSolver:
         compiled = None
         if self._compiled_step is not None and coeffs != (0.0, 0.0, 0.0):
             compiled = self._compiled_step(t, pred, params, coeffs)
-        args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton,
-                self.sensitivities, self._scales, self._present_array, history)
+        args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities)
         if compiled is None:
             ops = _PythonStep(self, t, pred, params, coeffs, correct)
-            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = newton_iterations(ops, z0.copy(), *args)
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = newton_iterations(
+                ops, z0.copy(), *args, self._scales, self._present, history)
             lin, factor = lf if lf is not None else (None, None)
         else:
-            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = compiled.iterate(z0.copy(), *args)
+            scales = np.array(self._scales)      # (compiled: typed arrays)
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = compiled.iterate(
+                z0.copy(), *args, scales, self._present_array, history)
+            self._scales = scales.tolist()
             s = compiled.state(s)
             lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters)
             c = self.counters
@@ -248,11 +251,11 @@ class StepSolver:
         """What the next steps' convergence decisions depend on (block scales, the last
         iteration matrix of the round-off test, the factor kind): a run restarted from a
         checkpoint with it repeats the same iterations bit for bit."""
-        return self._scales.tolist(), self._S, self._dense_general
+        return list(self._scales), self._S, self._dense_general
 
     def restore(self, snap: tuple[list[float], Any, bool]) -> None:
         """Return to a :meth:`snapshot`."""
-        self._scales, self._S, self._dense_general = np.array(snap[0]), snap[1], snap[2]
+        self._scales, self._S, self._dense_general = list(snap[0]), snap[1], snap[2]
 
     def solve_sensitivity(self, factor: Factor, pseudo_load: np.ndarray) -> np.ndarray:
         """∇z (n_z, m) from S ∇z = −P with the factor of the converged step."""

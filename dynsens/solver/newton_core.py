@@ -76,7 +76,7 @@ def real_norm(v: np.ndarray) -> float:
     """2-norm of the real part, scaled so that huge entries do not overflow the sum of squares."""
     if not v.size:
         return 0.0
-    r = np.ascontiguousarray(v.real)
+    r = v.real
     n = math.sqrt(float(r @ r))
     if 0.0 < n < 1e150:             # the common case: no overflow or underflow to guard
         return n
@@ -87,15 +87,16 @@ def real_norm(v: np.ndarray) -> float:
 
 
 @register_jitable
-def within(ops: Any, z: np.ndarray, dz: np.ndarray, rtol: float, atol: float, scales: np.ndarray,
-           present: np.ndarray) -> bool:
-    """‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol for every present block b; scales (3,) holds
-    the largest block norms of z so far in the run and is updated here.  A block that has been
+def within(ops: Any, z: np.ndarray, dz: np.ndarray, rtol: float, atol: float, scales: Any,
+           present: Any) -> bool:
+    """‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol for every present block b (present: the
+    indices k of the blocks; a list, or an array when compiled); scales (3,) holds the largest
+    block norms of z so far in the run and is updated here.  A block that has been
     exactly zero so far (accelerations of a static start) has no scale of its own: its
     correction is measured against the whole unknown vector."""
     ok = True
     zn, dzn = step_block_norms(ops, z, dz)
-    for i in range(present.shape[0]):
+    for i in range(len(present)):
         k = present[i]
         scales[k] = max(scales[k], zn[i])
         ref = max(zn[i], scales[k]) if scales[k] > 0 else real_norm(z)
@@ -121,11 +122,11 @@ def stagnated(history: np.ndarray, n: int, z: np.ndarray, dz: np.ndarray, rtol: 
 # ----------------------------------------------------------------------------- the iteration
 @register_jitable
 def newton_iterations(ops: Any, z: np.ndarray, rtol: float, atol: float, reuse_tol: float,
-                      max_iterations: int, newton: bool, sensitivities: bool, scales: np.ndarray,
-                      present: np.ndarray, history: np.ndarray) -> tuple:
+                      max_iterations: int, newton: bool, sensitivities: bool, scales: Any,
+                      present: Any, history: np.ndarray) -> tuple:
     """Newton-Raphson on F_R(z) = 0 from the guess z (n_z,), with the tolerances of
-    :class:`~dynsens.solver.newton.NewtonSettings`; scales and history (max_iterations,) are
-    updated in place.
+    :class:`~dynsens.solver.newton.NewtonSettings`; scales and present as in :func:`within`,
+    updated in place as is history (max_iterations,).
 
     Returns (status, iterations, z, dz, s, R, lf, fresh, residual_evaluations,
     linearizations): the status code, the iterations the outcome counts, the last unknowns and
