@@ -181,3 +181,22 @@ def test_complex_runs_take_the_python_iteration():
     real = model.parameters(case.x0)
     q0, qd0, p0 = model.initial_state(real)
     assert make(0.002, Prediction(q0, qd0, p0, 0.0, 0.0), real, (1e-6, 1e-3, 1e-3)) is not None
+
+
+def test_the_cache_key_follows_every_source_compiled_into_the_step(monkeypatch):
+    """numba checks only the compiled function's own file: the step's cache entries are keyed by a
+    hash of every source it inlines, so an edit to a force law or to the iteration selects a new
+    entry (and a source that cannot be read falls back to the version, without failing)."""
+    from dynsens.models.multibody import compiled_step
+    stamp = compiled_step._sources_stamp()
+    original = Path.read_bytes
+    for edited in ("forces.py", "newton_core.py", "compiled_linearization.py", "newmark.py"):
+        with monkeypatch.context() as m:
+            m.setattr(Path, "read_bytes", lambda self, f=edited: original(self) + (b"#" if self.name == f else b""))
+            assert compiled_step._sources_stamp() != stamp, edited
+    with monkeypatch.context() as m:
+        def unreadable(self: Path) -> bytes:
+            raise OSError("no source")
+        m.setattr(Path, "read_bytes", unreadable)
+        assert len(compiled_step._sources_stamp()) == 64
+    assert compiled_step._sources_stamp() == stamp

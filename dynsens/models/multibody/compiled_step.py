@@ -230,8 +230,12 @@ def _sources_stamp() -> str:
     from ...integrators import newmark
     from . import forces, hydraulics
     h = hashlib.sha256()
+    from ... import __version__
     for module in (core, newmark, cc, clin, forces, hydraulics, sys.modules[__name__]):
-        h.update(Path(inspect.getfile(module)).read_bytes())
+        try:
+            h.update(Path(inspect.getfile(module)).read_bytes())
+        except OSError:      # no source file to read (a frozen or zipped install): the version
+            h.update(f"{module.__name__} {__version__}".encode())
     return h.hexdigest()
 
 
