@@ -17,6 +17,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from ._jit import register_jitable
 from .banded import dense_band_plan, sparse_plan
 
 # plans kept per pattern (see .banded): the structure of S is analysed once per run
@@ -68,6 +69,22 @@ class Counters:
 PIVOT_RATIO = 1e-14
 
 
+@register_jitable
+def all_finite(a: np.ndarray) -> bool:
+    """Whether every entry of a is finite: one reduction first (a NaN or Inf entry makes the sum
+    non-finite; so may an overflowing sum of finite entries: then the entries are looked at)."""
+    return bool(np.isfinite(a.sum())) or bool(np.all(np.isfinite(a)))
+
+
+@register_jitable
+def pivot_test(udiag: np.ndarray) -> tuple[bool, float]:
+    """(whether the factor with U's diagonal udiag (not empty) is regular, min |pivot| / max
+    |pivot|): regular when the ratio exceeds PIVOT_RATIO."""
+    a = np.abs(udiag)
+    lo, scale = a.min(), a.max()
+    return not (lo <= PIVOT_RATIO * scale or scale == 0.0), lo / max(scale, 1e-300)
+
+
 class Factor:
     """A factorized square matrix; ``solve(rhs)`` for rhs (n,) or (n, k).
 
@@ -108,7 +125,7 @@ class Factor:
         if band is not None:
             # the stored entries (a dense S has every nonzero, NaN and Inf too, inside its band)
             entries = band.entries(S.data if plan is not None else S)
-            if not np.isfinite(entries.sum()) and not np.all(np.isfinite(entries)):
+            if not all_finite(entries):
                 raise SingularMatrixError("matrix has non-finite entries")
             self._kind = "banded"
             self._lu = band.factor(entries)
@@ -124,9 +141,7 @@ class Factor:
             udiag = self._lu.U.diagonal()
         else:
             self._kind = "dense"
-            # one reduction: a NaN or Inf entry makes the sum non-finite (so may an overflowing
-            # sum of finite entries: then look at the entries)
-            if not np.isfinite(S.sum()) and not np.all(np.isfinite(S)):
+            if not all_finite(S):
                 raise SingularMatrixError("matrix has non-finite entries")
             # LAPACK getrf/getrs directly: scipy's lu_factor/lu_solve wrappers cost more
             # than the factorization itself for the small matrices of mechanisms
@@ -138,10 +153,9 @@ class Factor:
             self._complex = lu.dtype.kind == "c"
             udiag = lu.diagonal()
         if udiag.size:
-            a = np.abs(udiag)
-            lo, scale = np.minimum.reduce(a), np.maximum.reduce(a)
-            if lo <= PIVOT_RATIO * scale or scale == 0.0:
-                raise SingularMatrixError(f"pivot ratio {lo / max(scale, 1e-300):.1e}")
+            regular, ratio = pivot_test(udiag)
+            if not regular:
+                raise SingularMatrixError(f"pivot ratio {ratio:.1e}")
 
     @classmethod
     def from_dense_lu(cls, lu: np.ndarray, piv: np.ndarray, counters: Counters) -> "Factor":

@@ -29,7 +29,8 @@ from ..integrators.newmark import Prediction
 from ..models.base import Linearization, Model, StepState
 from .linalg import Counters, Factor, SingularMatrixError, abs_product
 from .newton_core import (AT_ROUNDOFF, CONVERGED, NOT_FINITE, ROUNDOFF, ROUNDOFF_BOUND_MARGIN, SINGULAR,
-                          SOLVED_LINEAR, newton_iterations, real_norm as _real_norm)
+                          SOLVED_LINEAR, above_roundoff_bound, newton_iterations, real_norm as _real_norm,
+                          within_roundoff)
 
 __all__ = ["ROUNDOFF", "ROUNDOFF_BOUND_MARGIN", "NewtonSettings", "StepOutcome", "StepSolver"]
 
@@ -212,15 +213,12 @@ class StepSolver:
         S = self._S
         if S is None:
             return False
-        # the test implies ‖R‖₂ ≤ c·ε·‖|S| |z|‖₂ ≤ c·ε·‖S‖_F ‖z‖₂: a residual above that bound
-        # (with a margin for the bound's own rounding) fails it without forming |S| |z|.  Only
-        # where the stored entries are the matrix's own (dense, or sparse without duplicates)
+        # the quick rejection only where the stored entries are the matrix's own (dense, or
+        # sparse without duplicates)
         if not sp.issparse(S) or getattr(S, "has_canonical_format", False):
-            data = (S.data if sp.issparse(S) else S.reshape(-1)).real
-            if rnorm > ROUNDOFF_BOUND_MARGIN * ROUNDOFF * _real_norm(data) * _real_norm(z):
+            if above_roundoff_bound(rnorm, (S.data if sp.issparse(S) else S.reshape(-1)).real, z):
                 return False
-        terms = abs_product(S, np.abs(z.real))
-        return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
+        return within_roundoff(R, abs_product(S, np.abs(z.real)))
 
     def _nonfinite_message(self, R: np.ndarray, s: StepState, t: float, step: int, it: int) -> str:
         """Say where a non-finite residual comes from: an overflowing (diverging) coordinate,

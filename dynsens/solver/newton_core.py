@@ -21,11 +21,7 @@ from typing import Any
 
 import numpy as np
 
-try:    # the tests and the iteration compile into a model family's step (numba's overloads)
-    from numba.extending import register_jitable
-except ImportError:  # pragma: no cover - numba is a dependency; without it, Python only
-    def register_jitable(fn: Any) -> Any:
-        return fn
+from ._jit import register_jitable
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
 ROUNDOFF = 1e-13
@@ -84,6 +80,21 @@ def real_norm(v: np.ndarray) -> float:
     if big == 0.0 or not math.isfinite(big):
         return big
     return big * float(np.linalg.norm(r / big))
+
+
+@register_jitable
+def above_roundoff_bound(rnorm: float, entries: np.ndarray, z: np.ndarray) -> bool:
+    """The round-off test's quick rejection: |R_i| ≤ c·ε·(|S| |z|)_i for every row implies
+    ‖R‖₂ ≤ c·ε·‖S‖_F ‖z‖₂, so a residual norm rnorm above that bound (with a margin for the
+    bound's own rounding) fails the test without forming |S| |z|; entries: the stored entries of
+    S when each is the matrix's own (dense, or sparse without duplicates)."""
+    return rnorm > ROUNDOFF_BOUND_MARGIN * ROUNDOFF * real_norm(entries) * real_norm(z)
+
+
+@register_jitable
+def within_roundoff(R: np.ndarray, terms: np.ndarray) -> bool:
+    """|Re R_i| ≤ c·ε·terms_i for every row i, terms = |Re S| |Re z| (Oettli–Prager)."""
+    return bool(np.all(np.abs(R.real) <= ROUNDOFF * terms))
 
 
 @register_jitable

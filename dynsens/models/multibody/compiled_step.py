@@ -26,8 +26,7 @@ import numpy as np
 from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
-from ...solver.linalg import PIVOT_RATIO, Counters, Factor
-from ...solver.newton_core import ROUNDOFF, ROUNDOFF_BOUND_MARGIN
+from ...solver.linalg import Counters, Factor, all_finite, pivot_test
 from ..base import StepState
 from . import compiled as cc
 from . import compiled_linearization as clin
@@ -104,7 +103,6 @@ def _register() -> None:
     ensure_lapack()
     gesv = _LAPACK().numba_xgesv(types.float64)
     kind = np.int8(ord("d"))   # LAPACK type character, as numba.np.linalg passes it
-    real_norm = cc.jit(core.real_norm)
     correct = cc.inline(correct_arrays)
 
     @overload(core.step_correct)
@@ -173,19 +171,16 @@ def _register() -> None:
             piv = np.zeros(n, np.int32)
             x = rhs.copy()
             test = np.zeros(3)
-            if not np.isfinite(S.sum()) and not np.all(np.isfinite(S)):
+            if not all_finite(S):
                 test[0] = NON_FINITE_ENTRIES
                 return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
             info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
             if info > 0:
                 test[0], test[1] = ZERO_PIVOT, info
                 return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
-            lo, scale = np.inf, 0.0
-            for i in range(n):
-                a = abs(lu[i, i])
-                lo, scale = min(lo, a), max(scale, a)
-            if lo <= PIVOT_RATIO * scale or scale == 0.0:
-                test[0], test[2] = SMALL_PIVOT, lo / max(scale, 1e-300)
+            regular, ratio = pivot_test(np.diag(lu))
+            if not regular:
+                test[0], test[2] = SMALL_PIVOT, ratio
                 return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
             return True, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
         return impl
@@ -199,10 +194,9 @@ def _register() -> None:
             S = lf[4]
             if S.size == 0:
                 return False
-            if rnorm > ROUNDOFF_BOUND_MARGIN * ROUNDOFF * real_norm(S.ravel()) * real_norm(z):
+            if core.above_roundoff_bound(rnorm, S.ravel(), z):
                 return False
-            terms = np.abs(S) @ np.abs(z)
-            return bool(np.all(np.abs(R) <= ROUNDOFF * terms))
+            return core.within_roundoff(R, np.abs(S) @ np.abs(z))
         return impl
 
     @overload(core.step_block_norms)
@@ -215,7 +209,7 @@ def _register() -> None:
             zn, dzn = np.empty(k), np.empty(k)
             for i in range(k):
                 a, b = ops.blocks[i, 0], ops.blocks[i, 1]
-                zn[i], dzn[i] = real_norm(z[a:b]), real_norm(dz[a:b])
+                zn[i], dzn[i] = core.real_norm(z[a:b]), core.real_norm(dz[a:b])
             return zn, dzn
         return impl
 
