@@ -102,7 +102,7 @@ def _register() -> None:
 
     ensure_lapack()
     gesv = _LAPACK().numba_xgesv(types.float64)
-    kind = np.int8(ord("d"))   # LAPACK type character, as numba.np.linalg passes it
+    kind = ord("d")   # LAPACK's type character (passed as int8, as numba.np.linalg does)
     correct = cc.inline(correct_arrays)
 
     @overload(core.step_correct)
@@ -170,19 +170,18 @@ def _register() -> None:
             lu = S.T.copy()                  # S in column-major order: LAPACK's
             piv = np.zeros(n, np.int32)
             x = rhs.copy()
-            test = np.zeros(3)
+            test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
             if not all_finite(S):
                 test[0] = NON_FINITE_ENTRIES
-                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
-            info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
-            if info > 0:
-                test[0], test[1] = ZERO_PIVOT, info
-                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
-            regular, ratio = pivot_test(np.diag(lu))
-            if not regular:
-                test[0], test[2] = SMALL_PIVOT, ratio
-                return False, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
-            return True, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
+            else:
+                info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
+                if info > 0:
+                    test[0], test[1] = ZERO_PIVOT, info
+                else:
+                    regular, ratio = pivot_test(np.diag(lu))
+                    if not regular:
+                        test[0], test[2] = SMALL_PIVOT, ratio
+            return test[0] == REGULAR, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
         return impl
 
     @overload(core.step_at_roundoff)
