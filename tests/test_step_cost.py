@@ -1,7 +1,8 @@
 """The shortcuts that cut a step's cost give the numbers of the plain forms they replace, bit
 for bit: the element maps with their transpose kept (x @ G), the round-off terms |Re S| |z|
 summed entry by entry, the spring state a residual leaves for the tangent at the same state,
-and the iteration matrix on a union pattern its blocks share."""
+the iteration matrix on a union pattern its blocks share, and a dense iteration matrix formed
+at its blocks' pattern only."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 import dynsens
-from dynsens.models.base import Linearization, StepState
+from dynsens.models.base import PATTERN_SHARE, Linearization, StepState
 from dynsens.models.sparse_assembly import RightProduct
 from dynsens.solver.linalg import abs_product
 
@@ -114,6 +115,29 @@ def test_iteration_matrix_on_the_shared_pattern_equals_the_sparse_sums() -> None
     S = lin2.iteration_matrix(2.5e-7, 5e-4, 5e-4, n_q=n)
     generic = Linearization(lin2.R_z, lin2.R_q, lin2.R_qd).iteration_matrix(2.5e-7, 5e-4, 5e-4, n_q=n)
     assert np.array_equal(S.toarray(), generic.toarray())
+
+
+def test_dense_iteration_matrix_on_the_pattern_equals_the_whole_matrix_sums() -> None:
+    """Chain stored dense at 100 DOFs: its linearization carries the pattern of its blocks, S is
+    formed at those positions only, and equals the sums over the whole matrices bit for bit,
+    real and complex, with either coefficient zero."""
+    d = duffing_chain(100, t_end=0.01)
+    d["model"]["linear_algebra"] = "dense"
+    case = dynsens.load_case_dict(d)
+    model = case.model
+    n = model.traits.n_q
+    rng = np.random.default_rng(4)
+    empty = np.zeros(0)
+    for x in (case.x0, case.x0 + 1e-20j * np.arange(1, 5)):
+        params = model.parameters(x)
+        s = StepState(1e-2 * rng.standard_normal(n), rng.standard_normal(n), rng.standard_normal(n),
+                      empty, empty, empty)
+        lin = model.linearize(0.0, s, params)
+        assert lin.dense_pattern is not None and PATTERN_SHARE * lin.dense_pattern.size < n * n
+        for coeffs in ((2.5e-7, 5e-4, 5e-4), (1e-6, 0.0, 0.0), (0.0, 1e-3, 0.0), (0.0, 0.0, 0.0)):
+            S = lin.iteration_matrix(*coeffs, n_q=n)
+            whole = Linearization(lin.R_z, lin.R_q, lin.R_qd).iteration_matrix(*coeffs, n_q=n)
+            assert S.dtype == whole.dtype and np.array_equal(S, whole), coeffs
 
 
 def test_kept_constant_is_never_trusted_for_a_writable_array() -> None:

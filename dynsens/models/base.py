@@ -80,6 +80,12 @@ class Traits:
         return self.n_q + self.n_lam + self.n_p
 
 
+# a dense linearization with a known pattern forms S at the pattern's positions only when they
+# are fewer than 1/PATTERN_SHARE of the entries (measured on the chain's band: the whole-matrix
+# sums are cheaper below about 50 × 50, half the time at 100 × 100; BENCHMARKS.md)
+PATTERN_SHARE = 16
+
+
 @dataclass(frozen=True)
 class Linearization:
     """Partial derivatives of F_R at one state.  ``None`` marks a structurally zero block.
@@ -99,6 +105,9 @@ class Linearization:
     def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Matrix:
         """S = dF_R/dz when q = q_pred + c_q q̈, q̇ = q̇_pred + c_qd q̈, p = p_pred + c_p ṗ (method.md §3)."""
         n_z = self.R_z.shape[0]
+        pattern = self.dense_pattern
+        if pattern is not None and PATTERN_SHARE * pattern.size < n_z * n_z and self.R_p is None and n_q == n_z:
+            return self._iteration_matrix_on_pattern(c_q, c_qd, pattern)
         coupled_q = None
         if self.R_q is not None and c_q != 0.0:
             coupled_q = c_q * self.R_q
@@ -130,6 +139,23 @@ class Linearization:
         if coupled_p is not None:
             S[:, n_z - n_p:] += coupled_p
         return S
+
+    def _iteration_matrix_on_pattern(self, c_q: float, c_qd: float, pattern: np.ndarray) -> Array:
+        """:meth:`iteration_matrix` of dense blocks that are zero outside the flat positions
+        ``pattern``: the same sums (c_q R_q + c_qd R_qd) + R_z, formed at those positions only."""
+        coupled = None
+        if self.R_q is not None and c_q != 0.0:
+            coupled = c_q * self.R_q.take(pattern)
+        if self.R_qd is not None and c_qd != 0.0:
+            term = c_qd * self.R_qd.take(pattern)
+            coupled = term if coupled is None else coupled + term
+        if coupled is None:
+            return self.R_z
+        values = coupled + self.R_z.take(pattern)
+        n = self.R_z.shape[0]
+        S = np.zeros(n * n, values.dtype)
+        S[pattern] = values
+        return S.reshape(n, n)
 
     def state_product(self, dq: Array, dqd: Array, dp: Array) -> Array | None:
         """R_q dq + R_qd dqd + R_p dp for vectors or (n, m) matrices; None when all blocks are zero."""

@@ -137,9 +137,14 @@ class StructuralMatrices:
             r = np.concatenate([np.ravel(x) for x in rows])
             c = np.concatenate([np.ravel(x) for x in cols])
             keep = (r < n) & (c < n)
-            plan = self._assembly_plans[site] = (keep, r[keep], c[keep], r[keep] * n + c[keep])
+            # None: every entry is kept (no grounded ones), and the values need no selection
+            plan = self._assembly_plans[site] = (None if keep.all() else keep, r[keep], c[keep],
+                                                 r[keep] * n + c[keep])
         keep, r, c, flat = plan
-        v = np.concatenate([np.ravel(x) for x in vals])[keep]
+        # the arrays' own ravel: np.ravel's dispatch costs more than the copy at these sizes
+        v = np.concatenate([x.ravel() if isinstance(x, np.ndarray) else np.ravel(x) for x in vals])
+        if keep is not None:
+            v = v[keep]
         if self.traits.sparse:
             if site not in self._patterns:
                 self._patterns[site] = PatternAssembly(n, r, c)
