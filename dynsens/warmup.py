@@ -1,16 +1,18 @@
-"""Compile the multibody kernels once, into numba's on-disk cache: ``python -m dynsens.warmup``.
+"""Compile the compiled kernels and steps once, into numba's on-disk cache: ``python -m dynsens.warmup``.
 
 The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on its first use on a
 machine, real and complex separately (≈ 25 s and ≈ 8 s on 2 cores), and so is the compiled step
-that calls it (``models/multibody/compiled_step.py``, ≈ 30 s; one signature for every mechanism);
-all are cached on disk beside the package.  ``make setup`` runs this module so that a user's
-first ``dynsens simulate`` takes as long as the second, and so that no reported timing includes
-compilation.  It runs a short piece (``--steps`` steps) of each multibody case with forward
-partials (real arithmetic), complex partials and a complex-step run of the whole simulation
-(complex arithmetic), which reaches every compiled function with every argument type the runs
-use.
+that calls it (``models/multibody/compiled_step.py``, ≈ 30 s; one signature for every mechanism)
+and the compiled step of spring networks (``models/structural_step.py``, ≈ 10 s; one signature
+for every network); all are cached on disk beside the package.  ``make setup`` runs this module
+so that a user's first ``dynsens simulate`` takes as long as the second, and so that no reported
+timing includes compilation.  It runs a short piece (``--steps`` steps) of each multibody case
+with forward partials (real arithmetic), complex partials and a complex-step run of the whole
+simulation (complex arithmetic), which reaches every compiled function with every argument type
+the runs use, and of the shipped Duffing chain on the sparse path (the spring networks' step).
 
-Usage: python -m dynsens.warmup [CASE.yaml ...] [--steps N]   (default: the shipped mechanisms)
+Usage: python -m dynsens.warmup [CASE.yaml ...] [--steps N]   (default: the shipped mechanisms
+and the sparse chain)
 """
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ import yaml
 
 from .case.load import Case, load_case, load_case_dict
 from .models.multibody.model import MultibodyModel
+from .models.structural import StructuralModel
+from .models.structural_step import serves
 from .simulation import run_case
 
 # the shipped mechanisms (together they use every joint, force law and driver the kernel knows,
@@ -38,11 +42,19 @@ def warm_case(case: Case, steps: int = 150) -> float:
     that no reported time includes compilation; with a warm cache it costs a fraction of a second.
     """
     from .models.multibody import compiled
-    if not isinstance(case.model, MultibodyModel) or not compiled.enabled():
+    if not compiled.enabled():
         return 0.0
     t0 = time.perf_counter()
     raw = yaml.safe_load(case.text)
     over = [f"integrator.t_end={case.plan.t0 + steps * case.plan.dt!r}", "output.history=none"]
+    if isinstance(case.model, StructuralModel):
+        # the spring networks' compiled step: real runs only (complex ones iterate in Python)
+        if serves(case.model):
+            run_case(load_case_dict(raw, case.source, over))
+            return time.perf_counter() - t0
+        return 0.0
+    if not isinstance(case.model, MultibodyModel):
+        return 0.0
     for partials in ("forward", "complex"):
         run_case(load_case_dict(raw, case.source, over + [f"sensitivity.partials={partials}"]))
     short = load_case_dict(raw, case.source, over)
@@ -67,7 +79,8 @@ def main(argv: list[str] | None = None) -> None:
     """Command-line entry point."""
     ap = argparse.ArgumentParser(prog="python -m dynsens.warmup", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("cases", nargs="*", type=Path, help="case files (default: the shipped mechanisms)")
+    ap.add_argument("cases", nargs="*", type=Path,
+                    help="case files (default: the shipped mechanisms and the sparse chain)")
     ap.add_argument("--steps", type=int, default=150, help="steps of each run (default 150)")
     args = ap.parse_args(argv)
     from .models.multibody import compiled
@@ -79,6 +92,11 @@ def main(argv: list[str] | None = None) -> None:
         print("no case files found: pass the cases to warm")
         return
     total = warm(list(paths), args.steps)
+    if not args.cases:      # the spring networks' step, on the shipped chain made sparse
+        t0 = time.perf_counter()
+        warm_case(load_case(CASES_DIR / "duffing_chain.yaml", ["model.linear_algebra=sparse"]), args.steps)
+        total += time.perf_counter() - t0
+        print(f"warmed duffing_chain.yaml on the sparse path: {time.perf_counter() - t0:.1f} s", flush=True)
     print(f"numba cache warm ({total:.1f} s); later runs start at once", flush=True)
 
 

@@ -9,9 +9,11 @@ split by entry points, with inclusive times:
   iteration-matrix assembly, outputs, compiled kernels beneath them);
 * orchestration — the rest of the run (the time loop, Newton's bookkeeping, predictors and
   correctors, responses, sensitivity recursion bookkeeping);
-* compiled step — a mechanism's Newton iterations when they run compiled
-  (``dynsens/models/multibody/compiled_step.py``: model arithmetic and LAPACK inside one call,
-  with the step's Python set-up); not part of the model-arithmetic column.
+* compiled step — a step's Newton iterations when they run compiled (a mechanism's,
+  ``dynsens/models/multibody/compiled_step.py``, or a spring network's,
+  ``dynsens/models/structural_step.py``: model arithmetic and the factorization inside one
+  call, with the step's Python set-up and the conversion of its results, the linearization the
+  sensitivities read included); not part of the model-arithmetic column.
 
 Profiling inflates per-call overhead (orchestration most), so the split is indicative; the
 totals per step are those of the profiled run.  To compare trees, run this file with
@@ -35,7 +37,8 @@ import yardstick_chain as ys  # noqa: E402
 
 LINALG = (os.path.join("dynsens", "solver", "linalg.py"), os.path.join("dynsens", "solver", "banded.py"))
 MODELS = os.path.join("dynsens", "models") + os.sep
-COMPILED_STEP = os.path.join("dynsens", "models", "multibody", "compiled_step.py")
+COMPILED_STEP = (os.path.join("dynsens", "models", "multibody", "compiled_step.py"),
+                 os.path.join("dynsens", "models", "structural_step.py"))
 
 
 def _inside(filename: str, where: tuple[str, ...] | str) -> bool:

@@ -30,6 +30,7 @@ from .beams3d import Beam3DSet
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
+from .spring_law import spring_law
 from .structural_diagnostics import StructuralDiagnostics
 from .structural_matrices import StructuralMatrices
 from .structural_outputs import StructuralOutputs
@@ -245,17 +246,12 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         def pick(key: str) -> np.ndarray:
             return params[key] if springs is None else params[key][..., springs]
         k1 = pick("k1")
-        f = k1 * delta
         if self.traits.linear:
-            return f, (k1 + 0 * delta if tangent else None)
-        k2, k3 = pick("k2"), pick("k3")
-        # f = k1 δ + k2 δ² + k3 δ³ and k_t = k1 + 2 k2 δ + 3 k3 δ², δ² formed once; δ³ as δ²·δ:
-        # numpy's δ ** 3 calls pow(), ≈ 47 ns an entry, 60× a product (1 ulp apart at most)
-        d2 = delta ** 2
-        f = f + k2 * d2 + k3 * (d2 * delta)
-        # k1 + 2 k2 δ equals (k1 + 0·δ) + 2 k2 δ for finite δ (a non-finite δ is caught anyway)
-        kt = (2 * k2 * delta + k1) + 3 * k3 * d2 if tangent else None
-        if keep and kt is not None:
+            return k1 * delta, (k1 + 0 * delta if tangent else None)
+        f, kt = spring_law(delta, k1, pick("k2"), pick("k3"))
+        if not tangent:
+            return f, None
+        if keep:
             f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
             self._last_springs = (q, params, f, kt)
         return f, kt
@@ -381,6 +377,11 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if len(self.frames):
             total = total + np.sum(params["frame_mass"])
         return total
+
+    def compiled_step(self, newton: bool, refactor: bool) -> Any:
+        """The compiled Newton iteration of :mod:`.structural_step`, where it serves this model."""
+        from .structural_step import step_factory
+        return step_factory(self, newton, refactor)
 
     def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
         """Raise ModelError when a co-rotational 3D beam leaves its range (:meth:`Beam3DSet.range_problem`)."""

@@ -140,11 +140,12 @@ class StructuralMatrices:
             # None: every entry is kept (no grounded ones), and the values need no selection
             plan = self._assembly_plans[site] = (None if keep.all() else keep, r[keep], c[keep],
                                                  r[keep] * n + c[keep])
-        keep, r, c, flat = plan
+        kept: np.ndarray | None = plan[0]
+        r, c, flat = plan[1:]
         # the arrays' own ravel: np.ravel's dispatch costs more than the copy at these sizes
         v = np.concatenate([x.ravel() if isinstance(x, np.ndarray) else np.ravel(x) for x in vals])
-        if keep is not None:
-            v = v[keep]
+        if kept is not None:
+            v = v[kept]
         if self.traits.sparse:
             if site not in self._patterns:
                 self._patterns[site] = PatternAssembly(n, r, c)
@@ -155,10 +156,12 @@ class StructuralMatrices:
             K = K + 1j * np.bincount(flat, v.imag, n * n)
         return K.reshape(n, n)
 
-    def linearize(self, t: float, s: StepState, params: dict[str, Any]) -> Linearization:
+    def linearize(self, t: float, s: StepState, params: dict[str, Any], tangent: Any = None) -> Linearization:
+        """The model's :class:`Linearization` at s; ``tangent``: K_t at s where the caller has it
+        (a compiled step forms it with the same sums)."""
         # each block gathers its terms (follower loads, nonlinear dampers, a turning mass) and sums
         # them once (sparse models: on a pattern kept per block, see :meth:`_add`)
-        Ks = [self._tangent(s.q, params)]
+        Ks = [self._tangent(s.q, params) if tangent is None else tangent]
         if len(self.followers):
             rows, cols, vals = self.followers.tangent(t, self._ext(s.q), params["pv"])
             Ks.append(-self._assemble("follower", rows, cols, vals, np.result_type(s.q, params["pv"])))

@@ -59,21 +59,34 @@ class BandPlan:
                  src: np.ndarray | None = None):
         self.n, self.perm, self.src = n, perm, src
         self.within: np.ndarray | None = None    # a model's pattern this band holds (dense plans)
+        self.inverse: np.ndarray | None = None   # perm's inverse: row k of S is row inverse[k] here
         if perm is not None:
-            inv = np.empty(n, dtype=np.intp)
-            inv[perm] = np.arange(n)
-            i, j = inv[i], inv[j]
+            self.inverse = np.empty(n, dtype=np.intp)
+            self.inverse[perm] = np.arange(n)
+            i, j = self.inverse[i], self.inverse[j]
         self.kl = int(max(np.max(i - j, initial=0), 0))
         self.ku = int(max(np.max(j - i, initial=0), 0))
         self.rows = self.kl + self.ku + i - j
         self.cols = j
-        n_rows = 2 * self.kl + self.ku + 1
+        self.positions = self._positions(self.rows, j)
+
+    def _positions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Where the band entries (rows, cols) of the reordered matrix go in the storage the
+        factorization reads."""
+        n = self.n
         if self.tridiagonal:
             # band rows 3, 2, 1 (A[j+1, j], A[j, j], A[j−1, j]) as [sub (n−1) | main (n) | super (n−1)]
-            r = self.rows
-            self.positions = np.where(r == 3, j, np.where(r == 2, n - 1 + j, 2 * n - 2 + j))
-        else:
-            self.positions = self.rows + n_rows * j     # in the Fortran-ordered band array, read flat
+            return np.where(rows == 3, cols, np.where(rows == 2, n - 1 + cols, 2 * n - 2 + cols))
+        return rows + (2 * self.kl + self.ku + 1) * cols     # the Fortran-ordered band array, read flat
+
+    def storage_positions(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Where the entries (i, j) of S (its own order) go in the factorization's storage, as
+        for the entries the plan was made of; ValueError for an entry outside the band."""
+        if self.inverse is not None:
+            i, j = self.inverse[i], self.inverse[j]
+        if np.any(i - j > self.kl) or np.any(j - i > self.ku):
+            raise ValueError("an entry outside the band")
+        return self._positions(self.kl + self.ku + i - j, j)
 
     @property
     def width(self) -> int:
@@ -142,6 +155,19 @@ class TridiagonalFactor:
         self.dl, self.d, self.du, self.du2, self.ipiv, self.info = gttrf(
             dl, d, du, overwrite_dl=1, overwrite_d=1, overwrite_du=1)
         self.complex = diagonals.dtype.kind == "c"
+
+    @classmethod
+    def from_lu(cls, plan: BandPlan, diagonals: np.ndarray, du2: np.ndarray,
+                ipiv: np.ndarray) -> "TridiagonalFactor":
+        """The factor of a real matrix made elsewhere by gttrf's operations (a compiled step,
+        :mod:`.tridiagonal`): diagonals [dl | d | du] (3n − 2) and du2, ipiv as gttrf leaves them."""
+        self = cls.__new__(cls)
+        n = plan.n
+        self.plan, self.info, self.complex = plan, 0, False
+        self.dl, self.d, self.du = diagonals[:n - 1], diagonals[n - 1:2 * n - 1], diagonals[2 * n - 1:]
+        self.du2, self.ipiv = du2, ipiv
+        self._gttrs = _lapack_pair("gt", diagonals.dtype)[1]
+        return self
 
     @property
     def nbytes(self) -> int:

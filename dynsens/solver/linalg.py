@@ -18,7 +18,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ._jit import register_jitable
-from .banded import dense_band_plan, sparse_plan
+from .banded import BandFactor, TridiagonalFactor, dense_band_plan, sparse_plan
 
 # plans kept per pattern (see .banded): the structure of S is analysed once per run
 _DENSE_PLANS: dict[Any, Any] = {}
@@ -166,6 +166,15 @@ class Factor:
         self._kind, self._complex = "dense", False
         _, self._getrs = _lapack(lu.dtype)
         self._lu = (lu, piv)
+        return self
+
+    @classmethod
+    def from_band(cls, lu: BandFactor | TridiagonalFactor, counters: Counters) -> "Factor":
+        """The factor of a band matrix factored elsewhere (a compiled step; it counts its
+        factorizations itself)."""
+        self = cls.__new__(cls)
+        self.counters, self.n = counters, lu.plan.n
+        self._kind, self._lu = "banded", lu
         return self
 
     @property

@@ -156,7 +156,7 @@ class StepSolver:
                 z0.copy(), *args, scales, self._present_array, history)
             self._scales = scales.tolist()
             s = compiled.state(s)
-            lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters)
+            lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters, self.sensitivities)
             c = self.counters
             c.linearizations += n_lin
             c.factorizations += n_lin

@@ -24,51 +24,16 @@ compiled path off (side-by-side benchmarks).
 """
 from __future__ import annotations
 
-import os
-from typing import Any
 
 import numpy as np
 
-from ...errors import ConfigurationError
+# HAVE_NUMBA, KERNELS and enabled are read here by callers and tests
+from ...solver._jit import HAVE_NUMBA, KERNELS, enabled, inline, jit  # noqa: F401
 from .forces import spring_law
 from .hydraulics import cylinder_law
 from .rotations import T_G
 
-try:  # numba is a dependency; without it (an unsupported platform) the numpy kernel serves
-    from numba import njit
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - exercised only where numba cannot be installed
-    HAVE_NUMBA = False
-
 Array = np.ndarray
-
-
-KERNELS = ("compiled", "numpy")
-
-
-def enabled() -> bool:
-    """Whether the compiled kernel is used: numba importable and the environment variable
-    ``DYNSENS_KERNEL`` unset or ``compiled`` (``numpy``: the numpy kernel).
-
-    Raises ConfigurationError for any other value of ``DYNSENS_KERNEL``.
-    """
-    choice = os.environ.get("DYNSENS_KERNEL", "compiled").strip().lower() or "compiled"
-    if choice not in KERNELS:
-        raise ConfigurationError(
-            f"environment variable DYNSENS_KERNEL = {os.environ['DYNSENS_KERNEL']!r}: expected one of "
-            f"{', '.join(KERNELS)} (unset means compiled)")
-    return HAVE_NUMBA and choice == "compiled"
-
-
-if HAVE_NUMBA:
-    jit = njit(cache=True, nogil=True)
-    # small helpers inlined into their callers: a call that passes arrays costs reference
-    # counting that exceeds the helper's arithmetic
-    inline = njit(cache=True, nogil=True, inline="always")
-else:  # pragma: no cover
-    def jit(fn: Any) -> Any:
-        return fn
-    inline = jit
 
 
 # ---------------------------------------------------------------------------- kinematics

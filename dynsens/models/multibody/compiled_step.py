@@ -18,7 +18,6 @@ numba caches it on disk: the types of its arguments, not the model, select the o
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -26,6 +25,8 @@ import numpy as np
 from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
+from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
+                                         compiled_iteration, read_only, singular_reason, sources_stamp)
 from ...solver.linalg import Counters, Factor, all_finite, pivot_test
 from ..base import StepState
 from . import compiled as cc
@@ -36,10 +37,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
 
 Array = np.ndarray
-
-# regularity of S as the iteration leaves it in lf[-1]: (code, column or 0, pivot ratio)
-REGULAR, NON_FINITE_ENTRIES, ZERO_PIVOT, SMALL_PIVOT = 0, 1, 2, 3
-
 
 class StepData(NamedTuple):
     """What one step of a compiled mechanism reads (see :mod:`.compiled`): the step's own
@@ -78,15 +75,6 @@ class StepData(NamedTuple):
     ax_prod: Array
     p_owner: Array
     TG: Array
-
-
-def _read_only(a: Any, dtype: Any = None) -> Array:
-    """a as a C-contiguous read-only array (a view when it is one already in that dtype)."""
-    a = np.ascontiguousarray(a, dtype)
-    if a.flags.writeable:
-        a = a.view()
-        a.flags.writeable = False
-    return a
 
 
 def _is_step_data(ops: Any) -> bool:
@@ -214,33 +202,10 @@ def _register() -> None:
 
 
 def _sources_stamp() -> str:
-    """A hash of every source compiled into the step.  numba's cache checks only the file of the
-    function it compiles; this one inlines the iteration, the overloads above and the kernels,
-    so a change to any of them must select another cache entry (the stamp is part of the
-    entry's key, as the contents of a closure are)."""
-    import hashlib
-    import inspect
-    from ...integrators import newmark
+    """The cache key of the compiled iteration: the sources it inlines (the overloads here, the
+    kernels and force laws)."""
     from . import forces, hydraulics
-    h = hashlib.sha256()
-    from ... import __version__
-    for module in (core, newmark, cc, clin, forces, hydraulics, sys.modules[__name__]):
-        try:
-            h.update(Path(inspect.getfile(module)).read_bytes())
-        except OSError:      # no source file to read (a frozen or zipped install): the version
-            h.update(f"{module.__name__} {__version__}".encode())
-    return h.hexdigest()
-
-
-def _compiled_iteration(stamp: str) -> Any:
-    """The iteration compiled for StepData, its cache entries keyed by ``stamp``."""
-
-    def iterate(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,  # type: ignore[no-untyped-def]
-                scales, present, history):
-        stamp          # noqa: B018 - a closure variable: part of numba's cache key
-        return core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
-                                      scales, present, history)
-    return cc.jit(iterate)
+    return sources_stamp((cc, clin, forces, hydraulics, sys.modules[__name__]))
 
 
 _ITERATE: Any = None
@@ -251,7 +216,7 @@ def _iterate() -> Any:
     global _ITERATE
     if _ITERATE is None:
         _register()
-        _ITERATE = _compiled_iteration(_sources_stamp())
+        _ITERATE = compiled_iteration(_sources_stamp())
     return _ITERATE
 
 
@@ -277,7 +242,7 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
         if hit is not None and hit[0] is params:
             return hit[1]
         cl, ck = lay.compiled_arrays(), compiled_params(kp, np.float64)
-        fields = tuple(_read_only(a) for a in (
+        fields = tuple(read_only(a) for a in (
             np.array([tr.n_q, tr.n_lam, tr.n_p, lay.n_cp]), blocks, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr,
             cl.side_prim, cl.side_coef, ck.cAB, cl.norm_body, cl.norm_eq, cl.prod_eq, cl.ax_kind, cl.ax_pidx,
             ck.ax_c, ck.mass, ck.J, g, np.array([model.scale, model.alpha, model.beta], float),
@@ -292,8 +257,8 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
             return None
         cf, shift = model.coefficients(t, kp)
         ext, f_ext, g = time_inputs(model, kp, t, np.float64)      # (g: the same at every t)
-        step = (pred.q, pred.qd, pred.p, np.array(coeffs), _read_only(cf, np.float64),
-                _read_only(shift, np.float64), _read_only(ext), _read_only(f_ext))
+        step = (pred.q, pred.qd, pred.p, np.array(coeffs), read_only(cf, np.float64),
+                read_only(shift, np.float64), read_only(ext), read_only(f_ext))
         return CompiledStep(model, StepData._make(step + design_fields(params, kp, g)))
     return make
 
@@ -314,9 +279,10 @@ class CompiledStep:
         """The StepState of the iteration's state tuple."""
         return StepState(*s)
 
-    def linearization_and_factor(self, lf: tuple, counters: Counters) -> tuple[Any, Factor | None, Array]:
+    def linearization_and_factor(self, lf: tuple, counters: Counters, linearization: bool = True
+                                 ) -> tuple[Any, Factor | None, Array]:
         """(Linearization, Factor, S) of the iteration's last linearization (Factor None when S
-        was not regular)."""
+        was not regular; the linearization is made in any case: its blocks are the iteration's)."""
         R_z, R_q, R_qd, R_p, S, lu, piv, _, test = lf
         lin = CompiledLinearization(R_z, R_q, R_qd, R_p if self.model.traits.n_p else None)
         factor = Factor.from_dense_lu(lu.T, piv - 1, counters) if test[0] == REGULAR and S.size else None
@@ -325,9 +291,4 @@ class CompiledStep:
     @staticmethod
     def singular_reason(lf: tuple) -> str:
         """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor`."""
-        code, col, ratio = lf[-1]
-        if code == NON_FINITE_ENTRIES:
-            return "matrix has non-finite entries"
-        if code == ZERO_PIVOT:
-            return f"exactly zero pivot in column {int(col)}"
-        return f"pivot ratio {ratio:.1e}"
+        return singular_reason(lf[-1])

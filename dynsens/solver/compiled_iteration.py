@@ -1,0 +1,75 @@
+"""What every compiled step shares: the compiled iteration, its cache key, the regularity codes.
+
+A model family that runs :func:`~.newton_core.newton_iterations` compiled overloads the step
+operations for a named tuple of its step's arrays (the multibody kernel's in
+:mod:`dynsens.models.multibody.compiled_step`, spring networks' in
+:mod:`dynsens.models.structural_step`) and compiles the iteration with :func:`compiled_iteration`.
+numba caches the result on disk: the types of the arguments, not the model, select the overloads.
+"""
+from __future__ import annotations
+
+import hashlib
+import inspect
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Iterable
+
+import numpy as np
+
+from . import newton_core as core
+from ._jit import jit
+
+# regularity of S as an iteration leaves it in its last factor: (code, column or 0, pivot ratio)
+REGULAR, NON_FINITE_ENTRIES, ZERO_PIVOT, SMALL_PIVOT = 0, 1, 2, 3
+
+
+def read_only(a: Any, dtype: Any = None) -> np.ndarray:
+    """a as a C-contiguous read-only array (a view when it is one already in that dtype): a step's
+    arrays are passed read-only, so that every model of a family shares one compiled signature."""
+    a = np.ascontiguousarray(a, dtype)
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
+
+
+def sources_stamp(modules: Iterable[ModuleType]) -> str:
+    """A hash of the sources of ``modules`` and of those every compiled step inlines (the
+    iteration, the newmark corrector, the factor's tests of :mod:`.linalg`).  numba's cache
+    checks only the file of the function it compiles; a step inlines the iteration, its
+    overloads and the model's kernels, so a change to any of them must select another cache
+    entry (the stamp is part of the entry's key, as the contents of a closure are)."""
+    from .. import __version__
+    from ..integrators import newmark
+    from . import linalg
+    h = hashlib.sha256()
+    for module in (core, newmark, linalg, sys.modules[__name__], *modules):
+        try:
+            h.update(Path(inspect.getfile(module)).read_bytes())
+        except OSError:      # no source file to read (a frozen or zipped install): the version
+            h.update(f"{module.__name__} {__version__}".encode())
+    return h.hexdigest()
+
+
+def compiled_iteration(stamp: str) -> Any:
+    """:func:`~.newton_core.newton_iterations` compiled (the overloads of the step operations
+    registered first), its cache entries keyed by ``stamp``."""
+
+    def iterate(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,  # type: ignore[no-untyped-def]
+                scales, present, history):
+        stamp          # noqa: B018 - a closure variable: part of numba's cache key
+        return core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
+                                      scales, present, history)
+    return jit(iterate)
+
+
+def singular_reason(test: np.ndarray) -> str:
+    """Why S was not regular, from a compiled factor's (code, column, pivot ratio), in the words
+    of :class:`~dynsens.solver.linalg.Factor`."""
+    code, col, ratio = test
+    if code == NON_FINITE_ENTRIES:
+        return "matrix has non-finite entries"
+    if code == ZERO_PIVOT:
+        return f"exactly zero pivot in column {int(col)}"
+    return f"pivot ratio {ratio:.1e}"

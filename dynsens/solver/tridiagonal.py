@@ -1,0 +1,71 @@
+"""LU of a tridiagonal matrix with partial pivoting, for a compiled step: LAPACK's dgttrf and
+dgttrs (one right-hand side, no transpose) operation for operation, so that a factor made here
+equals, bit for bit, the one scipy's LAPACK makes of the same matrix (tests/test_tridiagonal.py),
+and the Python path's :class:`~dynsens.solver.banded.TridiagonalFactor` can solve with it.
+
+numba exposes no tridiagonal LAPACK routine, and a call through a ctypes pointer would keep the
+step out of numba's cache; the factorization is a handful of loops, latency-bound either way
+(BENCHMARKS.md: the same time as LAPACK's at n = 1000).  Plain Python where numba is missing;
+compiled into the callers that use it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import register_jitable
+
+
+@register_jitable
+def gttrf(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray) -> int:
+    """Factor the tridiagonal matrix with sub-, main and super-diagonal dl (n−1), d (n), du (n−1)
+    in place as P L U (dgttrf): dl the multipliers, d and du U's diagonal and first
+    super-diagonal, du2 (n−2) its second (fill from row interchanges), ipiv (n) the 1-based row
+    interchanges.  Returns info: 0, or the 1-based index of the first exactly zero pivot."""
+    n = d.shape[0]
+    for i in range(n):
+        ipiv[i] = i + 1
+    for i in range(n - 2):
+        du2[i] = 0.0
+    for i in range(n - 1):
+        if abs(d[i]) >= abs(dl[i]):
+            # no interchange: eliminate dl[i]
+            if d[i] != 0.0:
+                fact = dl[i] / d[i]
+                dl[i] = fact
+                d[i + 1] = d[i + 1] - fact * du[i]
+        else:
+            # interchange rows i and i + 1, then eliminate
+            fact = d[i] / dl[i]
+            d[i] = dl[i]
+            dl[i] = fact
+            temp = du[i]
+            du[i] = d[i + 1]
+            d[i + 1] = temp - fact * d[i + 1]
+            if i < n - 2:
+                du2[i] = du[i + 1]
+                du[i + 1] = -fact * du[i + 1]
+            ipiv[i] = i + 2
+    for i in range(n):
+        if d[i] == 0.0:
+            return i + 1
+    return 0
+
+
+@register_jitable
+def gttrs(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
+          b: np.ndarray) -> None:
+    """Solve A x = b in place with the factor of :func:`gttrf` (dgttrs, via dgtts2, for one
+    right-hand side b (n,))."""
+    n = d.shape[0]
+    # L x = b
+    for i in range(n - 1):
+        ip = ipiv[i] - 1
+        temp = b[i + 1 - ip + i] - dl[i] * b[ip]
+        b[i] = b[ip]
+        b[i + 1] = temp
+    # U x = b
+    b[n - 1] = b[n - 1] / d[n - 1]
+    if n > 1:
+        b[n - 2] = (b[n - 2] - du[n - 2] * b[n - 1]) / d[n - 2]
+    for i in range(n - 3, -1, -1):
+        b[i] = (b[i] - du[i] * b[i + 1] - du2[i] * b[i + 2]) / d[i]

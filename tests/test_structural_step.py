@@ -1,0 +1,267 @@
+"""The compiled Newton iteration of a spring network's step against the same iteration as Python.
+
+Both run :func:`dynsens.solver.newton_core.newton_iterations`; compiled, its step operations are
+the overloads of :mod:`dynsens.models.structural_step`, with the spring law's one definition and
+a tridiagonal LU that repeats LAPACK's operations.  The runs agree bit for bit: responses,
+direct and adjoint gradients, histories, counters, and the errors of a step that fails.  The
+tridiagonal LU is compared with scipy's LAPACK on random systems, pivoting and zero pivots
+included.
+"""
+from __future__ import annotations
+
+import copy
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.linalg import lapack
+
+import dynsens
+import scripts_path  # noqa: F401  (puts scripts/ on the path)
+from make_cases import duffing_chain
+from dynsens.errors import ConvergenceError, NonFiniteError
+from dynsens.integrators.newmark import Prediction
+from dynsens.models.base import StepState
+from dynsens.models import structural_step
+from dynsens.models.structural import StructuralModel
+from dynsens.solver import _jit
+from dynsens.solver.linalg import Counters
+from dynsens.solver.newton import NewtonSettings, StepSolver
+from dynsens.solver.tridiagonal import gttrf, gttrs
+
+CASES = Path(__file__).resolve().parent.parent / "cases"
+compiled_only = pytest.mark.skipif(
+    not _jit.enabled(), reason=f"DYNSENS_KERNEL={os.environ.get('DYNSENS_KERNEL')}: no compiled step")
+
+
+def _chain(n: int = 30, steps: int = 300, **model: object) -> dict:
+    d = duffing_chain(n, t_end=steps * 1e-3)
+    d["model"]["linear_algebra"] = "sparse"
+    d["model"].update(model)
+    d["output"]["history"] = ["q", "qd"]
+    return d
+
+
+def _network(n: int = 24) -> dict:
+    """A chain with what a spring network may have beyond it: quadratic and softening springs,
+    a second spring to ground, a DOF without a damper, Rayleigh damping, initial conditions and
+    two loads; still tridiagonal in its band order."""
+    d = _chain(n)
+    els = d["model"]["elements"]
+    els.append({"type": "spring", "name": "s_extra", "dofs": [f"u{n // 2}", "ground"], "k": 300.0,
+                "k2": 2.0e4, "k3": -5.0e4})
+    d["model"]["elements"] = [e for e in els if e["name"] != "d5"]
+    d["model"]["damping"] = {"rayleigh": {"alpha": 0.3, "beta": 1.0e-4}}
+    d["model"]["initial"] = {"displacement": {"u3": 0.01}, "velocity": {f"u{n}": -0.2}}
+    d["model"]["loads"].append({"dof": "u7", "value": -40.0, "function": {"type": "pulse", "t0": 0.05,
+                                                                          "duration": 0.05}})
+    return d
+
+
+def _python_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(StructuralModel, "compiled_step", lambda self, newton, refactor: None)
+
+
+def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: ignore[no-untyped-def]
+    calls: list[int] = []
+    original = structural_step.CompiledSpringStep.iterate
+    with monkeypatch.context() as m:
+        m.setattr(structural_step.CompiledSpringStep, "iterate", lambda self, *a: calls.append(1) or original(self, *a))
+        compiled = dynsens.run_case(case, **kw)
+    with monkeypatch.context() as m:
+        _python_iteration(m)
+        python = dynsens.run_case(case, **kw)
+    return compiled, python, len(calls)
+
+
+def _assert_identical(compiled, python) -> None:  # type: ignore[no-untyped-def]
+    assert compiled.counters == python.counters
+    assert compiled.responses.keys() == python.responses.keys()
+    for key, r in compiled.responses.items():
+        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
+        if r.gradient is not None:
+            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
+    for field, a in compiled.history.items():
+        np.testing.assert_array_equal(a, python.history[field], err_msg=field)
+
+
+@compiled_only
+@pytest.mark.parametrize("build, sets", [
+    (_chain, []),
+    (_chain, ["sensitivity.method=adjoint"]),
+    (_chain, ["sensitivity.partials=complex"]),
+    (_network, []),
+    (_network, ["sensitivity.method=adjoint"]),
+], ids=["chain", "chain-adjoint", "chain-complex-partials", "network", "network-adjoint"])
+def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, build, sets):
+    case = dynsens.load_case_dict(build(), "chain.yaml", sets)
+    compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
+    assert calls == compiled.counters["steps"]        # every step iterated compiled
+    _assert_identical(compiled, python)
+    primal, python_primal, _ = _both(monkeypatch, case, sensitivities=False)
+    _assert_identical(primal, python_primal)
+    for key, r in primal.responses.items():          # the same primal with or without gradients
+        np.testing.assert_array_equal(r.value, compiled.responses[key].value, err_msg=key)
+
+
+@compiled_only
+def test_which_models_are_served(monkeypatch):
+    """Sparse spring networks whose S the Python path factors as tridiagonal; not a dense model,
+    not one with bars, not a network with a spring across two links (its band is wider: the
+    factory declines its steps and the Python iteration runs, with the same numbers)."""
+    sparse = dynsens.load_case_dict(_chain(), "chain.yaml").model
+    assert structural_step.step_factory(sparse, newton=True, refactor=True) is not None
+    assert structural_step.step_factory(sparse, newton=False, refactor=True) is None
+    for name in ("duffing_chain", "truss_impact", "tower_sizing", "sdof_step"):
+        model = dynsens.load_case(CASES / f"{name}.yaml").model
+        assert structural_step.step_factory(model, newton=True, refactor=True) is None, name
+    wide = _chain()
+    wide["model"]["elements"].append({"type": "spring", "name": "across", "dofs": ["u2", "u9"], "k": 50.0,
+                                      "k3": 1.0e3})
+    case = dynsens.load_case_dict(wide, "wide.yaml")
+    compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
+    assert calls == 0
+    _assert_identical(compiled, python)
+
+
+@compiled_only
+def test_complex_runs_take_the_python_iteration():
+    case = dynsens.load_case_dict(_chain(), "chain.yaml")
+    model = case.model
+    make = structural_step.step_factory(model, newton=True, refactor=True)
+    pred = Prediction(np.zeros(model.n), np.zeros(model.n), np.zeros(0), 0.0, 0.0)
+    assert make(0.001, pred, model.parameters(case.x0), (2.5e-7, 5e-4, 0.0)) is not None
+    assert make(0.001, pred, model.parameters(case.x0.astype(complex)), (2.5e-7, 5e-4, 0.0)) is None
+
+
+def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-def]
+    """(type, message, residual history) of the error of run(), compiled and as Python."""
+    out = []
+    for python in (False, True):
+        with monkeypatch.context() as m:
+            if python:
+                _python_iteration(m)
+            with pytest.raises((ConvergenceError, NonFiniteError)) as err:
+                run()
+            out.append((type(err.value), str(err.value), getattr(err.value, "residual_history", None)))
+    return out
+
+
+@compiled_only
+def test_a_step_that_does_not_converge_fails_alike(monkeypatch):
+    case = dynsens.load_case_dict(_chain(), "chain.yaml", ["integrator.solver.max_iterations=1",
+                                                         "integrator.max_step_cuts=0"])
+    compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
+    assert compiled == python
+    assert "did not converge" in compiled[1]
+
+
+@compiled_only
+def test_a_softening_run_that_loses_its_way_fails_alike(monkeypatch):
+    """Strongly softening springs under a large load: Newton wanders at step 12; both iterations
+    end in the same error, with the same residual history."""
+    d = _chain()
+    d["design"]["variables"][3].update(value=-1.0e9, lower=-1.0e10)
+    d["model"]["loads"][0]["value"] = 1.0e4
+    case = dynsens.load_case_dict(d, "softening.yaml", ["integrator.max_step_cuts=0"])
+    compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
+    assert compiled == python
+    assert "did not converge at t = 0.012 s" in compiled[1]
+
+
+@compiled_only
+def test_a_singular_iteration_matrix_fails_alike(monkeypatch):
+    """No mass, no damping, purely cubic springs: S = c_q K_t(q) is regular where every spring
+    is stretched and zero at q = 0.  A first step served compiled, then one at q = 0: the same
+    reason from both iterations."""
+    case = dynsens.load_case_dict(_chain(12), "chain.yaml")
+    model = case.model
+    params = model.parameters(np.array([0.0, 0.0, 0.0, 1.0e6]))     # m, c, k, k3
+    h = 1e-3
+    c_q, c_qd = 0.25 * h * h, 0.5 * h
+
+    def correct(pr, qdd, lam, pd):  # type: ignore[no-untyped-def]
+        return StepState(pr.q + c_q * qdd, pr.qd + c_qd * qdd, qdd, lam, pr.p, pd)
+
+    def steps() -> None:
+        solver = StepSolver(model, NewtonSettings(), Counters(), newton=True, refactor=True,
+                            need_converged_factor=False)
+        zero = np.zeros(model.n)
+        stretched = Prediction(1e-3 * np.arange(1, model.n + 1) ** 1.5, zero, np.zeros(0), 0.0, 0.0)
+        try:
+            solver.solve_step(h, 1, stretched, zero, params, (c_q, c_qd, 0.0), correct)
+        except ConvergenceError:
+            pass
+        solver.solve_step(2 * h, 2, Prediction(zero, zero, np.zeros(0), 0.0, 0.0), zero, params,
+                          (c_q, c_qd, 0.0), correct)
+
+    calls: list[int] = []
+    original = structural_step.CompiledSpringStep.iterate
+    monkeypatch.setattr(structural_step.CompiledSpringStep, "iterate",
+                        lambda self, *a: calls.append(1) or original(self, *a))
+    compiled, python = _failure(monkeypatch, steps)
+    assert len(calls) == 2
+    assert compiled == python
+    assert "singular iteration matrix (exactly zero pivot in column 1" in compiled[1]
+
+
+def test_tridiagonal_lu_equals_lapack_bit_for_bit():
+    """gttrf / gttrs (compiled where numba is installed, as the step runs them, else Python)
+    against scipy's dgttrf / dgttrs: factors, pivots, info and solutions equal bit for bit, on
+    well and badly scaled systems, with row interchanges and exactly zero pivots."""
+    run_f, run_s = (_jit.jit(gttrf), _jit.jit(gttrs)) if _jit.HAVE_NUMBA else (gttrf, gttrs)
+    rng = np.random.default_rng(7)
+    interchanges = zero_pivots = 0
+    for trial in range(600):
+        n = int(rng.integers(3, 40)) if trial < 550 else 1000
+        dl, du = rng.standard_normal(n - 1), rng.standard_normal(n - 1)
+        d = rng.standard_normal(n) * (10.0 if trial % 3 == 0 else 0.3)
+        if trial % 7 == 0:       # a zero column: singular, an exactly zero pivot
+            k = int(rng.integers(1, n - 1))
+            du[k - 1] = d[k] = dl[k] = 0.0
+        elif trial % 7 == 1:     # a zero on the diagonal: an interchange where it would not be
+            d[rng.integers(0, n)] = 0.0
+        b = rng.standard_normal(n)
+        ref = lapack.dgttrf(dl.copy(), d.copy(), du.copy())
+        mine = [dl.copy(), d.copy(), du.copy(), np.zeros(n - 2), np.zeros(n, np.int32)]
+        info = run_f(*mine)
+        assert info == ref[5]
+        for a, r in zip(mine, ref[:5]):
+            np.testing.assert_array_equal(a, r)
+        interchanges += int(np.any(mine[4] != np.arange(1, n + 1)))
+        if info:
+            zero_pivots += 1
+            continue
+        x = b.copy()
+        run_s(*mine, x)
+        np.testing.assert_array_equal(x, lapack.dgttrs(*ref[:5], b.copy())[0])
+    assert interchanges > 100 and zero_pivots > 10
+
+
+def test_the_cache_key_follows_every_source_compiled_into_the_step(monkeypatch):
+    """An edit to the spring law, the tridiagonal LU, the overloads, the iteration or the
+    factor's tests selects another cache entry."""
+    stamp = structural_step._stamp()
+    original = Path.read_bytes
+    for edited in ("spring_law.py", "tridiagonal.py", "structural_step.py", "newton_core.py", "linalg.py",
+                   "newmark.py"):
+        with monkeypatch.context() as m:
+            m.setattr(Path, "read_bytes", lambda self, f=edited: original(self) + (b"#" if self.name == f else b""))
+            assert structural_step._stamp() != stamp, edited
+    assert structural_step._stamp() == stamp
+
+
+def test_the_spring_law_is_the_models(monkeypatch):
+    """The Python model evaluates the spring law the compiled step compiles (one definition):
+    replacing it changes the model's forces."""
+    case = dynsens.load_case_dict(_chain(5), "chain.yaml")
+    model = case.model
+    params = model.parameters(case.x0)
+    q = np.linspace(0.0, 0.01, 5)
+    before = copy.deepcopy(model._spring_state(q, params, tangent=False)[0])
+    from dynsens.models import structural
+    monkeypatch.setattr(structural, "spring_law", lambda d, k1, k2, k3: (2 * k1 * d, k1 + 0 * d))
+    after = model._spring_state(q.copy(), params, tangent=False)[0]
+    np.testing.assert_allclose(after, 2 * params["k1"] * (q - np.concatenate([[0.0], q[:-1]])))
+    assert not np.allclose(after, before)
