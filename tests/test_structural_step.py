@@ -1,7 +1,7 @@
 """The compiled Newton iteration of a spring network's step against the same iteration as Python.
 
 Both run :func:`dynsens.solver.newton_core.newton_iterations`; compiled, its step operations are
-the overloads of :mod:`dynsens.models.structural_step`, with the spring law's one definition and
+the overloads of :mod:`dynsens.models.structural_step_kernels`, with the spring law's one definition and
 a tridiagonal LU that repeats LAPACK's operations.  The runs agree bit for bit: responses,
 direct and adjoint gradients, histories, counters, and the errors of a step that fails.  The
 tridiagonal LU is compared with scipy's LAPACK on random systems, pivoting and zero pivots
@@ -23,7 +23,7 @@ from make_cases import duffing_chain
 from dynsens.errors import ConvergenceError, NonFiniteError
 from dynsens.integrators.newmark import Prediction
 from dynsens.models.base import StepState
-from dynsens.models import structural_step
+from dynsens.models import structural_step, structural_step_kernels
 from dynsens.models.structural import StructuralModel
 from dynsens.solver import _jit
 from dynsens.solver.linalg import Counters
@@ -35,12 +35,16 @@ compiled_only = pytest.mark.skipif(
     not _jit.enabled(), reason=f"DYNSENS_KERNEL={os.environ.get('DYNSENS_KERNEL')}: no compiled step")
 
 
-def _chain(n: int = 30, steps: int = 300, **model: object) -> dict:
+def _chain(n: int = 30, steps: int = 300, linear_algebra: str = "sparse") -> dict:
     d = duffing_chain(n, t_end=steps * 1e-3)
-    d["model"]["linear_algebra"] = "sparse"
-    d["model"].update(model)
+    d["model"]["linear_algebra"] = linear_algebra
     d["output"]["history"] = ["q", "qd"]
     return d
+
+
+def _dense_chain() -> dict:
+    """60 masses, stored dense: the Python path factors S as a band (from 48 unknowns on)."""
+    return _chain(60, linear_algebra="dense")
 
 
 def _network(n: int = 24) -> dict:
@@ -93,7 +97,10 @@ def _assert_identical(compiled, python) -> None:  # type: ignore[no-untyped-def]
     (_chain, ["sensitivity.partials=complex"]),
     (_network, []),
     (_network, ["sensitivity.method=adjoint"]),
-], ids=["chain", "chain-adjoint", "chain-complex-partials", "network", "network-adjoint"])
+    (_dense_chain, []),
+    (_dense_chain, ["sensitivity.method=adjoint"]),
+], ids=["chain", "chain-adjoint", "chain-complex-partials", "network", "network-adjoint", "dense-chain",
+        "dense-chain-adjoint"])
 def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, build, sets):
     case = dynsens.load_case_dict(build(), "chain.yaml", sets)
     compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
@@ -107,22 +114,42 @@ def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, buil
 
 @compiled_only
 def test_which_models_are_served(monkeypatch):
-    """Sparse spring networks whose S the Python path factors as tridiagonal; not a dense model,
-    not one with bars, not a network with a spring across two links (its band is wider: the
-    factory declines its steps and the Python iteration runs, with the same numbers)."""
+    """Spring networks whose S the Python path factors as tridiagonal: not a model with bars or
+    a linear one; for a small dense chain (dense LU) and a network with a spring across two links
+    (a wider band) the factory declines every step and the Python iteration runs, with the same
+    numbers."""
     sparse = dynsens.load_case_dict(_chain(), "chain.yaml").model
     assert structural_step.step_factory(sparse, newton=True, refactor=True) is not None
     assert structural_step.step_factory(sparse, newton=False, refactor=True) is None
-    for name in ("duffing_chain", "truss_impact", "tower_sizing", "sdof_step"):
+    for name in ("truss_impact", "tower_sizing", "sdof_step"):
         model = dynsens.load_case(CASES / f"{name}.yaml").model
         assert structural_step.step_factory(model, newton=True, refactor=True) is None, name
     wide = _chain()
     wide["model"]["elements"].append({"type": "spring", "name": "across", "dofs": ["u2", "u9"], "k": 50.0,
                                       "k3": 1.0e3})
-    case = dynsens.load_case_dict(wide, "wide.yaml")
-    compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
-    assert calls == 0
-    _assert_identical(compiled, python)
+    short = ["integrator.t_end=0.1"]
+    for case in (dynsens.load_case(CASES / "duffing_chain.yaml", short), dynsens.load_case_dict(wide, "wide.yaml")):
+        compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
+        assert calls == 0
+        _assert_identical(compiled, python)
+
+
+@compiled_only
+@pytest.mark.parametrize("build", [_chain, _dense_chain], ids=["sparse", "dense"])
+def test_a_design_whose_residual_is_not_the_models_is_not_served(monkeypatch, build):
+    """The serving test: a compiled F_R one rounding away from the model's at the probe states
+    (here the model's is moved) leaves every step to the Python iteration."""
+    case = dynsens.load_case_dict(build(steps=50) if build is _chain else build(), "chain.yaml",
+                                  ["integrator.t_end=0.05"])
+    original = StructuralModel.residual
+    monkeypatch.setattr(StructuralModel, "residual",
+                        lambda self, t, st, params: original(self, t, st, params) * (1 + 2e-16))
+    calls: list[int] = []
+    step = structural_step.CompiledSpringStep.iterate
+    monkeypatch.setattr(structural_step.CompiledSpringStep, "iterate",
+                        lambda self, *a: calls.append(1) or step(self, *a))
+    dynsens.run_case(case, sensitivities=False)
+    assert calls == []
 
 
 @compiled_only
@@ -242,14 +269,14 @@ def test_tridiagonal_lu_equals_lapack_bit_for_bit():
 def test_the_cache_key_follows_every_source_compiled_into_the_step(monkeypatch):
     """An edit to the spring law, the tridiagonal LU, the overloads, the iteration or the
     factor's tests selects another cache entry."""
-    stamp = structural_step._stamp()
+    stamp = structural_step_kernels._stamp()
     original = Path.read_bytes
-    for edited in ("spring_law.py", "tridiagonal.py", "structural_step.py", "newton_core.py", "linalg.py",
+    for edited in ("spring_law.py", "tridiagonal.py", "structural_step_kernels.py", "newton_core.py", "linalg.py",
                    "newmark.py"):
         with monkeypatch.context() as m:
             m.setattr(Path, "read_bytes", lambda self, f=edited: original(self) + (b"#" if self.name == f else b""))
-            assert structural_step._stamp() != stamp, edited
-    assert structural_step._stamp() == stamp
+            assert structural_step_kernels._stamp() != stamp, edited
+    assert structural_step_kernels._stamp() == stamp
 
 
 def test_the_spring_law_is_the_models(monkeypatch):

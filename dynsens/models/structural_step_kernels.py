@@ -1,0 +1,253 @@
+r"""The step operations of a spring network, compiled: numba overloads for :class:`SpringStepData`.
+
+:func:`dynsens.solver.newton_core.newton_iterations` compiled for a named tuple of a step's
+arrays (which designs it serves, and what becomes of its results: :mod:`.structural_step`):
+
+* the state is the scheme's corrector (:func:`dynsens.integrators.newmark.correct_arrays`);
+* F_R = M q̈ + f_int(q) − f_ext(t) + D q̇ with the spring law's forces and tangents
+  (:func:`.spring_law.spring_law`), summed as the Python path sums them: a sparse model's
+  products entry by entry in stored order, as scipy's; a dense model's through BLAS, as numpy's;
+  f_ext(t) is the model's, evaluated once a step in Python;
+* S is formed on the three diagonals ((c_q K_t + c_q̇ D) + M, the Python path's sums) and
+  factored by :func:`dynsens.solver.tridiagonal.gttrf` (LAPACK's dgttrf, operation for
+  operation) in the band plan's order, with the Python path's tests of regularity.
+
+numba caches it on disk, keyed by the sources it inlines (:func:`_stamp`).
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..integrators.newmark import correct_arrays
+from ..solver import newton_core as core
+from ..solver import tridiagonal
+from ..solver._jit import inline, jit
+from ..solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
+                                         compiled_iteration, sources_stamp)
+from ..solver.linalg import all_finite, pivot_test
+from . import spring_law as law
+
+Array = np.ndarray
+
+
+class SpringStepData(NamedTuple):
+    """What one step of a spring network reads: the step's arrays first, then those of the
+    model and design (kept between steps).  Every array but the prediction is read-only."""
+
+    q_pred: Array
+    qd_pred: Array
+    p_pred: Array            # (0,): no first-order states
+    coeffs: Array            # (c_q, c_q̇, c_p)
+    f_ext: Array             # (n,) loads at t
+    mass: Array              # (n,) the diagonal mass
+    spring_a: Array          # (n_s,) the springs' DOFs, n for ground
+    spring_b: Array
+    k1: Array
+    k2: Array
+    k3: Array
+    k_pos: Array             # (4 n_s,) storage positions of the tangent's entries (aa, bb, ab, ba), −1: grounded
+    G: Array                 # dense models: (n_s, n) spring forces to nodal forces, else (0, 0)
+    D: Array                 # dense models: (n, n) damping, else (0, 0) and by rows below
+    d_ptr: Array             # D by rows (sorted columns)
+    d_col: Array
+    d_val: Array
+    mass_band: Array         # (3n − 2,) M and D on the three diagonals
+    damping_band: Array
+    perm: Array              # (n,) the band order: its row k is row perm[k] of S
+    s_row: Array             # S's stored entries in the Python path's order: row, column, storage
+    s_col: Array
+    s_pos: Array
+
+
+def _is_step_data(ops: Any) -> bool:
+    from numba import types
+    return isinstance(ops, types.BaseNamedTuple) and ops.instance_class is SpringStepData
+
+
+def _register() -> None:
+    """The overloads of the step operations for SpringStepData (numba only)."""
+    from numba.extending import overload
+
+    correct = inline(correct_arrays)
+
+    @overload(core.step_correct)
+    def _correct(ops, z):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, z):  # type: ignore[no-untyped-def]
+            n = ops.mass.shape[0]
+            c = ops.coeffs
+            q, qd, p = correct(ops.q_pred, ops.qd_pred, ops.p_pred, c[0], c[1], c[2], z[:n], z[n:])
+            return q, qd, z[:n], z[n:], p, z[n:]
+        return impl
+
+    @overload(core.step_residual)
+    def _residual(ops, s):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, s):  # type: ignore[no-untyped-def]
+            q, qd, qdd = s[0], s[1], s[2]
+            n = q.shape[0]
+            a, b = ops.spring_a, ops.spring_b
+            delta = np.empty(a.shape[0])
+            for e in range(a.shape[0]):
+                delta[e] = (q[a[e]] if a[e] < n else 0.0) - (q[b[e]] if b[e] < n else 0.0)
+            f, kt = law.spring_law(delta, ops.k1, ops.k2, ops.k3)
+            dense = ops.G.shape[0] > 0
+            if dense:                   # the dense model's products: BLAS's, as numpy calls it
+                f_int = np.dot(f, ops.G)
+            else:                       # scipy's sparse products: entries in stored order
+                f_int = np.zeros(n)
+                for e in range(a.shape[0]):
+                    if a[e] < n:
+                        f_int[a[e]] += f[e]
+                    if b[e] < n:
+                        f_int[b[e]] -= f[e]
+            R = (ops.mass * qdd + f_int) - ops.f_ext
+            if dense:
+                R = R + np.dot(ops.D, qd)
+            else:
+                for i in range(n):
+                    acc = 0.0
+                    for k in range(ops.d_ptr[i], ops.d_ptr[i + 1]):
+                        acc += ops.d_val[k] * qd[ops.d_col[k]]
+                    R[i] += acc
+            return R, kt
+        return impl
+
+    @overload(core.step_no_factor)
+    def _no_factor(ops):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops):  # type: ignore[no-untyped-def]
+            e = np.zeros(0)
+            return e, e, e, e, e, e, e, np.zeros(0, np.int32), np.zeros(3)
+        return impl
+
+    @overload(core.step_factor_solve)
+    def _factor_solve(ops, s, evaluation, rhs):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, s, evaluation, rhs):  # type: ignore[no-untyped-def]
+            kt = evaluation
+            n = rhs.shape[0]
+            n_s = kt.shape[0]
+            K = np.zeros(3 * n - 2)
+            for block in range(4):          # the assembly's order: (a, a), (b, b), (a, b), (b, a)
+                sign = 1.0 if block < 2 else -1.0
+                for e in range(n_s):
+                    pos = ops.k_pos[block * n_s + e]
+                    if pos >= 0:
+                        K[pos] += sign * kt[e]
+            c = ops.coeffs
+            S = ops.mass_band + (c[0] * K + c[1] * ops.damping_band)
+            lu = S.copy()
+            du2 = np.zeros(max(n - 2, 0))
+            piv = np.zeros(n, np.int32)
+            x = np.zeros(n)
+            test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
+            if not all_finite(S):
+                test[0] = NON_FINITE_ENTRIES
+            else:
+                dl, d, du = lu[:n - 1], lu[n - 1:2 * n - 1], lu[2 * n - 1:]
+                info = tridiagonal.gttrf(dl, d, du, du2, piv)
+                if info > 0:
+                    test[0], test[1] = ZERO_PIVOT, info
+                else:
+                    regular, ratio = pivot_test(d)
+                    if not regular:
+                        test[0], test[2] = SMALL_PIVOT, ratio
+                    else:
+                        for k in range(n):
+                            x[k] = rhs[ops.perm[k]]
+                        tridiagonal.gttrs(dl, d, du, du2, piv, x)
+            step = np.empty(n)
+            for k in range(n):
+                step[ops.perm[k]] = x[k]
+            q, qd, qdd = s[0], s[1], s[2]
+            return test[0] == REGULAR, (K, q, qd, qdd.copy(), S, lu, du2, piv, test), step
+        return impl
+
+    @overload(core.step_at_roundoff)
+    def _at_roundoff(ops, lf, R, z, rnorm):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, lf, R, z, rnorm):  # type: ignore[no-untyped-def]
+            S = lf[4]
+            if S.size == 0:
+                return False
+            entries = S[ops.s_pos]          # S's stored entries, in the Python path's order
+            n = R.shape[0]
+            if ops.G.shape[0] > 0:          # a dense model: the Python path's dense S and product
+                Sd = np.zeros((n, n))
+                for k in range(entries.shape[0]):
+                    Sd[ops.s_row[k], ops.s_col[k]] = entries[k]
+                if core.above_roundoff_bound(rnorm, Sd.ravel(), z):
+                    return False
+                return core.within_roundoff(R, np.dot(np.abs(Sd), np.abs(z)))
+            if core.above_roundoff_bound(rnorm, entries, z):
+                return False
+            terms = np.zeros(n)
+            for k in range(entries.shape[0]):
+                terms[ops.s_row[k]] += abs(entries[k]) * abs(z[ops.s_col[k]])
+            return core.within_roundoff(R, terms)
+        return impl
+
+    @overload(core.step_block_norms)
+    def _block_norms(ops, z, dz):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, z, dz):  # type: ignore[no-untyped-def]
+            zn, dzn = np.empty(1), np.empty(1)
+            zn[0], dzn[0] = core.real_norm(z), core.real_norm(dz)
+            return zn, dzn
+        return impl
+
+
+def _stamp() -> str:
+    """The cache key of the compiled iteration: the sources it inlines (the overloads here, the
+    spring law, the tridiagonal LU)."""
+    return sources_stamp((law, tridiagonal, sys.modules[__name__]))
+
+
+_ITERATE: Any = None
+
+
+def iteration() -> Any:
+    """The compiled iteration (the overloads registered first)."""
+    global _ITERATE
+    if _ITERATE is None:
+        _register()
+        _ITERATE = compiled_iteration(_stamp())
+    return _ITERATE
+
+
+def _compiled_probe(stamp: str) -> Any:
+    """F_R at the unknowns z, compiled (the serving test of :func:`step_factory`), its cache
+    entries keyed by ``stamp`` as the iteration's."""
+
+    def probe(ops, z):  # type: ignore[no-untyped-def]
+        stamp          # noqa: B018 - a closure variable: part of numba's cache key
+        return core.step_residual(ops, core.step_correct(ops, z))[0]
+    return jit(probe)
+
+
+_PROBE: Any = None
+
+
+def probe_residual(ops: SpringStepData, z: np.ndarray) -> np.ndarray:
+    """F_R at the unknowns z, compiled (the serving test of :mod:`.structural_step`)."""
+    global _PROBE
+    if _PROBE is None:
+        iteration()                 # the overloads first
+        _PROBE = _compiled_probe(_stamp())
+    return _PROBE(ops, z)
