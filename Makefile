@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
-	$(PY) -m dynsens.warmup   # compile the multibody kernels into numba's cache (~1 min, once)
+	$(PY) -m dynsens.warmup   # compile the kernels and compiled steps into numba's cache (~1 min, once)
 	touch $(STAMP)
 
 setup: $(STAMP)
