@@ -1,9 +1,12 @@
-"""Shared test helpers: complex-step derivative of a whole simulation; a small design problem."""
+"""Shared test helpers: complex-step derivative of a whole simulation; a small design problem;
+the errors of a run with a compiled step and with the Python iteration."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import dynsens
+from dynsens.errors import ConvergenceError, NonFiniteError
 
 
 def complex_step_gradients(case, x=None, h_rel=1e-20):
@@ -76,3 +79,36 @@ SDOF_RUN = {
         {"name": "q_ks", "type": "ks", "quantity": {"dof": "u", "kind": "displacement"}, "rho": 100.0},
     ],
 }
+
+
+def python_iteration(monkeypatch, model_class):
+    """Make every model of ``model_class`` iterate its steps in Python (no compiled step)."""
+    monkeypatch.setattr(model_class, "compiled_step", lambda self, newton, refactor: None)
+
+
+def failures_compiled_and_python(monkeypatch, run, model_class):
+    """(type, message, residual history) of the error run() raises, first with the compiled
+    step of ``model_class``'s models, then with the Python iteration."""
+    out = []
+    for python in (False, True):
+        with monkeypatch.context() as m:
+            if python:
+                python_iteration(m, model_class)
+            with pytest.raises((ConvergenceError, NonFiniteError)) as err:
+                run()
+            out.append((type(err.value), str(err.value), getattr(err.value, "residual_history", None)))
+    return out
+
+
+def assert_identical_runs(compiled, python):
+    """Two runs agree bit for bit: counters, responses (values and gradients) and every
+    history field."""
+    assert compiled.counters == python.counters
+    assert compiled.responses.keys() == python.responses.keys()
+    for key, r in compiled.responses.items():
+        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
+        if r.gradient is not None:
+            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
+    assert compiled.history.keys() == python.history.keys()
+    for field, a in compiled.history.items():
+        np.testing.assert_array_equal(a, python.history[field], err_msg=field)

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import dynsens
-from dynsens.errors import ConvergenceError, NonFiniteError
+from helpers import assert_identical_runs, failures_compiled_and_python, python_iteration
+from dynsens.errors import NonFiniteError
 from dynsens.integrators.newmark import Prediction
 from dynsens.models.base import StepState
 from dynsens.models.multibody import compiled as cc
@@ -36,7 +37,7 @@ compiled_only = pytest.mark.skipif(
 
 
 def _python_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(MultibodyModel, "compiled_step", lambda self, newton, refactor: None)
+    python_iteration(monkeypatch, MultibodyModel)
 
 
 def _short(name: str, steps: int, *extra: str) -> dynsens.case.load.Case:
@@ -68,16 +69,7 @@ def test_the_shipped_mechanisms_served_are_the_expected_ones():
 def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, name):
     case = _short(name, 150)
     compiled, python = _both(monkeypatch, case, sensitivities=True)
-    assert compiled.counters == python.counters
-    assert compiled.responses.keys() == python.responses.keys()
-    for key, r in compiled.responses.items():
-        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
-        if r.gradient is not None:
-            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
-    for field in ("q", "lam", "p"):
-        a, b = compiled.history.get(field), python.history.get(field)
-        if a is not None:
-            np.testing.assert_array_equal(a, b, err_msg=field)
+    assert_identical_runs(compiled, python)
 
 
 @compiled_only
@@ -103,16 +95,7 @@ def test_adjoint_gradients_follow_the_compiled_steps(monkeypatch):
 
 
 def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-def]
-    """(type, message) of the error of run() with the compiled step and with the Python one."""
-    out = []
-    for python in (False, True):
-        with monkeypatch.context() as m:
-            if python:
-                _python_iteration(m)
-            with pytest.raises((ConvergenceError, NonFiniteError)) as err:
-                run()
-            out.append((type(err.value), str(err.value), getattr(err.value, "residual_history", None)))
-    return out
+    return failures_compiled_and_python(monkeypatch, run, MultibodyModel)
 
 
 @compiled_only

@@ -18,9 +18,10 @@ import pytest
 from scipy.linalg import lapack
 
 import dynsens
+from helpers import assert_identical_runs, failures_compiled_and_python, python_iteration
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from make_cases import duffing_chain
-from dynsens.errors import ConvergenceError, NonFiniteError
+from dynsens.errors import ConvergenceError
 from dynsens.integrators.newmark import Prediction
 from dynsens.models.base import StepState
 from dynsens.models import structural_step, structural_step_kernels
@@ -64,7 +65,7 @@ def _network(n: int = 24) -> dict:
 
 
 def _python_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(StructuralModel, "compiled_step", lambda self, newton, refactor: None)
+    python_iteration(monkeypatch, StructuralModel)
 
 
 def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: ignore[no-untyped-def]
@@ -77,17 +78,6 @@ def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: i
         _python_iteration(m)
         python = dynsens.run_case(case, **kw)
     return compiled, python, len(calls)
-
-
-def _assert_identical(compiled, python) -> None:  # type: ignore[no-untyped-def]
-    assert compiled.counters == python.counters
-    assert compiled.responses.keys() == python.responses.keys()
-    for key, r in compiled.responses.items():
-        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
-        if r.gradient is not None:
-            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
-    for field, a in compiled.history.items():
-        np.testing.assert_array_equal(a, python.history[field], err_msg=field)
 
 
 @compiled_only
@@ -105,9 +95,9 @@ def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, buil
     case = dynsens.load_case_dict(build(), "chain.yaml", sets)
     compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
     assert calls == compiled.counters["steps"]        # every step iterated compiled
-    _assert_identical(compiled, python)
+    assert_identical_runs(compiled, python)
     primal, python_primal, _ = _both(monkeypatch, case, sensitivities=False)
-    _assert_identical(primal, python_primal)
+    assert_identical_runs(primal, python_primal)
     for key, r in primal.responses.items():          # the same primal with or without gradients
         np.testing.assert_array_equal(r.value, compiled.responses[key].value, err_msg=key)
 
@@ -131,7 +121,7 @@ def test_which_models_are_served(monkeypatch):
     for case in (dynsens.load_case(CASES / "duffing_chain.yaml", short), dynsens.load_case_dict(wide, "wide.yaml")):
         compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
         assert calls == 0
-        _assert_identical(compiled, python)
+        assert_identical_runs(compiled, python)
 
 
 @compiled_only
@@ -163,16 +153,7 @@ def test_complex_runs_take_the_python_iteration():
 
 
 def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-def]
-    """(type, message, residual history) of the error of run(), compiled and as Python."""
-    out = []
-    for python in (False, True):
-        with monkeypatch.context() as m:
-            if python:
-                _python_iteration(m)
-            with pytest.raises((ConvergenceError, NonFiniteError)) as err:
-                run()
-            out.append((type(err.value), str(err.value), getattr(err.value, "residual_history", None)))
-    return out
+    return failures_compiled_and_python(monkeypatch, run, StructuralModel)
 
 
 @compiled_only

@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from ..integrators.newmark import correct_arrays
 from ..solver._jit import enabled
 from ..solver.banded import BandPlan, TridiagonalFactor
-from ..solver.compiled_iteration import REGULAR, read_only, singular_reason
+from ..solver.compiled_iteration import REGULAR, CompiledStep, read_only
 from ..solver.linalg import Counters, Factor, SingularMatrixError
 from .base import StepState
 from .sparse_assembly import on_pattern
@@ -161,22 +161,16 @@ def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
     return make
 
 
-class CompiledSpringStep:
+class CompiledSpringStep(CompiledStep):
     """One step of a spring network for :func:`.newton_core.newton_iterations`, compiled: the
     data of the step, and the conversion of what the iteration returns."""
 
+    iteration = iteration
+
     def __init__(self, model: "StructuralModel", t: float, params: dict[str, Any], design: _Design,
                  data: SpringStepData):
-        self.model, self.t, self.params, self.design, self.data = model, t, params, design, data
-
-    def iterate(self, *args: Any) -> tuple:
-        """:func:`.newton_core.newton_iterations` with this step's data (same arguments after ops)."""
-        return iteration()(self.data, *args)
-
-    @staticmethod
-    def state(s: tuple) -> StepState:
-        """The StepState of the iteration's state tuple."""
-        return StepState(*s)
+        super().__init__(data)
+        self.model, self.t, self.params, self.design = model, t, params, design
 
     def linearization_and_factor(self, lf: tuple, counters: Counters, linearization: bool = True
                                  ) -> tuple[Any, Factor | None, None]:
@@ -198,8 +192,3 @@ class CompiledSpringStep:
             lin = self.model.linearize(self.t, StepState(q, qd, qdd, empty, empty, empty), self.params,
                                        tangent=d.tangent_matrix(K))
         return lin, factor, None
-
-    @staticmethod
-    def singular_reason(lf: tuple) -> str:
-        """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor`."""
-        return singular_reason(lf[-1])

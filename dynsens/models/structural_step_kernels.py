@@ -26,7 +26,7 @@ from ..solver import newton_core as core
 from ..solver import tridiagonal
 from ..solver._jit import inline, jit
 from ..solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         compiled_iteration, sources_stamp)
+                                         LazyIteration, sources_stamp)
 from ..solver.linalg import all_finite, pivot_test
 from . import spring_law as law
 
@@ -190,9 +190,7 @@ def _register() -> None:
                 Sd = np.zeros((n, n))
                 for k in range(entries.shape[0]):
                     Sd[ops.s_row[k], ops.s_col[k]] = entries[k]
-                if core.above_roundoff_bound(rnorm, Sd.ravel(), z):
-                    return False
-                return core.within_roundoff(R, np.dot(np.abs(Sd), np.abs(z)))
+                return core.dense_at_roundoff(Sd, R, z, rnorm)
             if core.above_roundoff_bound(rnorm, entries, z):
                 return False
             terms = np.zeros(n)
@@ -219,16 +217,8 @@ def _stamp() -> str:
     return sources_stamp((law, tridiagonal, sys.modules[__name__]))
 
 
-_ITERATE: Any = None
-
-
-def iteration() -> Any:
-    """The compiled iteration (the overloads registered first)."""
-    global _ITERATE
-    if _ITERATE is None:
-        _register()
-        _ITERATE = compiled_iteration(_stamp())
-    return _ITERATE
+# the compiled iteration (the overloads registered first)
+iteration = LazyIteration(_register, _stamp)
 
 
 def _compiled_probe(stamp: str) -> Any:

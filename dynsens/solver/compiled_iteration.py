@@ -13,7 +13,7 @@ import inspect
 import sys
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
@@ -62,6 +62,48 @@ def compiled_iteration(stamp: str) -> Any:
         return core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
                                       scales, present, history)
     return jit(iterate)
+
+
+class LazyIteration:
+    """A model family's compiled iteration, made on first use: ``register()`` (its overloads of
+    the step operations) first, then :func:`compiled_iteration` keyed by ``stamp()``."""
+
+    def __init__(self, register: Callable[[], None], stamp: Callable[[], str]):
+        self._register, self._stamp = register, stamp
+        self._compiled: Any = None
+
+    def __call__(self) -> Any:
+        if self._compiled is None:
+            self._register()
+            self._compiled = compiled_iteration(self._stamp())
+        return self._compiled
+
+
+class CompiledStep:
+    """One step of a model family for :func:`~.newton_core.newton_iterations`, compiled: the
+    step's data and the family's :class:`LazyIteration` (``iteration``, set by each family's
+    subclass, which also turns the iteration's last factor into the Python path's objects)."""
+
+    iteration: LazyIteration
+
+    def __init__(self, data: Any):
+        self.data = data
+
+    def iterate(self, *args: Any) -> tuple:
+        """:func:`~.newton_core.newton_iterations` with this step's data (same arguments after ops)."""
+        return type(self).iteration()(self.data, *args)
+
+    @staticmethod
+    def state(s: tuple) -> Any:
+        """The StepState of the iteration's state tuple."""
+        from ..models.base import StepState
+        return StepState(*s)
+
+    @staticmethod
+    def singular_reason(lf: tuple) -> str:
+        """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor` (the
+        last entry of the factor tuple: its code, column and pivot ratio)."""
+        return singular_reason(lf[-1])
 
 
 def singular_reason(test: np.ndarray) -> str:

@@ -98,6 +98,15 @@ def within_roundoff(R: np.ndarray, terms: np.ndarray) -> bool:
 
 
 @register_jitable
+def dense_at_roundoff(S: np.ndarray, R: np.ndarray, z: np.ndarray, rnorm: float) -> bool:
+    """The round-off test of a compiled step with a dense real S (n, n): the quick rejection
+    on all of S's entries, then |R_i| ≤ c·ε·(|S| |z|)_i with numpy's (BLAS) product."""
+    if above_roundoff_bound(rnorm, S.ravel(), z):
+        return False
+    return within_roundoff(R, np.abs(S) @ np.abs(z))
+
+
+@register_jitable
 def within(ops: Any, z: np.ndarray, dz: np.ndarray, rtol: float, atol: float, scales: Any,
            present: Any) -> bool:
     """‖Δz_b‖ ≤ rtol·max(‖z_b‖, scale_b) + atol for every present block b (present: the

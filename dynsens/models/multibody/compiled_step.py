@@ -25,10 +25,10 @@ import numpy as np
 from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
+from ...solver.compiled_iteration import CompiledStep as CompiledStepBase
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         compiled_iteration, read_only, singular_reason, sources_stamp)
+                                         LazyIteration, read_only, sources_stamp)
 from ...solver.linalg import Counters, Factor, all_finite, pivot_test
-from ..base import StepState
 from . import compiled as cc
 from . import compiled_linearization as clin
 from .residual import CompiledLinearization, time_inputs
@@ -179,11 +179,7 @@ def _register() -> None:
 
         def impl(ops, lf, R, z, rnorm):  # type: ignore[no-untyped-def]
             S = lf[4]
-            if S.size == 0:
-                return False
-            if core.above_roundoff_bound(rnorm, S.ravel(), z):
-                return False
-            return core.within_roundoff(R, np.abs(S) @ np.abs(z))
+            return S.size > 0 and core.dense_at_roundoff(S, R, z, rnorm)
         return impl
 
     @overload(core.step_block_norms)
@@ -208,16 +204,8 @@ def _sources_stamp() -> str:
     return sources_stamp((cc, clin, forces, hydraulics, sys.modules[__name__]))
 
 
-_ITERATE: Any = None
-
-
-def _iterate() -> Any:
-    """The compiled iteration (the overloads registered first)."""
-    global _ITERATE
-    if _ITERATE is None:
-        _register()
-        _ITERATE = compiled_iteration(_sources_stamp())
-    return _ITERATE
+# the compiled iteration (the overloads registered first)
+_iterate = LazyIteration(_register, _sources_stamp)
 
 
 def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
@@ -263,21 +251,15 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
     return make
 
 
-class CompiledStep:
+class CompiledStep(CompiledStepBase):
     """One step of a mechanism for :func:`.newton_core.newton_iterations`, compiled: the data
     of the step, and the conversion of what the iteration returns."""
 
+    iteration = _iterate
+
     def __init__(self, model: "MultibodyModel", data: StepData):
-        self.model, self.data = model, data
-
-    def iterate(self, *args: Any) -> tuple:
-        """:func:`.newton_core.newton_iterations` with this step's data (same arguments after ops)."""
-        return _iterate()(self.data, *args)
-
-    @staticmethod
-    def state(s: tuple) -> StepState:
-        """The StepState of the iteration's state tuple."""
-        return StepState(*s)
+        super().__init__(data)
+        self.model = model
 
     def linearization_and_factor(self, lf: tuple, counters: Counters, linearization: bool = True
                                  ) -> tuple[Any, Factor | None, Array]:
@@ -287,8 +269,3 @@ class CompiledStep:
         lin = CompiledLinearization(R_z, R_q, R_qd, R_p if self.model.traits.n_p else None)
         factor = Factor.from_dense_lu(lu.T, piv - 1, counters) if test[0] == REGULAR and S.size else None
         return lin, factor, S
-
-    @staticmethod
-    def singular_reason(lf: tuple) -> str:
-        """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor`."""
-        return singular_reason(lf[-1])
