@@ -89,12 +89,16 @@ def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: i
     (_network, ["sensitivity.method=adjoint"]),
     (_dense_chain, []),
     (_dense_chain, ["sensitivity.method=adjoint"]),
+    (_chain, ["integrator.adaptive={rtol: 1.0e-6, atol: 1.0e-9}", "integrator.scheme=hht",
+              "integrator.alpha=0.1"]),
+    (_chain, ["integrator.adaptive={rtol: 1.0e-6, atol: 1.0e-9}", "sensitivity.method=adjoint"]),
 ], ids=["chain", "chain-adjoint", "chain-complex-partials", "network", "network-adjoint", "dense-chain",
-        "dense-chain-adjoint"])
+        "dense-chain-adjoint", "adaptive-hht", "adaptive-adjoint"])
 def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, build, sets):
     case = dynsens.load_case_dict(build(), "chain.yaml", sets)
     compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
-    assert calls == compiled.counters["steps"]        # every step iterated compiled
+    # every step iterated compiled (an adaptive run's rejected trials as well)
+    assert calls == compiled.counters["steps"] + compiled.counters.get("rejected_steps", 0)
     assert_identical_runs(compiled, python)
     primal, python_primal, _ = _both(monkeypatch, case, sensitivities=False)
     assert_identical_runs(primal, python_primal)
