@@ -104,8 +104,9 @@ class _Design:
 def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
     """For :meth:`.structural.StructuralModel.compiled_step`: the :class:`CompiledSpringStep` of a
     step, or None for a step it does not serve (complex data; a design whose S the Python path
-    does not factor as tridiagonal: it iterates in Python); None for a model it does not serve
-    (not a spring network, see :func:`serves`)."""
+    does not factor as tridiagonal, or whose compiled F_R is not the model's bit for bit: it
+    iterates in Python); None for a model it does not serve (not a spring network, see
+    :func:`serves`)."""
     if not (newton and refactor and enabled() and serves(model)):
         return None
     kept: dict[int, tuple[Any, Any]] = {}       # per parameter set: its _Design (None: not served)
