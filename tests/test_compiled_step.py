@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import dynsens
-from helpers import assert_identical_runs, failures_compiled_and_python, python_iteration
+from helpers import (assert_identical_runs, assert_same_failures, failures_compiled_and_python,
+                     python_iteration)
 from dynsens.errors import NonFiniteError
 from dynsens.integrators.newmark import Prediction
 from dynsens.models.base import StepState
@@ -102,7 +103,7 @@ def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-d
 def test_a_step_that_does_not_converge_fails_alike(monkeypatch):
     case = _short("tyrolean_weir", 20, "integrator.solver.max_iterations=1", "integrator.max_step_cuts=0")
     compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert "did not converge" in compiled[1]
 
 
@@ -125,7 +126,7 @@ def test_a_singular_iteration_matrix_fails_alike(monkeypatch):
                           lambda pr, qdd, lam, pd: StepState(pr.q + 0.25 * h * h * qdd, pr.qd + 0.5 * h * qdd,
                                                              qdd, lam, pr.p, pd))
     compiled, python = _failure(monkeypatch, step)
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert "singular iteration matrix" in compiled[1] and "lose rank" in compiled[1]
 
 
@@ -147,7 +148,7 @@ def test_a_non_finite_residual_fails_alike(monkeypatch):
                           lambda pr, qdd, lam, pd: StepState(pr.q + 0.25 * h * h * qdd, pr.qd + 0.5 * h * qdd,
                                                              qdd, lam, pr.p + 0.5 * h * pd, pd))
     compiled, python = _failure(monkeypatch, run)
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert compiled[0] is NonFiniteError
 
 

@@ -18,7 +18,8 @@ import pytest
 from scipy.linalg import lapack
 
 import dynsens
-from helpers import assert_identical_runs, failures_compiled_and_python, python_iteration
+from helpers import (assert_identical_runs, assert_same_failures, failures_compiled_and_python,
+                     python_iteration)
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from make_cases import duffing_chain
 from dynsens.errors import ConvergenceError
@@ -165,7 +166,7 @@ def test_a_step_that_does_not_converge_fails_alike(monkeypatch):
     case = dynsens.load_case_dict(_chain(), "chain.yaml", ["integrator.solver.max_iterations=1",
                                                          "integrator.max_step_cuts=0"])
     compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert "did not converge" in compiled[1]
 
 
@@ -178,7 +179,7 @@ def test_a_softening_run_that_loses_its_way_fails_alike(monkeypatch):
     d["model"]["loads"][0]["value"] = 1.0e4
     case = dynsens.load_case_dict(d, "softening.yaml", ["integrator.max_step_cuts=0"])
     compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert "did not converge at t = 0.012 s" in compiled[1]
 
 
@@ -214,7 +215,7 @@ def test_a_singular_iteration_matrix_fails_alike(monkeypatch):
                         lambda self, *a: calls.append(1) or original(self, *a))
     compiled, python = _failure(monkeypatch, steps)
     assert len(calls) == 2
-    assert compiled == python
+    assert_same_failures(compiled, python)
     assert "singular iteration matrix (exactly zero pivot in column 1" in compiled[1]
 
 
