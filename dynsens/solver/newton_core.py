@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ._jit import register_jitable
+from ._jit import HAVE_NUMBA, enabled, jit, register_jitable
 
 # Componentwise backward error below which a residual is round-off (≈ 500 ε).
 ROUNDOFF = 1e-13
@@ -67,8 +67,7 @@ def step_block_norms(ops: Any, z: np.ndarray, dz: np.ndarray) -> tuple[Any, Any]
 
 
 # ----------------------------------------------------------------------------- tests
-@register_jitable
-def real_norm(v: np.ndarray) -> float:
+def _real_norm(v: np.ndarray) -> float:
     """2-norm of the real part, scaled so that huge entries do not overflow the sum of squares."""
     if not v.size:
         return 0.0
@@ -80,6 +79,32 @@ def real_norm(v: np.ndarray) -> float:
     if big == 0.0 or not math.isfinite(big):
         return big
     return big * float(np.linalg.norm(r / big))
+
+
+_NORM: list[Any] = []       # the compiled norm for Python callers, or None (decided on first use)
+
+
+def real_norm(v: np.ndarray) -> float:
+    """:func:`_real_norm`: inlined into a compiled step, and for Python callers the same
+    compiled function where compiled code is enabled.  The sum of squares is a BLAS dot product,
+    and numba calls scipy's BLAS where numpy calls its own: where the two are different builds
+    (the oldest supported numpy and scipy) they may differ in the last bit, and a norm decides
+    when Newton stops.  (Complex or strided data, which only the Python path sees, stay with
+    numpy.)"""
+    if not _NORM:
+        _NORM.append(jit(_real_norm) if enabled() else None)
+    norm = _NORM[0]
+    if norm is None or v.dtype.kind != "f" or not v.flags.c_contiguous:
+        return _real_norm(v)
+    return norm(v)
+
+
+if HAVE_NUMBA:
+    from numba.extending import overload
+
+    @overload(real_norm)
+    def _real_norm_compiled(v):  # type: ignore[no-untyped-def]
+        return _real_norm
 
 
 @register_jitable
