@@ -103,7 +103,7 @@ if HAVE_NUMBA:
     from numba.extending import overload
 
     @overload(real_norm)
-    def _real_norm_compiled(v):  # type: ignore[no-untyped-def]
+    def _real_norm_compiled(v: np.ndarray) -> Any:    # (numba compares the annotations too)
         return _real_norm
 
 
