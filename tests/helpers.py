@@ -100,18 +100,63 @@ def failures_compiled_and_python(monkeypatch, run, model_class):
     return out
 
 
+_BLAS_AGREE: list[bool] = []
+
+
+def blas_builds_agree() -> bool:
+    """Whether numba's BLAS (scipy's build) forms dot and matrix-vector products bit for bit as
+    numpy's does, at lengths and alignments like a step's.  With current wheels the two are one
+    build; under the minimum versions (numpy 1.24, scipy 1.10) they are not, and a dot product
+    may differ in its last bit, depending on where its arrays lie in memory."""
+    if not _BLAS_AGREE:
+        from numba import njit
+
+        @njit(cache=False)
+        def dot(a, b):  # type: ignore[no-untyped-def]
+            return a @ b
+
+        @njit(cache=False)
+        def mv(A, x):  # type: ignore[no-untyped-def]
+            return A @ x
+        buf = np.random.default_rng(0).standard_normal(20000)
+        agree = True
+        for n in (3, 7, 16, 30, 43, 60, 100, 257, 1000):
+            for off in range(4):
+                a, b = buf[off:off + n], buf[off + 100:off + 100 + n]
+                m = min(n, 100)
+                A, x = buf[off:off + m * m].reshape(m, m), buf[off + 7:off + 7 + m]
+                agree = agree and dot(a, b) == a @ b and np.array_equal(mv(A, x), A @ x)
+        _BLAS_AGREE.append(agree)
+    return _BLAS_AGREE[0]
+
+
+# where numba's BLAS and numpy's are different builds, the compiled and Python iterations take
+# their convergence decisions on norms and products one rounding apart: their runs then agree to
+# the Newton tolerance, not bit for bit (measured under the minimum versions: 2e-6 relative)
+DIFFERENT_BLAS_RTOL = 1e-5
+
+
 def assert_identical_runs(compiled, python):
-    """Two runs agree bit for bit: counters, responses (values and gradients) and every
-    history field."""
-    assert compiled.counters == python.counters
+    """Two runs agree bit for bit (counters, responses with their gradients, every history
+    field) where numba's BLAS is numpy's build; otherwise to :data:`DIFFERENT_BLAS_RTOL` of each
+    array's largest entry, with the same number of steps."""
+    exact = blas_builds_agree()
+    assert compiled.counters == python.counters if exact else compiled.counters["steps"] == python.counters["steps"]
+
+    def same(a, b, what):  # type: ignore[no-untyped-def]
+        if exact:
+            np.testing.assert_array_equal(a, b, err_msg=what)
+        else:
+            scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
+            np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
     assert compiled.responses.keys() == python.responses.keys()
     for key, r in compiled.responses.items():
-        np.testing.assert_array_equal(r.value, python.responses[key].value, err_msg=key)
+        same(r.value, python.responses[key].value, key)
         if r.gradient is not None:
-            np.testing.assert_array_equal(r.gradient, python.responses[key].gradient, err_msg=key)
+            same(r.gradient, python.responses[key].gradient, key)
     assert compiled.history.keys() == python.history.keys()
     for field, a in compiled.history.items():
-        np.testing.assert_array_equal(a, python.history[field], err_msg=field)
+        same(a, python.history[field], field)
 
 
 def assert_same_failures(compiled, python):

@@ -18,8 +18,8 @@ import pytest
 from scipy.linalg import lapack
 
 import dynsens
-from helpers import (assert_identical_runs, assert_same_failures, failures_compiled_and_python,
-                     python_iteration)
+from helpers import (assert_identical_runs, assert_same_failures, blas_builds_agree,
+                     failures_compiled_and_python, python_iteration)
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from make_cases import duffing_chain
 from dynsens.errors import ConvergenceError
@@ -98,8 +98,10 @@ def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: i
 def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, build, sets):
     case = dynsens.load_case_dict(build(), "chain.yaml", sets)
     compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
-    # every step iterated compiled (an adaptive run's rejected trials as well)
-    assert calls == compiled.counters["steps"] + compiled.counters.get("rejected_steps", 0)
+    # every step iterated compiled (an adaptive run's rejected trials as well); a dense model's
+    # products are BLAS's, served only where numba's sum as numpy's do (see blas_builds_agree)
+    every = compiled.counters["steps"] + compiled.counters.get("rejected_steps", 0)
+    assert calls == every or (build is _dense_chain and not blas_builds_agree() and calls == 0)
     assert_identical_runs(compiled, python)
     primal, python_primal, _ = _both(monkeypatch, case, sensitivities=False)
     assert_identical_runs(primal, python_primal)
