@@ -76,15 +76,15 @@ class _Design:
             s_col, s_row = np.nonzero(np.abs(diagonal[:, None] - diagonal[None, :]) <= 1)
             G = model._spring_scatter.G
             D_dense = np.zeros((n, n)) if D_model is None else D_model
-            self.tangent = None
+            t_row, t_col = s_row, s_col       # K_t: dense, written on the whole band
         else:                     # the Python path's S: its stored entries, in CSC order
             s_row, s_col = _entries(S)
             G = D_dense = none
-            self.tangent = K      # the tangent's pattern, and where its entries are here
-            self.tangent_positions = plan.storage_positions(*_entries(K))
+            t_row, t_col = _entries(K)        # K_t: on the pattern of the model's assembly
         s_pos = plan.storage_positions(s_row, s_col)
-        if self.dense:
-            self.tangent_flat, self.tangent_positions = s_row * n + s_col, s_pos
+        self.tangent = K          # where K_t's entries are, in the model's matrix and here
+        self.tangent_flat = t_row * n + t_col
+        self.tangent_positions = plan.storage_positions(t_row, t_col)
         perm = np.arange(n) if plan.perm is None else plan.perm
         self.fields = tuple(read_only(x) for x in (
             params["mass"], a, b, params["k1"], params["k2"], params["k3"], k_pos, G, D_dense,

@@ -26,7 +26,7 @@ from ..solver import newton_core as core
 from ..solver import tridiagonal
 from ..solver._jit import inline, jit
 from ..solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, sources_stamp)
+                                         LazyIteration, is_step_data, sources_stamp)
 from ..solver.linalg import all_finite, pivot_test
 from . import spring_law as law
 
@@ -63,8 +63,7 @@ class SpringStepData(NamedTuple):
 
 
 def _is_step_data(ops: Any) -> bool:
-    from numba import types
-    return isinstance(ops, types.BaseNamedTuple) and ops.instance_class is SpringStepData
+    return is_step_data(ops, SpringStepData)
 
 
 def _register() -> None:

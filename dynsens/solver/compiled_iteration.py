@@ -64,6 +64,13 @@ def compiled_iteration(stamp: str) -> Any:
     return jit(iterate)
 
 
+def is_step_data(ops: Any, data_class: type) -> bool:
+    """In an overload of a step operation: whether numba's type ``ops`` is the named tuple
+    ``data_class`` (the model family the overload serves)."""
+    from numba import types
+    return isinstance(ops, types.BaseNamedTuple) and ops.instance_class is data_class
+
+
 class LazyIteration:
     """A model family's compiled iteration, made on first use: ``register()`` (its overloads of
     the step operations) first, then :func:`compiled_iteration` keyed by ``stamp()``."""

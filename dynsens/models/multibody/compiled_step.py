@@ -27,7 +27,7 @@ from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
 from ...solver.compiled_iteration import CompiledStep as CompiledStepBase
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, read_only, sources_stamp)
+                                         LazyIteration, is_step_data, read_only, sources_stamp)
 from ...solver.linalg import Counters, Factor, all_finite, pivot_test
 from . import compiled as cc
 from . import compiled_linearization as clin
@@ -78,8 +78,7 @@ class StepData(NamedTuple):
 
 
 def _is_step_data(ops: Any) -> bool:
-    from numba import types
-    return isinstance(ops, types.BaseNamedTuple) and ops.instance_class is StepData
+    return is_step_data(ops, StepData)
 
 
 def _register() -> None:
