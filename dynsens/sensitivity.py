@@ -248,7 +248,7 @@ class DesignPartials:
         base = self.method != "forward"
         col = np.concatenate([[0], self._col]) if base else self._col
         coef = np.concatenate([[0.0], self._coef]) if base else self._coef
-        leaves = (_along(np.stack(v), np.stack(dv), col, coef)            # (K, n), (K, n, m) -> (K, E, n)
+        leaves = (_along(np.array(v), np.array(dv), col, coef)            # (K, n), (K, n, m) -> (K, E, n)
                   for v, dv in zip(zip(*states), zip(*dstates)))
         out = StepState(*(x.reshape(K * E, x.shape[-1]) for x in leaves))
         self._block_states = (states, out)          # keeps the list alive: identity stays unique

@@ -4,7 +4,8 @@ The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on 
 machine, real and complex separately (≈ 25 s and ≈ 8 s on 2 cores), and so is the compiled step
 that calls it (``models/multibody/compiled_step.py``, ≈ 30 s; one signature for every mechanism)
 and the compiled step of spring networks (``models/structural_step_kernels.py``, ≈ 10 s; one signature
-for every network); all are cached on disk beside the package.  ``make setup`` runs this module
+for every network), and the compiled block of sensitivity steps (``derivatives/direct_step.py``; one
+signature for every dense model); all are cached on disk beside the package.  ``make setup`` runs this module
 so that a user's first ``dynsens simulate`` takes as long as the second, and so that no reported
 timing includes compilation.  It runs a short piece (``--steps`` steps) of each multibody case
 with forward partials (real arithmetic), complex partials and a complex-step run of the whole

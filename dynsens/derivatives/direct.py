@@ -17,10 +17,11 @@ import numpy as np
 
 from ..integrators.newmark import Aux, Newmark
 from ..models.base import Model, StepState
-from ..sensitivity import DesignPartials, initial_state_gradient, pseudo_load, pseudo_load_with
+from ..sensitivity import DesignPartials, initial_state_gradient, pseudo_load
 from ..solver.linalg import Counters
 from ..solver.newton import StepSolver
 from ..stepping import StepRecord, split_unknowns
+from .direct_step import PythonDirectStep, direct_step, run_block, serves
 from .finite import check_block
 
 TRAIL_STEPS = 128
@@ -68,6 +69,8 @@ class DirectMode:
         self._transitions: dict[tuple[int, int, float], tuple[Any, Any, np.ndarray, np.ndarray]] = {}
         self.ds: StepState | None = None
         self.daux: Aux | None = None
+        self._ops = PythonDirectStep(scheme, solver.solve_sensitivity, tr.n_q, tr.n_lam,
+                                     lambda projection, ds: projection.apply(ds, partials))
 
     def start(self, rec: StepRecord) -> StepState:
         """∇s at t0: the design derivative of the initial state, and ∇z0 from the initial solve."""
@@ -97,7 +100,13 @@ class DirectMode:
                                                             [r.solved for r in trail])
         self.counters.sensitivity_residual_evaluations += self.partials.evaluations_per_call * len(trail)
         ds, daux = self.ds, self.daux
-        k = 0
+        compiled = not self._use_transitions and serves(self.scheme, trail, ds, design_part)
+        if compiled:          # the whole block compiled (:mod:`.direct_step`)
+            states, ds, daux = run_block(self.scheme, trail, ds, daux, design_part, self.n_q, self.n_lam)
+            ds_of = list(states)
+            self.counters.solves += len(trail)
+            self.counters.solve_columns += len(trail) * self.partials.m
+        k = len(trail) if compiled else 0
         while k < len(trail):
             rec = trail[k]
             end = k + 1
@@ -123,16 +132,10 @@ class DirectMode:
 
     def _step(self, ds: StepState, daux: Aux, design_part: np.ndarray, lin: Any, factor: Any,
               h: float, projection: Any = None) -> tuple[StepState, Aux]:
-        """One sensitivity step (method.md §4): predict ∇, pseudo load, S ∇z = −P, correct (and
-        the derivative of the step's projection, when the model projects its end states)."""
-        scheme = self.scheme
-        dpred = scheme.predict(ds, daux, h)
-        P = pseudo_load_with(design_part, lin, dpred.q, dpred.qd, dpred.p)
-        dz = self.solver.solve_sensitivity(factor, P)
-        ds = scheme.correct(dpred, *split_unknowns(dz, self.n_q, self.n_lam), h)
-        if projection is not None and projection.feedback:
-            ds = projection.apply(ds, self.partials)
-        return ds, scheme.advance(dpred, ds)
+        """One sensitivity step (method.md §4, :func:`.direct_step.direct_step`): predict ∇,
+        pseudo load, S ∇z = −P, correct (and the derivative of the step's projection, when the
+        model projects its end states)."""
+        return direct_step(self._ops, (lin, factor, h, projection), ds, daux, design_part)
 
     def _unpack(self, X: np.ndarray) -> tuple[StepState, Aux]:
         parts = [X[sl] for sl in self._pieces]

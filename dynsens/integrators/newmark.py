@@ -70,7 +70,8 @@ class Newmark:
         return 2 if abs(self.gamma - 0.5 - self.alpha_f + self.alpha_m) < 1e-12 else 1
 
     @property
-    def _c_a(self) -> float:
+    def c_a(self) -> float:
+        """c_a = (1 − α_f)/(1 − α_m): ∂a/∂q̈ of the algorithmic accelerations (1 for plain Newmark)."""
         return (1.0 - self.alpha_f) / (1.0 - self.alpha_m)
 
     def start(self, s: StepState) -> Aux:
@@ -79,8 +80,7 @@ class Newmark:
 
     def coefficients(self, dt: float) -> tuple[float, float, float]:
         """(c_q, c_qd, c_p) = (∂q/∂q̈, ∂q̇/∂q̈, ∂p/∂ṗ) of the corrector for step size dt (s)."""
-        c = self._c_a
-        return self.beta * dt * dt * c, self.gamma * dt * c, self.gamma * dt * c
+        return corrector_coefficients(dt, self.beta, self.gamma, self.c_a)
 
     def predict(self, s: StepState, aux: Aux, dt: float) -> Prediction:
         """Predictor from the state at the previous step (vectors or (n, m) matrices)."""
@@ -88,9 +88,7 @@ class Newmark:
         if am == 0.0 and af == 0.0:
             # plain Newmark: no remainder terms (the predictor is evaluated every step, also for
             # the (n, m) sensitivity matrices)
-            return Prediction(s.q + dt * s.qd + (dt * dt * (0.5 - b)) * aux.a,
-                              s.qd + (dt * (1.0 - g)) * aux.a,
-                              s.p + (dt * (1.0 - g)) * aux.b, 0.0, 0.0)
+            return Prediction(*predict_arrays(s.q, s.qd, s.p, aux.a, aux.b, dt, b, g), 0.0, 0.0)
         a_rest = (af * s.qdd - am * aux.a) / (1.0 - am)
         b_rest = (af * s.pd - am * aux.b) / (1.0 - am)
         return Prediction(
@@ -109,10 +107,31 @@ class Newmark:
 
     def advance(self, pred: Prediction, s: StepState) -> Aux:
         """Algorithmic accelerations of the new step."""
-        c = self._c_a
-        if c == 1.0:
-            return Aux(pred.a_rest + s.qdd, pred.b_rest + s.pd)
-        return Aux(pred.a_rest + c * s.qdd, pred.b_rest + c * s.pd)
+        return Aux(*advance_arrays(pred.a_rest, pred.b_rest, s.qdd, s.pd, self.c_a))
+
+
+# The scheme's maps as functions of arrays and numbers: the methods above call them, and so do
+# the compiled steps (Newton's and the sensitivities'), so each map has one definition.
+
+def corrector_coefficients(dt: float, beta: float, gamma: float, c_a: float) -> tuple[float, float, float]:
+    """(c_q, c_q̇, c_p) of the corrector for step size dt (s); c_a = (1 − α_f)/(1 − α_m)."""
+    return beta * dt * dt * c_a, gamma * dt * c_a, gamma * dt * c_a
+
+
+def predict_arrays(q: np.ndarray, qd: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray, dt: float,
+                   beta: float, gamma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Plain Newmark's predicted (q, q̇, p) from the previous step's state and algorithmic
+    accelerations a, b (vectors or (n, m) matrices), step size dt (s)."""
+    return (q + dt * qd + (dt * dt * (0.5 - beta)) * a, qd + (dt * (1.0 - gamma)) * a,
+            p + (dt * (1.0 - gamma)) * b)
+
+
+def advance_arrays(a_rest: np.ndarray | float, b_rest: np.ndarray | float, qdd: np.ndarray, pd: np.ndarray,
+                   c_a: float) -> tuple[np.ndarray, np.ndarray]:
+    """The new algorithmic accelerations (a, b) = (a_rest + c_a q̈, b_rest + c_a ṗ)."""
+    if c_a == 1.0:
+        return a_rest + qdd, b_rest + pd
+    return a_rest + c_a * qdd, b_rest + c_a * pd
 
 
 def correct_arrays(q_pred: np.ndarray, qd_pred: np.ndarray, p_pred: np.ndarray, c_q: float, c_qd: float,

@@ -26,7 +26,7 @@ from ..solver import newton_core as core
 from ..solver import tridiagonal
 from ..solver._jit import inline, jit
 from ..solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, is_step_data, sources_stamp)
+                                         LazyIteration, is_step_data, sources_stamp, step_kept)
 from ..solver.linalg import all_finite, pivot_test
 from . import spring_law as law
 
@@ -197,6 +197,11 @@ def _register() -> None:
                 terms[ops.s_row[k]] += abs(entries[k]) * abs(z[ops.s_col[k]])
             return core.within_roundoff(R, terms)
         return impl
+
+    @overload(step_kept)
+    def _kept(ops, s):  # type: ignore[no-untyped-def]
+        if _is_step_data(ops):
+            return lambda ops, s: None       # nothing: the structural checks read the state only
 
     @overload(core.step_block_norms)
     def _block_norms(ops, z, dz):  # type: ignore[no-untyped-def]

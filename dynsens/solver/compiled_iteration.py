@@ -8,6 +8,7 @@ numba caches the result on disk: the types of the arguments, not the model, sele
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import inspect
 import sys
@@ -52,15 +53,25 @@ def sources_stamp(modules: Iterable[ModuleType]) -> str:
     return h.hexdigest()
 
 
+def step_kept(ops: Any, s: Any) -> Any:
+    """What a model family computes, still compiled, at the state s an iteration ends at, for
+    the Python that follows the step (the mechanisms: its kinematics, which the drift guard,
+    the monitors and the event outputs read).  Each family overloads it; as Python it keeps
+    nothing (the Python path's models evaluate what is asked when it is asked)."""
+    return None
+
+
 def compiled_iteration(stamp: str) -> Any:
     """:func:`~.newton_core.newton_iterations` compiled (the overloads of the step operations
-    registered first), its cache entries keyed by ``stamp``."""
+    registered first), its cache entries keyed by ``stamp``; its result is followed by
+    :func:`step_kept` at the state it ends at."""
 
     def iterate(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,  # type: ignore[no-untyped-def]
                 scales, present, history):
         stamp          # noqa: B018 - a closure variable: part of numba's cache key
-        return core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
-                                      scales, present, history)
+        out = core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
+                                     scales, present, history)
+        return out + (step_kept(ops, out[4]),)
     return jit(iterate)
 
 
@@ -97,20 +108,31 @@ class CompiledStep:
         self.data = data
 
     def iterate(self, *args: Any) -> tuple:
-        """:func:`~.newton_core.newton_iterations` with this step's data (same arguments after ops)."""
-        return type(self).iteration()(self.data, *args)
+        """:func:`~.newton_core.newton_iterations` with this step's data (same arguments after
+        ops), and what :func:`step_kept` computed at the state it ended at."""
+        return type(self).iteration()(self.data, *args)  # type: ignore[no-any-return]
+
+    def keep(self, s: Any, kept: Any) -> None:
+        """Hand what :func:`step_kept` computed at the converged state s to the model (by
+        default nothing)."""
 
     @staticmethod
     def state(s: tuple) -> Any:
         """The StepState of the iteration's state tuple."""
-        from ..models.base import StepState
-        return StepState(*s)
+        return _step_state()._make(s)
 
     @staticmethod
     def singular_reason(lf: tuple) -> str:
         """Why S was not regular, in the words of :class:`~dynsens.solver.linalg.Factor` (the
         last entry of the factor tuple: its code, column and pivot ratio)."""
         return singular_reason(lf[-1])
+
+
+@functools.cache
+def _step_state() -> Any:
+    # (models import the solver: the state type is looked up on first use, then kept)
+    from ..models.base import StepState
+    return StepState
 
 
 def singular_reason(test: np.ndarray) -> str:

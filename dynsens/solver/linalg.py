@@ -193,6 +193,14 @@ class Factor:
         """``diag``, ``dense``, ``banded`` or ``sparse``: how S was factorized."""
         return self._kind
 
+    @property
+    def dense_real_lu(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """LAPACK getrf's (lu (n, n), column-major; piv (n,), 0-based) of a dense real S (float64);
+        None for another kind or dtype."""
+        if self._kind != "dense" or self._complex or self._lu[0].dtype != np.float64:
+            return None
+        return self._lu  # type: ignore[no-any-return]
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve S x = rhs; rhs (n,) or (n, k), real or complex."""
         self.counters.solves += 1

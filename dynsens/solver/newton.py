@@ -152,10 +152,12 @@ class StepSolver:
             lin, factor = lf if lf is not None else (None, None)
         else:
             scales = np.array(self._scales)      # (compiled: typed arrays)
-            status, it, z, dz, s, R, lf, fresh, n_res, n_lin = compiled.iterate(
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept = compiled.iterate(
                 z0.copy(), *args, scales, self._present_array, history)
             self._scales = scales.tolist()
             s = compiled.state(s)
+            if status == CONVERGED or status == AT_ROUNDOFF:
+                compiled.keep(s, kept)
             lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters, self.sensitivities)
             c = self.counters
             c.linearizations += n_lin

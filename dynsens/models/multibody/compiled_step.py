@@ -27,7 +27,7 @@ from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
 from ...solver.compiled_iteration import CompiledStep as CompiledStepBase
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, is_step_data, read_only, sources_stamp)
+                                         LazyIteration, is_step_data, read_only, sources_stamp, step_kept)
 from ...solver.linalg import Counters, Factor, all_finite, pivot_test
 from . import compiled as cc
 from . import compiled_linearization as clin
@@ -105,6 +105,18 @@ def _register() -> None:
             return q, qd, z[:n_q], z[n_q:n_q + n_lam], p, z[n_q + n_lam:]
         return impl
 
+    def kinematics(ops, s):  # type: ignore[no-untyped-def]
+        q, qd, qdd = s[0], s[1], s[2]
+        return cc.kinematics(q.reshape(1, -1), qd.reshape(1, -1), np.ascontiguousarray(qdd).reshape(1, -1),
+                             ops.pb, ops.is_point, ops.Ts4, ops.side_ptr, ops.side_prim, ops.side_coef, ops.cAB,
+                             ops.norm_body)
+    kinematics = cc.inline(kinematics)
+
+    @overload(step_kept)
+    def _kept(ops, s):  # type: ignore[no-untyped-def]
+        if _is_step_data(ops):          # of the converged state: the drift guard's, the outputs'
+            return lambda ops, s: kinematics(ops, s)
+
     @overload(core.step_residual)
     def _residual(ops, s):  # type: ignore[no-untyped-def]
         if not _is_step_data(ops):
@@ -112,9 +124,7 @@ def _register() -> None:
 
         def impl(ops, s):  # type: ignore[no-untyped-def]
             q, qd, qdd, lam, p, pd = s
-            Lp, Lr, C, PV, ABV, X, N = cc.kinematics(
-                q.reshape(1, -1), qd.reshape(1, -1), np.ascontiguousarray(qdd).reshape(1, -1), ops.pb,
-                ops.is_point, ops.Ts4, ops.side_ptr, ops.side_prim, ops.side_coef, ops.cAB, ops.norm_body)
+            Lp, Lr, C, PV, ABV, X, N = kinematics(ops, s)
             w = ops.weights
             R, Phi, W, F, AX, Pp, H, HL, HLd, Hp = cc.forces_and_residual(
                 Lp, Lr, C, ABV, X, N, ops.pb, ops.is_point, ops.side_ptr, ops.side_prim, ops.side_coef,
@@ -238,15 +248,26 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
         kept[id(params)] = (params, fields)
         return fields
 
+    views: list[tuple[Array | None, Array | None]] = [(None, None)] * 3    # (source, read-only view)
+
+    def read_only_kept(k: int, a: Array) -> Array:
+        # cf, shift and f_ext are mostly the same arrays from step to step (constant in time)
+        source, view = views[k]
+        if source is not a:
+            views[k] = source, view = a, read_only(a, np.float64)
+        return view  # type: ignore[return-value]
+
+    f64 = np.dtype(np.float64)
+
     def make(t: float, pred: Any, params: Any, coeffs: tuple[float, float, float]) -> CompiledStep | None:
         kp = kernel_params(lay, params)
-        if kp.pv.dtype != np.float64 or not all(a.dtype == np.float64 for a in (pred.q, pred.qd, pred.p)):
+        if not (kp.pv.dtype == pred.q.dtype == pred.qd.dtype == pred.p.dtype == f64):
             return None
         cf, shift = model.coefficients(t, kp)
         ext, f_ext, g = time_inputs(model, kp, t, np.float64)      # (g: the same at every t)
-        step = (pred.q, pred.qd, pred.p, np.array(coeffs), read_only(cf, np.float64),
-                read_only(shift, np.float64), read_only(ext), read_only(f_ext))
-        return CompiledStep(model, StepData._make(step + design_fields(params, kp, g)))
+        step = (pred.q, pred.qd, pred.p, np.array(coeffs), read_only_kept(0, cf), read_only_kept(1, shift),
+                read_only(ext), read_only_kept(2, f_ext))
+        return CompiledStep(model, StepData._make(step + design_fields(params, kp, g)), params)
     return make
 
 
@@ -256,15 +277,22 @@ class CompiledStep(CompiledStepBase):
 
     iteration = _iterate
 
-    def __init__(self, model: "MultibodyModel", data: StepData):
+    def __init__(self, model: "MultibodyModel", data: StepData, params: Any):
         super().__init__(data)
-        self.model = model
+        self.model, self.params = model, params
+
+    def keep(self, s: Any, kept: tuple) -> None:
+        """The kinematics of the converged state s, to the model's cache of kinematics."""
+        self.model.keep_kinematics(s, self.params, kept)
 
     def linearization_and_factor(self, lf: tuple, counters: Counters, linearization: bool = True
                                  ) -> tuple[Any, Factor | None, Array]:
         """(Linearization, Factor, S) of the iteration's last linearization (Factor None when S
-        was not regular; the linearization is made in any case: its blocks are the iteration's)."""
+        was not regular); both only with ``linearization``: the sensitivities need them, the
+        primal steps do not."""
         R_z, R_q, R_qd, R_p, S, lu, piv, _, test = lf
+        if not linearization:
+            return None, None, S
         lin = CompiledLinearization(R_z, R_q, R_qd, R_p if self.model.traits.n_p else None)
         factor = Factor.from_dense_lu(lu.T, piv - 1, counters) if test[0] == REGULAR and S.size else None
         return lin, factor, S

@@ -109,6 +109,10 @@ class Layout:
         self.S = np.zeros((self.n_eq, self.n_cp))
         self.S[prod_eq, np.arange(self.n_cp)] = 1.0
         self.norm_eq, self.norm_body = np.array(norm_eq, int), np.array(norm_body, int)
+        # the normalisations' rows as a slice where they are consecutive (the usual case: cheaper
+        # to add to than by an index array, the same sums)
+        consecutive = len(norm_eq) > 0 and norm_eq == list(range(norm_eq[0], norm_eq[0] + len(norm_eq)))
+        self.norm_rows: Any = slice(norm_eq[0], norm_eq[0] + len(norm_eq)) if consecutive else self.norm_eq
         self.pb = np.array([t.body for t in self.prims], np.int_)          # type: ignore[attr-defined]
         self.is_point = np.array([isinstance(t, Point) for t in self.prims], float)
         self.point_idx = np.flatnonzero(self.is_point)

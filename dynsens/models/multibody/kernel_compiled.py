@@ -68,31 +68,37 @@ class CompiledKin(Kin):
     a ``pool``, a large batch takes its arrays from it (:class:`BufferPool`)."""
 
     def __init__(self, lay: Layout, kp: KParams, q: Array, qd: Array, qdd: Array,
-                 pool: BufferPool | None = None):
+                 pool: BufferPool | None = None, computed: tuple | None = None):
         self.lay, self.kp = lay, kp
         self.dtype = dt = np.result_type(q, qd, qdd, kp.pv)          # float64 or complex128
-        self.arrays = cl = lay.compiled_arrays()
-        self.params = ck = compiled_params(kp, dt)
+        self.arrays = lay.compiled_arrays()
+        self.params = compiled_params(kp, dt)
         # contiguous, in one dtype: one compiled specialization per dtype
         q, qd, qdd = np.ascontiguousarray(q, dt), np.ascontiguousarray(qd, dt), np.ascontiguousarray(qdd, dt)
         self.q, self.qd = q, qd
+        if computed is None:
+            computed = self._compute(q, qd, qdd, pool)
+        (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = computed
+        self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
+        self._rows = None
+
+    def _compute(self, q: Array, qd: Array, qdd: Array, pool: BufferPool | None) -> tuple:
+        """The compiled kernel's arrays at the states (a large batch's in arrays of the pool)."""
+        lay, cl, ck, dt = self.lay, self.arrays, self.params, self.dtype
         args = (q, qd, qdd, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr, cl.side_prim, cl.side_coef, ck.cAB,
                 cl.norm_body)
         B = max(q.shape[0], ck.Ts4.shape[0])
         if pool is None or not _is_block(q.shape[0], ck.Ts4.shape[0]):
-            (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = cc.kinematics(*args)
-        else:
-            n_b, n_t, n_prod = lay.n_b, lay.n_t, ck.cAB.shape[2]
-            shapes = [(B, 3, n_b, 4), (B, 3, n_b, 3), (B, n_t, 3, 4, 3), (B, n_t, 3, 3),
-                      (B, 2, n_prod, 3, 3), (B, n_prod, 3), (B, cl.norm_body.shape[0], 3)]
-            sizes = [int(np.prod(sh)) for sh in shapes]
-            flat = pool.take(sum(sizes), dt)
-            ends = np.cumsum(sizes)
-            out = [flat[e - n:e].reshape(sh) for e, n, sh in zip(ends, sizes, shapes)]
-            cc.kinematics_into(*args, *out)
-            (self.Lp, self.Lr, self.C, self.PV, self.ABV, self.X, self.N) = out
-        self.AV, self.BV = self.ABV[:, 0], self.ABV[:, 1]
-        self._rows = None
+            return cc.kinematics(*args)  # type: ignore[no-any-return]
+        n_b, n_t, n_prod = lay.n_b, lay.n_t, ck.cAB.shape[2]
+        shapes = [(B, 3, n_b, 4), (B, 3, n_b, 3), (B, n_t, 3, 4, 3), (B, n_t, 3, 3),
+                  (B, 2, n_prod, 3, 3), (B, n_prod, 3), (B, cl.norm_body.shape[0], 3)]
+        sizes = [int(np.prod(sh)) for sh in shapes]
+        flat = pool.take(sum(sizes), dt)
+        ends = np.cumsum(sizes)
+        out = tuple(flat[e - n:e].reshape(sh) for e, n, sh in zip(ends, sizes, shapes))
+        cc.kinematics_into(*args, *out)
+        return out
 
 
 @dataclass
@@ -139,8 +145,15 @@ class KinCache:
     def __init__(self, lay: Layout, size: int = 4):
         self.lay, self.size = lay, size
         self.compiled = cc.enabled()        # decided once per model (DYNSENS_KERNEL)
-        self._items: list[tuple[tuple[Any, ...], tuple[Array, Array, Array], Kin]] = []
+        # (key, the state's arrays, Kin); a kept entry's key is formed when first compared
+        self._items: list[tuple[tuple[Any, ...] | None, tuple[Array, Array, Array], Kin]] = []
         self.pool = BufferPool()
+
+    def put(self, kp: KParams, q: Array, qd: Array, qdd: Array, computed: tuple) -> None:
+        """Keep the kinematics at one state (each (n_q,)) that the compiled kernel ``computed``
+        (:func:`.compiled.kinematics`' arrays) as :meth:`get` would have made them."""
+        if self.compiled:
+            self._insert(kp, q, qd, qdd, computed)
 
     def get(self, kp: KParams, q: Array, qd: Array, qdd: Array) -> Kin:
         """Kin at states (each (n_q,) or (Bs, n_q)) for parameters kp."""
@@ -149,19 +162,33 @@ class KinCache:
         for _, src, kin in self._items:
             if src[0] is q and src[1] is qd and src[2] is qdd and kin.kp is kp:
                 return kin
+        key = self._key(kp, q, qd, qdd)
+        for i, (k, src, kin) in enumerate(self._items):
+            if k is None:
+                k = self._key(kin.kp, *src)
+                self._items[i] = (k, src, kin)
+            if k == key and kin.kp is kp:
+                return kin
+        return self._insert(kp, q, qd, qdd, None, key)
+
+    @staticmethod
+    def _key(kp: KParams, q: Array, qd: Array, qdd: Array) -> tuple[Any, ...]:
+        q2 = q if q.ndim == 2 else q[None]
+        return (id(kp), q2.shape, q2.dtype.char, qd.dtype.char, qdd.dtype.char,
+                q.tobytes(), qd.tobytes(), qdd.tobytes())
+
+    def _insert(self, kp: KParams, q: Array, qd: Array, qdd: Array, computed: tuple | None,
+                key: tuple[Any, ...] | None = None) -> Kin:
         q2 = q if q.ndim == 2 else q[None]
         qd2 = qd if qd.ndim == 2 else qd[None]
         qdd2 = qdd if qdd.ndim == 2 else qdd[None]
-        key = (id(kp), q2.shape, q2.dtype.char, qd2.dtype.char, qdd2.dtype.char,
-               q2.tobytes(), qd2.tobytes(), qdd2.tobytes())
-        for k, _, kin in self._items:
-            if k == key and kin.kp is kp:
-                return kin
         if _is_block(q2.shape[0], kp.B):
             # an earlier block's states are not evaluated again: release their arrays to the pool
             self._items = [it for it in self._items if not _is_block(it[2].q.shape[0], it[2].kp.B)]
-        kin = CompiledKin(self.lay, kp, q2, qd2, qdd2, self.pool) \
+        kin = CompiledKin(self.lay, kp, q2, qd2, qdd2, self.pool, computed) \
             if self.compiled and _use_compiled(kp, q2, qd2, qdd2) else Kin(self.lay, kp, q2, qd2, qdd2)
+        if key is None and computed is None:
+            key = self._key(kp, q, qd, qdd)
         self._items.insert(0, (key, (q, qd, qdd), kin))
         del self._items[self.size:]
         return kin

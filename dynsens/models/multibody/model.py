@@ -215,13 +215,18 @@ class MultibodyModel(Model):
             x, xd, xdd = X[..., 0], X[..., 1], X[..., 2]
             rows = np.stack([c * x, cd * x + c * xd, cdd * x + 2.0 * cd * xd + c * xdd], axis=-1)
         Phi = rmatmul(lay.S, rows) - shift
-        Phi[:, lay.norm_eq] += kin.N
+        Phi[:, lay.norm_rows] += kin.N
         return Phi, cf
 
     def kinematics(self, s: StepState, params: MBParams | KParams) -> Kin:
         """Kernel kinematics at s (leaves (n,) or (B, n)) for one or stacked parameter sets."""
         kp = params if isinstance(params, KParams) else kernel_params(self.layout, params)
         return self._kin.get(kp, s.q, s.qd, s.qdd)
+
+    def keep_kinematics(self, s: StepState, params: MBParams, arrays: tuple) -> None:
+        """Keep the compiled kernel's kinematics ``arrays`` of the state s (the compiled step's,
+        at the state it converged to) for the checks and outputs that read them next."""
+        self._kin.put(kernel_params(self.layout, params), s.q, s.qd, s.qdd, arrays)
 
     def _evaluation(self, t: float, s: StepState, params: MBParams | KParams) -> Evaluation:
         kin = self.kinematics(s, params)
@@ -268,7 +273,8 @@ class MultibodyModel(Model):
         if not (self._kin.compiled and lay.compiled_laws) or \
                 not all(f.closed_form for f in self.other_forces):
             return super().residual_batch_steps(ts, states, params_list)
-        q, qd, qdd, lam, p, pd = (np.repeat(np.stack(v), B, axis=0) for v in zip(*states))
+        # (np.array of a list of equal arrays: np.stack's copies, without its per-array Python work)
+        q, qd, qdd, lam, p, pd = (np.repeat(np.array(v), B, axis=0) for v in zip(*states))
         if not _use_compiled(kp, q, qd, qdd):
             return super().residual_batch_steps(ts, states, params_list)
         kin = CompiledKin(lay, kp, q, qd, qdd, self._kin.pool)

@@ -99,12 +99,12 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
     for i, el in enumerate(lay.axial):
         for k, t in enumerate(ts):
             ext[k, :, i] = el.external(t, kp.pv)
-    forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
     # what does not depend on t is formed once per parameter sets and dtype: gravity, and the
     # point forces when all of them are constant in time (never written to: the kernel reads
     # them, and numba would compile another specialization for read-only arrays)
     kept = kp.__dict__.setdefault("_steady_inputs", {}).get(dt.char)
     if kept is None:
+        forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
         g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
             else np.zeros((1, 3), dt)
         f0 = None
@@ -112,8 +112,8 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
             f0 = np.zeros((B if forces else 1, lay.n_t, 3), dt)
             for pf, j in forces:
                 f0[:, j] -= point_force(pf, 0.0, kp.pv)
-        kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0)
-    g, f_ext = kept
+        kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0, forces)
+    g, f_ext, forces = kept
     if f_ext is None:
         f_ext = np.zeros((B * K, lay.n_t, 3), dt)
         for pf, j in forces:

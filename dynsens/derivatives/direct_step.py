@@ -1,0 +1,285 @@
+r"""One step of direct differentiation (method.md §4), defined once for every backend.
+
+:func:`direct_step` is the step: predict the sensitivity matrices with the scheme, form the
+pseudo load P (the explicit design part plus R_q ∇q^pred + R_q̇ ∇q̇^pred + R_p ∇p^pred), solve
+S ∇z = −P with the step's factor, correct, and move the scheme's algorithmic accelerations on.
+Like Newton's iteration (:mod:`dynsens.solver.newton_core`), it reaches the scheme and the
+linear algebra only through operations (``sens_*``):
+
+* run as Python, they are the methods of :class:`PythonDirectStep` (any scheme, model, matrix
+  kind, real or complex, with the derivative of a projection);
+* compiled, they are numba overloads for :class:`DenseBlock`, the records of a block of steps
+  of plain Newmark with dense real linearizations and LU factors (the compiled mechanisms'),
+  and :func:`direct_block` takes the whole block without returning to the interpreter.  The
+  products are BLAS gemm and the solve LAPACK getrs, as in the Python path, so the numbers are
+  the same where numba's BLAS is numpy's build.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..integrators.newmark import (Newmark, advance_arrays, correct_arrays, corrector_coefficients,
+                                   predict_arrays)
+from ..models.base import StepState
+from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
+from ..solver.linalg import Factor
+from ..stepping import StepRecord, split_unknowns
+
+
+# ----------------------------------------------------------------------------- step operations
+# Each is the method of the same name of a Python step object (``rec``: what the object needs
+# of the step); the compiled block overloads them, so these bodies run in Python only.
+
+def sens_predict(ops: Any, rec: Any, ds: Any, daux: Any) -> Any:
+    """The predicted sensitivities of the step from ∇s and the scheme's ∇a, ∇b."""
+    return ops.predict(rec, ds, daux)
+
+
+def sens_pseudo_load(ops: Any, rec: Any, design_part: np.ndarray, dpred: Any) -> np.ndarray:
+    """P (n_z, m): the explicit design part plus the state part at the predicted sensitivities."""
+    return ops.pseudo_load(rec, design_part, dpred)
+
+
+def sens_solve(ops: Any, rec: Any, P: np.ndarray) -> np.ndarray:
+    """∇z (n_z, m) from S ∇z = −P with the step's factor."""
+    return ops.solve(rec, P)
+
+
+def sens_correct(ops: Any, rec: Any, dpred: Any, dz: np.ndarray) -> Any:
+    """∇s of the step from the prediction and ∇z (the scheme's corrector)."""
+    return ops.correct(rec, dpred, dz)
+
+
+def sens_advance(ops: Any, rec: Any, dpred: Any, ds: Any) -> Any:
+    """The scheme's ∇a, ∇b after the step."""
+    return ops.advance(rec, dpred, ds)
+
+
+@register_jitable
+def direct_step(ops: Any, rec: Any, ds: Any, daux: Any, design_part: np.ndarray) -> tuple[Any, Any]:
+    """One sensitivity step (method.md §4): (∇s, ∇aux) after the step ``rec``."""
+    dpred = sens_predict(ops, rec, ds, daux)
+    P = sens_pseudo_load(ops, rec, design_part, dpred)
+    dz = sens_solve(ops, rec, P)
+    ds = sens_correct(ops, rec, dpred, dz)
+    return ds, sens_advance(ops, rec, dpred, ds)
+
+
+class PythonDirectStep:
+    """The step operations as Python, for a step ``rec`` = (lin, factor, h, projection)."""
+
+    def __init__(self, scheme: Newmark, solve: Any, n_q: int, n_lam: int, project: Any):
+        self.scheme, self._solve, self.n_q, self.n_lam = scheme, solve, n_q, n_lam
+        self._project = project         # (projection, ∇s) -> ∇s, for a projection fed back
+
+    def predict(self, rec: tuple, ds: StepState, daux: Any) -> Any:
+        return self.scheme.predict(ds, daux, rec[2])
+
+    def pseudo_load(self, rec: tuple, design_part: np.ndarray, dpred: Any) -> np.ndarray:
+        lin = rec[0]
+        state_part = lin.state_product(dpred.q, dpred.qd, dpred.p) if lin is not None else None
+        return design_part if state_part is None else design_part + state_part
+
+    def solve(self, rec: tuple, P: np.ndarray) -> np.ndarray:
+        return self._solve(rec[1], P)
+
+    def correct(self, rec: tuple, dpred: Any, dz: np.ndarray) -> StepState:
+        ds = self.scheme.correct(dpred, *split_unknowns(dz, self.n_q, self.n_lam), rec[2])
+        projection = rec[3]
+        if projection is not None and projection.feedback:
+            ds = self._project(projection, ds)
+        return ds
+
+    def advance(self, rec: tuple, dpred: Any, ds: StepState) -> Any:
+        return self.scheme.advance(dpred, ds)
+
+
+# ----------------------------------------------------------------------------- the compiled block
+_F64 = np.dtype(np.float64)
+
+
+class DenseBlock(NamedTuple):
+    """The records of a block of steps for the compiled :func:`direct_block`, stacked (K, ...)."""
+
+    R_q: np.ndarray       # (K, n_z, n_q)
+    R_qd: np.ndarray      # (K, n_z, n_q)
+    R_p: np.ndarray       # (K, n_z, n_p)
+    lu: np.ndarray        # (K, n_z, n_z): getrf's LU, each in column-major order
+    piv: np.ndarray       # (K, n_z) getrf's 1-based pivots (int32)
+    h: np.ndarray         # (K,) step sizes (s)
+    scheme: np.ndarray    # (β, γ, c_a)
+    sizes: np.ndarray     # (n_q, n_lam)
+
+
+def dense_real(rec: StepRecord) -> bool:
+    """Whether the compiled block serves a record: a dense real linearization (R_q, R_q̇ and
+    R_p or none) and a dense real LU factor, no projection."""
+    lin, factor = rec.lin, rec.factor
+    if rec.projection is not None or type(factor) is not Factor or factor.dense_real_lu is None or lin is None:
+        return False
+    return _dense_real(lin.R_q) and _dense_real(lin.R_qd) and (lin.R_p is None or _dense_real(lin.R_p))
+
+
+def _dense_real(a: Any) -> bool:
+    return type(a) is np.ndarray and a.dtype == _F64
+
+
+def serves(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> bool:
+    """Whether :func:`run_block` takes this block: compiled code enabled, plain Newmark, real
+    sensitivities and design partials, every record :func:`dense_real`."""
+    return (HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0
+            and design_part.dtype == _F64 and all(v.dtype == _F64 for v in ds)
+            and all(dense_real(r) for r in trail))
+
+
+def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any, design_part: np.ndarray,
+              n_q: int, n_lam: int) -> tuple[list[StepState], StepState, Any]:
+    """The sensitivities of the records of ``trail`` (which :func:`serves`), from ∇s and ∇aux
+    before the first; design_part (K, n_z, m).  Returns (∇s of each record, ∇s, ∇aux after the
+    last)."""
+    K, n_z = len(trail), trail[0].factor.n
+    zeros = np.zeros((n_z, 0))
+    block = DenseBlock(
+        np.array([r.lin.R_q for r in trail]), np.array([r.lin.R_qd for r in trail]),
+        np.array([r.lin.R_p if r.lin.R_p is not None else zeros for r in trail]),
+        np.stack([r.factor.dense_real_lu[0].T for r in trail]),
+        (np.stack([r.factor.dense_real_lu[1] for r in trail]) + 1).astype(np.int32),
+        np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
+        np.array([n_q, n_lam]))
+    # (leaves in one layout: the compiled block is typed by its arguments)
+    out = _block()(block, tuple(np.ascontiguousarray(v) for v in ds), tuple(np.ascontiguousarray(v) for v in daux),
+                   np.ascontiguousarray(design_part, np.float64))
+    states = list(map(StepState._make, zip(*out[:6])))
+    return states, states[-1], type(daux)(out[6][K - 1], out[7][K - 1])
+
+
+def _make_block(stamp: str) -> Any:
+    def block(ops, ds, daux, design_part):  # type: ignore[no-untyped-def]
+        stamp       # noqa: B018 - a closure variable: part of numba's cache key
+        return direct_block(ops, ds, daux, design_part)
+    return jit(block)
+
+
+@register_jitable
+def direct_block(ops: Any, ds: Any, daux: Any, design_part: np.ndarray) -> tuple:
+    """:func:`direct_step` for each record k of the block; every record's ∇s and ∇aux, stacked
+    (K, n, m) per leaf."""
+    K = design_part.shape[0]
+    out = tuple_of_stacks(ds, daux, K)
+    for k in range(K):
+        ds, daux = direct_step(ops, k, ds, daux, design_part[k])
+        store(out, k, ds, daux)
+    return out
+
+
+_COMPILED: list[Any] = []
+GETRS_SYMBOL = "dynsens_dgetrs"
+
+
+def _block() -> Any:
+    """The compiled :func:`direct_block` (the overloads registered first)."""
+    if not _COMPILED:
+        import sys
+
+        from ..solver.compiled_iteration import sources_stamp
+        _register()
+        _COMPILED.append(_make_block(sources_stamp((sys.modules[__name__],))))
+    return _COMPILED[0]
+
+
+@register_jitable
+def tuple_of_stacks(ds: Any, daux: Any, K: int) -> tuple:
+    """Empty (K, n, m) arrays for each leaf of ∇s and ∇aux."""
+    return (np.empty((K,) + ds[0].shape), np.empty((K,) + ds[1].shape), np.empty((K,) + ds[2].shape),
+            np.empty((K,) + ds[3].shape), np.empty((K,) + ds[4].shape), np.empty((K,) + ds[5].shape),
+            np.empty((K,) + daux[0].shape), np.empty((K,) + daux[1].shape))
+
+
+@register_jitable
+def store(out: tuple, k: int, ds: Any, daux: Any) -> None:
+    """Record k's ∇s and ∇aux into the stacks of :func:`tuple_of_stacks`."""
+    for i in range(6):
+        out[i][k] = ds[i]
+    out[6][k] = daux[0]
+    out[7][k] = daux[1]
+
+
+def _register() -> None:
+    """The overloads of the step operations for :class:`DenseBlock` (numba only)."""
+    import llvmlite.binding as ll
+    from numba import types
+    from numba.extending import get_cython_function_address, overload
+
+    from ..solver.compiled_iteration import is_step_data
+
+    # LAPACK's dgetrs as scipy exports it (the routine scipy.linalg.lapack's getrs calls), by a
+    # symbol name: a compiled function that calls a ctypes pointer could not be cached
+    ll.add_symbol(GETRS_SYMBOL, get_cython_function_address("scipy.linalg.cython_lapack", "dgetrs"))
+    vp = types.voidptr
+    getrs = types.ExternalFunction(GETRS_SYMBOL, types.void(vp, vp, vp, vp, vp, vp, vp, vp, vp))
+    predict, correct = inline(predict_arrays), inline(correct_arrays)
+    advance, coefficients = inline(advance_arrays), inline(corrector_coefficients)
+
+    def ours(ops: Any) -> bool:
+        return is_step_data(ops, DenseBlock)
+
+    @overload(sens_predict)
+    def _predict(ops, rec, ds, daux):  # type: ignore[no-untyped-def]
+        if ours(ops):
+            return lambda ops, rec, ds, daux: predict(ds[0], ds[1], ds[4], daux[0], daux[1], ops.h[rec],
+                                                      ops.scheme[0], ops.scheme[1])
+
+    @overload(sens_pseudo_load)
+    def _pseudo_load(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
+        if not ours(ops):
+            return None
+
+        def impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
+            # Linearization.state_product's sums, in its order (a first-order block only if any)
+            out = ops.R_q[rec] @ dpred[0]
+            out = out + ops.R_qd[rec] @ dpred[1]
+            if dpred[2].shape[0]:
+                out = out + ops.R_p[rec] @ dpred[2]
+            return design_part + out
+        return impl
+
+    @overload(sens_solve)
+    def _solve(ops, rec, P):  # type: ignore[no-untyped-def]
+        if not ours(ops):
+            return None
+
+        def impl(ops, rec, P):  # type: ignore[no-untyped-def]
+            n, m = P.shape
+            x = np.empty((m, n))            # −P in column-major order, as LAPACK takes it
+            for i in range(n):
+                for j in range(m):
+                    x[j, i] = -P[i, j]
+            trans = np.array([ord("N")], np.uint8)
+            ints = np.array([n, m, n, n, 0], np.int32)      # n, nrhs, lda, ldb, info
+            lu = ops.lu[rec]
+            piv = ops.piv[rec]
+            getrs(trans.ctypes, ints[0:].ctypes, ints[1:].ctypes, lu.ctypes, ints[2:].ctypes, piv.ctypes,
+                  x.ctypes, ints[3:].ctypes, ints[4:].ctypes)
+            return x.T
+        return impl
+
+    @overload(sens_correct)
+    def _correct(ops, rec, dpred, dz):  # type: ignore[no-untyped-def]
+        if not ours(ops):
+            return None
+
+        def impl(ops, rec, dpred, dz):  # type: ignore[no-untyped-def]
+            n_q, n_lam = ops.sizes[0], ops.sizes[1]
+            c_q, c_qd, c_p = coefficients(ops.h[rec], ops.scheme[0], ops.scheme[1], ops.scheme[2])
+            qdd, lam, pd = dz[:n_q], dz[n_q:n_q + n_lam], dz[n_q + n_lam:]
+            q, qd, p = correct(dpred[0], dpred[1], dpred[2], c_q, c_qd, c_p, qdd, pd)
+            return (np.ascontiguousarray(q), np.ascontiguousarray(qd), np.ascontiguousarray(qdd),
+                    np.ascontiguousarray(lam), np.ascontiguousarray(p), np.ascontiguousarray(pd))
+        return impl
+
+    @overload(sens_advance)
+    def _advance(ops, rec, dpred, ds):  # type: ignore[no-untyped-def]
+        if ours(ops):
+            return lambda ops, rec, dpred, ds: advance(0.0, 0.0, ds[2], ds[5], ops.scheme[2])
