@@ -38,7 +38,8 @@ MIN_VENV ?= .venv-min
 MIN_PINS := numpy==1.24.0 scipy==1.10.0 h5py==3.8.0 click==8.1.0 pyyaml==6.0.1 numba==0.60.0 \
 	matplotlib==3.7.0 pytest==7.4.0
 MIN_TESTS := tests/test_api.py tests/test_sdof_closed_form.py tests/test_case_errors.py tests/test_optimize.py \
-	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_newmark.py
+	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_direct_step.py \
+	tests/test_newmark.py
 test-min:
 	test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
 	$(MIN_VENV)/bin/python -m pip install --quiet --upgrade pip
