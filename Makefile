@@ -32,14 +32,17 @@ lint: $(LINT_STAMP)
 
 # the lowest versions pyproject.toml allows, in a venv of their own (CI runs this); a subset of
 # the suite: the API, closed forms, case errors, the optimizer (multi-start sampling), the
-# compiled kernel against numpy and the compiled steps against the Python iteration. Its own numba
-# cache keeps the main environment's warm.
+# compiled kernel against numpy, the compiled steps against the Python iteration and the
+# compiled sensitivity block against the Python steps (a mechanism, a structural model, random
+# blocks). Its own numba cache keeps the main environment's warm.
 MIN_VENV ?= .venv-min
 MIN_PINS := numpy==1.24.0 scipy==1.10.0 h5py==3.8.0 click==8.1.0 pyyaml==6.0.1 numba==0.60.0 \
 	matplotlib==3.7.0 pytest==7.4.0
 MIN_TESTS := tests/test_api.py tests/test_sdof_closed_form.py tests/test_case_errors.py tests/test_optimize.py \
-	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_direct_step.py \
-	tests/test_newmark.py
+	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_newmark.py \
+	"tests/test_direct_step.py::test_the_compiled_block_equals_the_python_steps[tyrolean_weir]" \
+	"tests/test_direct_step.py::test_the_compiled_block_equals_the_python_steps[duffing_chain]" \
+	tests/test_direct_step.py::test_a_block_of_random_records_equals_the_python_steps
 test-min:
 	test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
 	$(MIN_VENV)/bin/python -m pip install --quiet --upgrade pip

@@ -19,7 +19,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from . import newton_core as core
-from ._jit import jit
+from ._jit import jit, register_jitable
+from .linalg import all_finite
 
 # regularity of S as an iteration leaves it in its last factor: (code, column or 0, pivot ratio)
 REGULAR, NON_FINITE_ENTRIES, ZERO_PIVOT, SMALL_PIVOT = 0, 1, 2, 3
@@ -61,17 +62,24 @@ def step_kept(ops: Any, s: Any) -> Any:
     return None
 
 
+@register_jitable
+def state_finite(s: Any) -> bool:
+    """Whether every entry of the state s (the six leaves of a StepState) is finite."""
+    return (all_finite(s[0]) and all_finite(s[1]) and all_finite(s[2]) and all_finite(s[3])
+            and all_finite(s[4]) and all_finite(s[5]))
+
+
 def compiled_iteration(stamp: str) -> Any:
     """:func:`~.newton_core.newton_iterations` compiled (the overloads of the step operations
     registered first), its cache entries keyed by ``stamp``; its result is followed by
-    :func:`step_kept` at the state it ends at."""
+    :func:`step_kept` at the state it ends at and by :func:`state_finite` of that state."""
 
     def iterate(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,  # type: ignore[no-untyped-def]
                 scales, present, history):
         stamp          # noqa: B018 - a closure variable: part of numba's cache key
         out = core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
                                      scales, present, history)
-        return out + (step_kept(ops, out[4]),)
+        return out + (step_kept(ops, out[4]), state_finite(out[4]))
     return jit(iterate)
 
 
@@ -109,7 +117,8 @@ class CompiledStep:
 
     def iterate(self, *args: Any) -> tuple:
         """:func:`~.newton_core.newton_iterations` with this step's data (same arguments after
-        ops), and what :func:`step_kept` computed at the state it ended at."""
+        ops), what :func:`step_kept` computed at the state it ended at, and whether that state is
+        finite."""
         return type(self).iteration()(self.data, *args)  # type: ignore[no-any-return]
 
     def keep(self, s: Any, kept: Any) -> None:

@@ -64,6 +64,7 @@ class StepOutcome:
     lin: Linearization | None
     factor: Factor | None
     iterations: int
+    finite: bool = False      # every entry of the state is known to be finite (a compiled step checked)
 
 
 class StepSolver:
@@ -150,9 +151,10 @@ class StepSolver:
             status, it, z, dz, s, R, lf, fresh, n_res, n_lin = newton_iterations(
                 ops, z0.copy(), *args, self._scales, self._present, history)
             lin, factor = lf if lf is not None else (None, None)
+            finite = False        # (not known: the stepper looks)
         else:
             scales = np.array(self._scales)      # (compiled: typed arrays)
-            status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept = compiled.iterate(
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept, finite = compiled.iterate(
                 z0.copy(), *args, scales, self._present_array, history)
             self._scales = scales.tolist()
             s = compiled.state(s)
@@ -169,11 +171,11 @@ class StepSolver:
         self.counters.residual_evaluations += n_res
         self.counters.newton_iterations += n_lin - (status == SINGULAR)
         if status == CONVERGED:
-            return self._accept(t, s, params, coeffs, lin, factor, it, fresh=True)
+            return self._accept(t, s, params, coeffs, lin, factor, it, True, finite)
         if status == AT_ROUNDOFF:
-            return self._accept(t, s, params, coeffs, lin, factor, it, fresh=fresh)
+            return self._accept(t, s, params, coeffs, lin, factor, it, fresh, finite)
         if status == SOLVED_LINEAR:
-            return StepOutcome(s, lin, factor, it)
+            return StepOutcome(s, lin, factor, it, finite)
         if status == NOT_FINITE:
             raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
         residual_history = history[:it].tolist()
@@ -201,14 +203,14 @@ class StepSolver:
 
     def _accept(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
                 lin: Linearization | None, factor: Factor | None, iterations: int,
-                fresh: bool) -> StepOutcome:
+                fresh: bool, finite: bool) -> StepOutcome:
         """Converged at s.  The sensitivity solve needs S at the converged state (method.md §4):
         in ``reuse`` mode the last factor serves when it is ``fresh`` (its iterate is one
         correction within the Newton tolerance, or the reuse tolerance, away from s); otherwise,
         and always in ``converged`` mode, S is factorized again at s."""
         if self.sensitivities and self.refactor and (self.need_converged_factor or not fresh):
             lin, factor = self._linearize_and_factor(t, s, params, coeffs)
-        return StepOutcome(s, lin, factor, iterations)
+        return StepOutcome(s, lin, factor, iterations, finite)
 
     def _at_roundoff(self, R: np.ndarray, z: np.ndarray, rnorm: float) -> bool:
         """|R_i| ≤ c·ε·(|S| |z|)_i for every row i, with S the last iteration matrix; rnorm = ‖Re R‖₂."""
