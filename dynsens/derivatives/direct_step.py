@@ -23,6 +23,7 @@ import numpy as np
 from ..integrators.newmark import (Newmark, advance_arrays, correct_arrays, corrector_coefficients,
                                    predict_arrays)
 from ..models.base import StepState
+from ..sensitivity import pseudo_load_with
 from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
 from ..solver.linalg import Factor
 from ..stepping import StepRecord, split_unknowns
@@ -78,9 +79,7 @@ class PythonDirectStep:
         return self.scheme.predict(ds, daux, rec[2])
 
     def pseudo_load(self, rec: tuple, design_part: np.ndarray, dpred: Any) -> np.ndarray:
-        lin = rec[0]
-        state_part = lin.state_product(dpred.q, dpred.qd, dpred.p) if lin is not None else None
-        return design_part if state_part is None else design_part + state_part
+        return pseudo_load_with(design_part, rec[0], dpred.q, dpred.qd, dpred.p)
 
     def solve(self, rec: tuple, P: np.ndarray) -> np.ndarray:
         return self._solve(rec[1], P)
@@ -237,7 +236,7 @@ def _register() -> None:
             return None
 
         def impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
-            # Linearization.state_product's sums, in its order (a first-order block only if any)
+            # pseudo_load_with's sums (Linearization.state_product's), in its order
             out = ops.R_q[rec] @ dpred[0]
             out = out + ops.R_qd[rec] @ dpred[1]
             if dpred[2].shape[0]:
