@@ -77,6 +77,11 @@ class Recorder:
         self._g: dict[str, list[np.ndarray]] = {s.name: [] for s in specs}
 
     @property
+    def output_ids(self) -> set[int]:
+        """Outputs whose values are recorded."""
+        return {s.output_id for s in self.specs}
+
+    @property
     def gradient_outputs(self) -> set[int]:
         """Outputs whose design gradient is recorded."""
         return {s.output_id for s in self.specs if s.sensitivity}

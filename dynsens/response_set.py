@@ -22,7 +22,8 @@ class ResponseSet:
 
     Parameters
     ----------
-    outputs : the distinct outputs needed (ids are list indices).
+    outputs : the distinct outputs of the case (ids are list indices); those that no response,
+        event or recorded quantity reads are not evaluated.
     responses : in dependency order (combinations last).
     events : terminating events.
     block : most steps evaluated together (fewer when many gradient directions, a large state
@@ -49,6 +50,9 @@ class ResponseSet:
             {ev.output_id for ev in events} | (recorder.gradient_outputs if recorder else set())
         self.responses = responses
         self.events = events
+        # outputs something reads (the others, quantities when none are recorded, are skipped)
+        self._used_oids = {oid for r in responses for oid in r.output_ids} | \
+            {ev.output_id for ev in events} | (recorder.output_ids if recorder else set())
         self.block = block
         self.fired: dict[str, EventRecord] = {}
         self.end_time: Any = None
@@ -67,6 +71,7 @@ class ResponseSet:
         """Record quantities in this run (before :meth:`start`)."""
         self.recorder = recorder
         self._grad_oids |= recorder.gradient_outputs
+        self._used_oids |= recorder.output_ids
 
     def start(self, params: Any, partials: Any | None, stacked_one: Any | None, n_state: int,
               *, trace: bool = False) -> None:
@@ -76,7 +81,7 @@ class ResponseSet:
         ``trace`` keeps the outputs' values of every instant (:meth:`trace`, adjoint mode)."""
         self._params, self._partials, self._params_one = params, partials, stacked_one
         if stacked_one is None and self._stack_parameters is not None and \
-                any(oid not in self._grad_oids for oid in range(len(self.outputs))):
+                any(oid not in self._grad_oids for oid in self._used_oids):
             self._params_one = self._stack_parameters([params])
         self._trace = [] if trace else None
         entries = partials.block_entries if partials is not None else 1
@@ -168,12 +173,15 @@ class ResponseSet:
         value: dict[int, np.ndarray] = {}
         grad: dict[int, np.ndarray | None] = {}
         for oid, o in enumerate(self.outputs):
+            if oid not in self._used_oids:
+                continue
             partials = self._partials if dstates[0] is not None and oid in self._grad_oids else None
             if o.linear:
                 # linear in the state, independent of the design: ∇v = fn(∇state)
-                value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
+                # (np.array of a list of equal arrays: np.stack's copies, without its per-array work)
+                value[oid] = np.array([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
                 grad[oid] = None if partials is None else \
-                    np.stack([np.asarray(o.fn(t, ds, self._params)) for t, ds in zip(times, dstates)])
+                    np.array([np.asarray(o.fn(t, ds, self._params)) for t, ds in zip(times, dstates)])
             elif o.batched and o.autonomous and (partials is not None or self._params_one is not None):
                 # one call for all steps (and directions); t is irrelevant to the output
                 if partials is not None:
@@ -181,16 +189,16 @@ class ResponseSet:
                         lambda st, prm, _fn=o.fn: np.asarray(_fn(times[-1], st, prm)), states, dstates)
                 else:
                     if stacked_s is None:
-                        stacked_s = StepState(*(np.stack(v) for v in zip(*states)))
+                        stacked_s = StepState(*(np.array(v) for v in zip(*states)))
                     value[oid], grad[oid] = np.asarray(o.fn(times[-1], stacked_s, self._params_one)), None
             elif partials is not None:
                 pairs = [partials.value_and_total(lambda st, prm, _fn=o.fn, _t=t: np.asarray(_fn(_t, st, prm)),
                                                   s, ds, o.batched)
                          for t, s, ds in zip(times, states, dstates)]
-                value[oid] = np.stack([v for v, _ in pairs])
-                grad[oid] = np.stack([g for _, g in pairs])
+                value[oid] = np.array([v for v, _ in pairs])
+                grad[oid] = np.array([g for _, g in pairs])
             else:
-                value[oid] = np.stack([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
+                value[oid] = np.array([np.asarray(o.fn(t, s, self._params)) for t, s in zip(times, states)])
                 grad[oid] = None
         samples = Samples(times, value, grad, dict(grad))
         if self.recorder is not None:

@@ -193,3 +193,43 @@ def test_recorded_gradient_histories_match_central_differences_of_the_whole_run(
             assert scale > 0, (name, j)
             # central differences agree to 1.3e-6 of the largest gradient (worst: p2 against theta_AZ)
             assert np.max(np.abs(fd - g)) <= 1e-5 * scale, (name, j, np.max(np.abs(fd - g)) / scale)
+
+
+def _counting(case, calls):
+    """The case with every output's evaluations counted in ``calls`` (by output id)."""
+    import dataclasses
+
+    make = case._make_responses
+
+    def made(record):
+        rs = make(record)
+        for oid, o in enumerate(rs.outputs):
+            def fn(t, s, prm, _fn=o.fn, _oid=oid):
+                calls[_oid] = calls.get(_oid, 0) + 1
+                return _fn(t, s, prm)
+            rs.outputs[oid] = dataclasses.replace(o, fn=fn)
+        return rs
+    return dataclasses.replace(case, _make_responses=made)
+
+
+def test_outputs_only_a_recorded_quantity_reads_are_evaluated_only_when_recording():
+    raw_extra = {"name": "a", "quantity": {"dof": "u", "kind": "acceleration"}, "unit": "m/s2"}
+    raw = yaml.safe_load(sdof_case().text)
+    raw["output"]["quantities"].append(raw_extra)
+    case = dynsens.load_case_dict(raw, "sdof_records")
+    calls: dict[int, int] = {}
+    counted = _counting(case, calls)
+    rs = case.new_response_set()
+    a_id = next(s.output_id for s in case.quantities if s.name == "a")
+    read = {oid for r in rs.responses for oid in r.output_ids}
+    assert a_id not in read
+    recorded = dynsens.run_case(counted)
+    assert calls.get(a_id, 0) > 0 and "a" in recorded.quantities
+    assert recorded.quantities["a"].value.shape == recorded.time.shape
+    calls.clear()
+    bare = dynsens.run_case(counted, history=())
+    assert calls.get(a_id, 0) == 0 and all(calls.get(oid, 0) > 0 for oid in read)
+    assert bare.quantities == {}
+    for name, r in recorded.responses.items():          # the responses do not notice
+        assert np.array_equal(np.atleast_1d(r.value), np.atleast_1d(bare.responses[name].value)), name
+        assert np.array_equal(r.gradient, bare.responses[name].gradient), name

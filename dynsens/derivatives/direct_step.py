@@ -143,8 +143,7 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
     block = DenseBlock(
         np.array([r.lin.R_q for r in trail]), np.array([r.lin.R_qd for r in trail]),
         np.array([r.lin.R_p if r.lin.R_p is not None else zeros for r in trail]),
-        np.stack([r.factor.dense_real_lu[0].T for r in trail]),
-        (np.stack([r.factor.dense_real_lu[1] for r in trail]) + 1).astype(np.int32),
+        np.array([r.factor.compiled_lu[0] for r in trail]), np.array([r.factor.compiled_lu[1] for r in trail]),
         np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
         np.array([n_q, n_lam]))
     # (leaves in one layout: the compiled block is typed by its arguments)

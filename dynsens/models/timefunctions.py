@@ -67,6 +67,23 @@ class TimeFunction:
         return vals[j] + w * (vals[j + 1] - vals[j])
 
 
+    def settled_from(self, pv: np.ndarray) -> float:
+        """A time T (s) after which the value no longer changes: value(t, pv) is the same for
+        every t > T (−inf for a constant, +inf when it never settles).  Lets callers keep inputs
+        evaluated at one such time instead of evaluating them again at each step."""
+        k = self.kind
+        if k == "constant":
+            return -np.inf
+        p = [_first(pv[..., i]) for i in self.idx]
+        if k in ("step", "ramp", "smoothstep"):
+            return max(p)                   # past t0 (and t1): the last branch, 1
+        if k == "pulse":
+            return max(p[0], p[0] + p[1])   # past t0 and t0 + d: 0
+        if k == "table":
+            return self.table_t[-1]         # past the last entry: its value
+        return np.inf                       # harmonic
+
+
 def _first(v: Any) -> float:
     """Real part of a scalar, or of the first entry of a batch."""
     x = v.flat[0] if isinstance(v, np.ndarray) else v

@@ -94,6 +94,10 @@ class Factor:
     (:attr:`~dynsens.models.base.Linearization.dense_pattern`), for the band test.
     """
 
+    # getrf's (lu, piv) as a compiled step returned them: lu row-major (the transpose of the
+    # column-major factor), piv 1-based int32 (None: not made by a compiled step)
+    _from_compiled: tuple[np.ndarray, np.ndarray] | None = None
+
     def __init__(self, S: Any, counters: Counters, dense_general: bool = False,
                  within: np.ndarray | None = None):
         self.counters = counters
@@ -158,14 +162,16 @@ class Factor:
                 raise SingularMatrixError(f"pivot ratio {ratio:.1e}")
 
     @classmethod
-    def from_dense_lu(cls, lu: np.ndarray, piv: np.ndarray, counters: Counters) -> "Factor":
-        """The factor of a dense real matrix from LAPACK getrf's lu (column-major) and 0-based
-        piv, factored elsewhere (the compiled step; it counts its factorizations itself)."""
+    def from_compiled_lu(cls, lu_rows: np.ndarray, piv: np.ndarray, counters: Counters) -> "Factor":
+        """The factor of a dense real matrix factored by a compiled step (it counts its
+        factorizations itself): LAPACK getrf's lu stored row by row (its transpose, C order)
+        and 1-based int32 piv, as the compiled step returned them."""
         self = cls.__new__(cls)
-        self.counters, self.n = counters, lu.shape[0]
+        self.counters, self.n = counters, lu_rows.shape[0]
         self._kind, self._complex = "dense", False
-        _, self._getrs = _lapack(lu.dtype)
-        self._lu = (lu, piv)
+        _, self._getrs = _lapack(lu_rows.dtype)
+        self._lu = (lu_rows.T, piv - 1)
+        self._from_compiled = (lu_rows, piv)
         return self
 
     @classmethod
@@ -200,6 +206,15 @@ class Factor:
         if self._kind != "dense" or self._complex or self._lu[0].dtype != np.float64:
             return None
         return self._lu  # type: ignore[no-any-return]
+
+    @property
+    def compiled_lu(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """:attr:`dense_real_lu` in a compiled step's form: lu row by row (C order), piv 1-based
+        int32 (the arrays the compiled step returned, when it made this factor)."""
+        if self._from_compiled is not None:
+            return self._from_compiled
+        lu = self.dense_real_lu
+        return None if lu is None else (lu[0].T, (lu[1] + 1).astype(np.int32))
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve S x = rhs; rhs (n,) or (n, k), real or complex."""

@@ -64,6 +64,10 @@ class AxialElement:
         """Time-dependent input of the law at t (s) for parameters pv (n,) or (B, n); 0 if none."""
         return 0.0
 
+    def settled_from(self, pv: Array) -> float:
+        """A time T (s) after which :meth:`external` no longer changes (−inf: never changes)."""
+        return -np.inf
+
     def law(self, L: Array, Ld: Array, p: Array, t: float, pv: Array, c: Array) -> tuple:
         """(P, P_L, P_L̇, P_p, h, h_L, h_L̇, h_p) at length L (length), rate L̇ (length/s),
         states p (..., n_pressures), time t (s), parameters pv and constants c (..., n_c)."""

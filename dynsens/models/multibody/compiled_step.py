@@ -248,10 +248,10 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
         kept[id(params)] = (params, fields)
         return fields
 
-    views: list[tuple[Array | None, Array | None]] = [(None, None)] * 3    # (source, read-only view)
+    views: list[tuple[Array | None, Array | None]] = [(None, None)] * 4    # (source, read-only view)
 
     def read_only_kept(k: int, a: Array) -> Array:
-        # cf, shift and f_ext are mostly the same arrays from step to step (constant in time)
+        # cf, shift, ext and f_ext are mostly the same arrays from step to step (constant in time)
         source, view = views[k]
         if source is not a:
             views[k] = source, view = a, read_only(a, np.float64)
@@ -266,7 +266,7 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
         cf, shift = model.coefficients(t, kp)
         ext, f_ext, g = time_inputs(model, kp, t, np.float64)      # (g: the same at every t)
         step = (pred.q, pred.qd, pred.p, np.array(coeffs), read_only_kept(0, cf), read_only_kept(1, shift),
-                read_only(ext), read_only_kept(2, f_ext))
+                read_only_kept(3, ext), read_only_kept(2, f_ext))
         return CompiledStep(model, StepData._make(step + design_fields(params, kp, g)), params)
     return make
 
@@ -294,5 +294,5 @@ class CompiledStep(CompiledStepBase):
         if not linearization:
             return None, None, S
         lin = CompiledLinearization(R_z, R_q, R_qd, R_p if self.model.traits.n_p else None)
-        factor = Factor.from_dense_lu(lu.T, piv - 1, counters) if test[0] == REGULAR and S.size else None
+        factor = Factor.from_compiled_lu(lu, piv, counters) if test[0] == REGULAR and S.size else None
         return lin, factor, S

@@ -46,9 +46,11 @@ def drift_limit(model: "MultibodyModel", params: Any) -> float:
 
 def constraint_residuals(model: "MultibodyModel", t: float, s: StepState, params: Any) -> Any:
     """(Φ, Φ̇, Φ̈) (n_eq, 3) at (t, s), kept for the same state object: the guard after a step and
-    the monitors recorded for it share one evaluation."""
+    the monitors recorded for it share one evaluation (also when they name the step's time
+    differently, t_prev + h and the grid's time, where no constraint depends on time)."""
     last = model.__dict__.get("_phi_last")
-    if last is not None and last[0] == t and last[1] is s.q and last[2] is s.qd and last[3] is params:
+    if last is not None and last[1] is s.q and last[2] is s.qd and last[3] is params and \
+            (last[0] == t or not (model.layout.coefs or model.layout.shifts)):
         return last[4]
     Phi = model.constraint_levels(t, model.kinematics(s, params))[0][0]
     model.__dict__["_phi_last"] = (t, s.q, s.qd, params, Phi)

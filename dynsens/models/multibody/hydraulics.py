@@ -118,6 +118,10 @@ class HydraulicCylinder(AxialElement):
         """Pump flow Q_P(t) = V̇_S φ(t) (volume/s); pv (n,) or (B, n)."""
         return pv[..., self.idx["pump_flow"]] * self.pump.value(t, pv)
 
+    def settled_from(self, pv: Array) -> float:
+        """A time T (s) after which the pump flow no longer changes (that of its time function)."""
+        return self.pump.settled_from(pv)
+
     def kinematics(self, ctx: Ctx) -> tuple[Array, Array, Array]:
         """(s, ṡ, ê): stroke (1, k), stroke rate (1, k), unit axis A→B (3, k)."""
         dv, dd, _ = self.d.kin(ctx)

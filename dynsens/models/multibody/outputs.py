@@ -61,6 +61,12 @@ def _out(v: Any, batched: bool) -> Any:
     return v if batched else v[0]
 
 
+def _angle_z(e0: Any, e1: Any, e2: Any, e3: Any) -> Any:
+    """Direction (rad) in the x–y plane of the body x-axis A(p)e_x = (e0² + e1² − e2² − e3²,
+    2(e1e2 + e0e3), ·), from the Euler parameters (scalars or arrays, complex-safe)."""
+    return atan2_cs(2.0 * (e1 * e2 + e0 * e3), e0 * e0 + e1 * e1 - e2 * e2 - e3 * e3)
+
+
 def _reaction(model: "MultibodyModel", jt: Any) -> Callable[[float, StepState, Any], Any]:
     """f (3,) (or (B, 3)): force of joint jt on body_2 (body_1 when body_2 is the ground),
     −(∂Φ_J/∂r)ᵀλ_J, from the products of the joint's equations (batched)."""
@@ -104,15 +110,15 @@ def _axial(model: "MultibodyModel", el: Any, kind: str) -> Callable[[float, Step
         kin, _, batched = _kin(model, s, prm)
         x = kin.X[:, lay.n_cp + i]
         L = np.sqrt(x[:, 0])
-        Ld = x[:, 1] / (2.0 * L)
         c = kin.kp.ec[i]
-        if kind in ("length", "length_rate"):
-            v = L if kind == "length" else Ld
-        elif kind in ("stroke", "stroke_rate", "volume_1", "volume_2"):
-            st = L - c[:, 2]
-            v = {"stroke": st, "stroke_rate": Ld}.get(kind)
-            if v is None:
-                v = el._volumes(st, c)[0 if kind == "volume_1" else 1]
+        if kind in ("length", "stroke", "volume_1", "volume_2"):
+            v = L if kind == "length" else L - c[:, 2]
+            if kind in ("volume_1", "volume_2"):
+                v = el._volumes(v, c)[0 if kind == "volume_1" else 1]
+            return _out(v[:, None], batched)
+        Ld = x[:, 1] / (2.0 * L)
+        if kind in ("length_rate", "stroke_rate"):
+            v = Ld
         else:
             j = getattr(el, "p_index", 0)
             P = el.law(L, Ld, np.atleast_2d(s.p)[:, j:j + el.n_pressures], t, kin.kp.pv, c)[0]
@@ -221,14 +227,14 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], body_labels, linear=True)
 
         def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
-            p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
             if _k == "angle_z":
-                # body x-axis A(p)e_x = (e0² + e1² − e2² − e3², 2(e1e2 + e0e3), ·)
-                v = atan2_cs(2.0 * (p[1:2] * p[2:3] + p[0:1] * p[3:4]),
-                             p[0:1] * p[0:1] + p[1:2] * p[1:2] - p[2:3] * p[2:3] - p[3:4] * p[3:4])
-            else:
-                v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
-                v = v if _k == "angular_velocity" else v[2:3]
+                # (one state, at every step for an event: its scalars, not arrays of one entry)
+                e = s.q[a + 3:a + 7] if s.q.ndim == 1 else s.q[:, a + 3:a + 7].T     # (4,) or (4, B)
+                angle = _angle_z(e[0], e[1], e[2], e[3])
+                return np.array([angle]) if s.q.ndim == 1 else angle[:, None]
+            p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
+            v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
+            v = v if _k == "angular_velocity" else v[2:3]
             return v.T if s.q.ndim == 2 else v[:, 0]
         return Output(fn, body_labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
     if head == "marker":

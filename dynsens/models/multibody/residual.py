@@ -76,14 +76,15 @@ def point_force(pf: Any, t: float, pv: Array) -> Array:
 def time_inputs(model: "MultibodyModel", kp: Any, t: float, dtype: Any) -> tuple[Array, Array, Array]:
     """Element inputs (B, n_ax), applied point forces on the primitives (·, n_t, 3) and gravity
     (·, 3) of the parameter sets kp at time t (s), in dtype; kept on kp for the last t (Newton
-    evaluates all iterates of a step at one time; the arrays are read-only)."""
+    evaluates all iterates of a step at one time; the arrays are read-only), and from then on
+    once the time functions have settled (their ``settled_from``)."""
     dt = np.dtype(dtype)
     cache = kp.__dict__.setdefault("_inputs", {})
     hit = cache.get(dt.char)
-    if hit is not None and hit[0] == t:
-        return hit[1]
+    if hit is not None and (hit[0] == t or (t > hit[1] and hit[0] > hit[1])):
+        return hit[2]
     out = time_inputs_steps(model, kp, np.array([t]), dt)
-    cache[dt.char] = (t, out)
+    cache[dt.char] = (t, _steady(model, kp, dt)[3], out)
     return out
 
 
@@ -91,35 +92,47 @@ def time_inputs_steps(model: "MultibodyModel", kp: Any, ts: Array, dtype: Any) -
     """The inputs of :func:`time_inputs` at the K times ts (s), entry k·B + j for step k and
     parameter set j: element inputs (K·B, n_ax), point forces (K·B, n_t, 3) — (B, n_t, 3) when
     they are constant in time, (1, n_t, 3) without any; the compiled kernel repeats leading
-    entries cyclically — and gravity (B or 1, 3)."""
+    entries cyclically — and gravity (B or 1, 3).  Once the time functions have settled (all
+    ts past their ``settled_from``), the inputs at the first time stand for all (B entries)."""
     lay = model.layout
     dt = np.dtype(dtype)
     K, B = len(ts), kp.B
+    g, f_ext, forces, settled = _steady(model, kp, dt)
+    if K > 1 and ts[0] > settled and np.all(ts > settled):
+        ts, K = ts[:1], 1
     ext = np.zeros((K, B, len(lay.axial)), dt)
     for i, el in enumerate(lay.axial):
         for k, t in enumerate(ts):
             ext[k, :, i] = el.external(t, kp.pv)
-    # what does not depend on t is formed once per parameter sets and dtype: gravity, and the
-    # point forces when all of them are constant in time (never written to: the kernel reads
-    # them, and numba would compile another specialization for read-only arrays)
-    kept = kp.__dict__.setdefault("_steady_inputs", {}).get(dt.char)
-    if kept is None:
-        forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
-        g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
-            else np.zeros((1, 3), dt)
-        f0 = None
-        if all(pf.fn.kind == "constant" for pf, _ in forces):
-            f0 = np.zeros((B if forces else 1, lay.n_t, 3), dt)
-            for pf, j in forces:
-                f0[:, j] -= point_force(pf, 0.0, kp.pv)
-        kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0, forces)
-    g, f_ext, forces = kept
     if f_ext is None:
         f_ext = np.zeros((B * K, lay.n_t, 3), dt)
         for pf, j in forces:
             for k, t in enumerate(ts):
                 f_ext[k * B:(k + 1) * B, j] -= point_force(pf, t, kp.pv)
     return ext.reshape(K * B, -1), f_ext, g
+
+
+def _steady(model: "MultibodyModel", kp: Any, dt: np.dtype) -> tuple[Array, Array | None, list, float]:
+    """What does not depend on t, formed once per parameter sets and dtype: gravity, the point
+    forces when all of them are constant in time (else None, with the list of them), and the
+    time after which nothing changes.  The arrays are never written to: the kernel reads them,
+    and numba would compile another specialization for read-only arrays."""
+    kept = kp.__dict__.setdefault("_steady_inputs", {}).get(dt.char)
+    if kept is not None:
+        return kept
+    lay, B = model.layout, kp.B
+    forces = [(pf, j) for pf, j in zip(model.point_forces, lay.point_prim) if j >= 0]
+    g = np.ascontiguousarray(kp.pv[:, list(model.gravity.idx)], dt) if model.gravity is not None \
+        else np.zeros((1, 3), dt)
+    f0 = None
+    if all(pf.fn.kind == "constant" for pf, _ in forces):
+        f0 = np.zeros((B if forces else 1, lay.n_t, 3), dt)
+        for pf, j in forces:
+            f0[:, j] -= point_force(pf, 0.0, kp.pv)
+    settled = max([el.settled_from(kp.pv) for el in lay.axial] + [pf.fn.settled_from(kp.pv) for pf, _ in forces],
+                  default=-np.inf)
+    kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0, forces, float(settled))
+    return kept
 
 
 class Evaluation:
