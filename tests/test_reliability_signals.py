@@ -31,9 +31,15 @@ main()
 """
 
 
+def _default_sigint() -> None:
+    # as from a terminal: a test run started as a background job of a non-interactive shell
+    # inherits SIGINT ignored, and so would the child (Python then installs no handler for it)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(args: list[str], code: str = "from dynsens.cli.main import main; main()") -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
 
 
 def _wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> None:
