@@ -66,7 +66,6 @@ class TimeFunction:
         w = (t - ts[j]) / (ts[j + 1] - ts[j])
         return vals[j] + w * (vals[j + 1] - vals[j])
 
-
     def settled_from(self, pv: np.ndarray) -> float:
         """A time T (s) after which the value no longer changes: value(t, pv) is the same for
         every t > T (−inf for a constant, +inf when it never settles).  Lets callers keep inputs
