@@ -26,7 +26,7 @@ from .case.load import Case, load_case, load_case_dict
 from .gradcheck import GradientReport
 from .gradcheck import check_gradients as _check_gradients
 from .march import RunResult
-from .optimize.runner import optimize_case as _optimize_case
+from .optimize.verified import optimize_verified as _optimize_verified
 from .optimize.store import read_history as _read_history
 from .responses import ResponseValue
 from .simulation import run_case
@@ -193,14 +193,16 @@ class OptimizeResult(_ScipyResult):
     ``success``, ``status`` (SLSQP's exit mode), ``message``; and ``feasible``,
     ``max_violation`` (scaled), ``constraints`` (name -> value of the constrained response),
     ``design_names``, ``starts`` (one dict per start), ``history`` (the best start's
-    per-iteration arrays) and ``path`` (the OPT.h5 file, None when run in memory).
+    per-iteration arrays), ``path`` (the OPT.h5 file, None when run in memory), ``verification``
+    (the optimum's verification, None when not run) and ``verified`` (whether it passed).
     """
 
 
 def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[str, float] | None = None,
              starts: int | None = None, seed: int | None = None, maxiter: int | None = None,
              ftol: float | None = None, workers: int | None = None, scheduler: str | None = None,
-             overwrite: bool = False, resume: bool = False, **overrides: Any) -> OptimizeResult:
+             overwrite: bool = False, resume: bool = False, verify: bool | None = None,
+             **overrides: Any) -> OptimizeResult:
     """Minimize the case's objective subject to its constraints (SLSQP, exact gradients).
 
     Parameters
@@ -210,6 +212,9 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
         kept in a temporary directory for the run and removed afterwards).
     x0 : start values by design-variable name, replacing the case's initial design.
     starts, seed, maxiter, ftol, workers, scheduler, overwrite, resume : as the command's options.
+    verify : run the optimum again at a refined step and on a longer window (default: the
+        case's ``optimization.verification.enabled``, on); the result's ``verification`` holds
+        :class:`~dynsens.optimize.verify.Verification` (None when not run), ``verified`` its verdict.
     **overrides : case entries by key path, as ``--set``.
 
     Returns
@@ -223,8 +228,9 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     tmp = tempfile.TemporaryDirectory(prefix="dynsens-opt-") if output is None else None
     path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
     try:
-        res = _optimize_case(c, path, starts=starts, seed=seed, x0=x0, maxiter=maxiter, ftol=ftol,
-                            workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite)
+        res, verification = _optimize_verified(c, path, verify=verify, starts=starts, seed=seed, x0=x0,
+                                               maxiter=maxiter, ftol=ftol, workers=workers, scheduler=scheduler,
+                                               resume=resume, overwrite=overwrite)
         best = res.best_outcome
         hist = _read_history(path, best.index)
     finally:
@@ -248,7 +254,8 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
         design_names=c.design_names,
         starts=[{"x_start": o.x_start, "x": o.x, "fun": o.f, "success": o.success, "feasible": o.feasible,
                  "nit": o.nit, "nfev": o.n_sim, "message": o.message} for o in res.starts],
-        history=hist, path=None if tmp is not None else path)
+        history=hist, path=None if tmp is not None else path, verification=verification,
+        verified=None if verification is None else verification.passed)
 
 
 def check_gradients(case: CaseLike, steps: Sequence[float] = (1e-3, 1e-4, 1e-5, 1e-6), scheme: str = "forward",

@@ -63,11 +63,13 @@ def stress_limits(case: Case) -> tuple[float | None, float | None]:
 
 
 def check_members(case: Case, x: Any = None, *, tension_limit: float | None = None,
-                  compression_limit: float | None = None, buckling: bool = True) -> MemberCheck:
+                  compression_limit: float | None = None, buckling: bool = True,
+                  result: Any = None) -> MemberCheck:
     """Run ``case`` at design ``x`` (default x0) and return every bar's largest ratios.
 
     Limits default to the case's ``stress_ratio`` responses (MPa in the shipped cases);
-    ``buckling`` checks bars that declare ``inertia``.
+    ``buckling`` checks bars that declare ``inertia``.  ``result``: a run of ``case`` at ``x``
+    that stored the displacement history ``q`` (default: run it here).
     """
     x = case.x0 if x is None else np.asarray(x, dtype=float)
     st, sc = stress_limits(case)
@@ -77,7 +79,9 @@ def check_members(case: Case, x: Any = None, *, tension_limit: float | None = No
     if not isinstance(model, StructuralModel) or not model.bar_names:
         raise CaseError("the post-check needs a structural model with bars", case.source)
     names = tuple(model.bar_names)
-    res = run_case(case, x, sensitivities=False, history=("q",))
+    res = result if result is not None else run_case(case, x, sensitivities=False, history=("q",))
+    if "q" not in res.history:
+        raise ValueError("the post-check needs a run that stored the displacement history 'q'")
     params = model.parameters(x)
     pc = ProblemCollector(case.source)
     q = res.history["q"]

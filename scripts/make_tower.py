@@ -80,13 +80,17 @@ def tower(levels: int = 12, height: float = 1000.0, base: float = 2400.0, top: f
             "scale": 300.0, "assign": {"area": "A", "inertia": TUBE_I}}]},
         "model": {"type": "structural", "dim": 3, "nodes": nodes, "elements": elements,
                   "damping": {"rayleigh": {"alpha": 2.0, "beta": 2.0e-5}}, "loads": loads},
-        "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 2.0e-3, "t_end": 0.1},
+        "integrator": {"scheme": "newmark", "beta": 0.25, "gamma": 0.5, "dt": 2.0e-3, "t_end": 0.3},
         "sensitivity": {"enabled": True, "partials": "forward"},
         "output": {"history": ["q"]},
         "responses": responses,
         "optimization": {"objective": "mass", "constraints": [
             {"response": r["name"], "upper": 1.0} for r in responses[1:] if r.get("aggregate") != "max"],
-            "maxiter": 300, "ftol": 1.0e-7},
+            "maxiter": 300, "ftol": 1.0e-7,
+            # the tower rings on after the 30 ms pulse: its diagonals peak near 0.16 s, so the window
+            # covers 0.3 s; the optimum is verified at dt/2 and on a longer window, and bounds that
+            # fail there are tightened by the measured excess and the design re-optimized
+            "verification": {"rounds": 3}},
     }
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 import dynsens
+from dynsens.optimize.verify import format_verification, verify_design
 from dynsens.postcheck import check_members
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -35,7 +36,7 @@ def main() -> None:
     source = args.source
     if source is None:
         source = str(Path(tempfile.mkdtemp()) / "tower_opt.h5")
-        subprocess.run([sys.executable, "-m", "dynsens.cli.main", "optimize", str(TOWER), "-o", source],
+        subprocess.run([sys.executable, "-m", "dynsens", "optimize", str(TOWER), "-o", source],
                        check=False)
     case = dynsens.load_case(TOWER)
     with h5py.File(source, "r") as f:
@@ -46,14 +47,28 @@ def main() -> None:
         wall = float(st["wall_time"])
         names = json.loads(f["optimization"].attrs["response_names"])
         responses = dict(zip(names, np.asarray(st["responses_opt"], float).tolist()))
+        labels = [c["response"] for c in json.loads(f["optimization"].attrs["constraints"])]
+        rounds = len(f["verification/rounds/f"]) - 1 if "verification/rounds" in f else 0
+        tightened = {}
+        if rounds:
+            base = [float(b) for b in f["verification/rounds/bounds"][0]]
+            last = [float(b) for b in f["verification/rounds/bounds"][-1]]
+            tightened = {str(i): b for i, (b0, b) in enumerate(zip(base, last)) if b != b0}
     mass0 = float(dynsens.run_case(case, sensitivities=False).responses["mass"].value)
     chk = check_members(case, x)
     member, kind, ratio = chk.worst()
+    v = verify_design(case, x, refine=2, horizon="auto", tail=0.1)
+    print(format_verification(v))
     record = {
         "case": "tower_sizing.yaml", "status": status, **stats, "wall_time_s": round(wall, 1),
         "mass_start": mass0, "mass": float(responses["mass"]),
         "post_check": {"largest_ratio": chk.largest, "member": member, "kind": kind, "steps": chk.steps,
                        "passes": bool(chk.passes(1e-3))},
+        "verification": {"passed": bool(v.passed), "rounds": rounds,
+                         "tightened_bounds": {(labels[int(i)] if int(i) < len(labels) else i): b
+                                              for i, b in tightened.items()},
+                         "largest_ratio": {run: float(m.largest) for run, m in v.members.items()},
+                         "runs": {r.name: {"dt": r.dt, "t_end": r.t_end} for r in v.runs}},
         "design": {n: float(v) for n, v in zip(case.design_names, x)},
     }
     RECORD.write_text("# written by scripts/optimize_tower.py from a `dynsens optimize` run\n"

@@ -23,6 +23,19 @@ class ConstraintSpec:
 
 
 @dataclass(frozen=True)
+class VerificationSpec:
+    """``optimization.verification``: the run of the optimum at a refined step and on a longer
+    window (:mod:`dynsens.optimize.verify`).  ``horizon`` is ``"auto"``, None or an end time (s)."""
+
+    enabled: bool = True
+    refine: int = 2
+    horizon: float | str | None = "auto"
+    tail: float = 0.1
+    rounds: int = 0
+    safety: float = 1.5
+
+
+@dataclass(frozen=True)
 class OptimizationSpec:
     """Objective (minimized), constraints and optimizer settings."""
 
@@ -32,6 +45,7 @@ class OptimizationSpec:
     maxiter: int = 100
     ftol: float = 1e-6
     options: dict[str, Any] = field(default_factory=dict)
+    verification: VerificationSpec = field(default_factory=VerificationSpec)
 
 
 def validate_optimization(spec: Any, response_names: tuple[str, ...],
@@ -69,6 +83,42 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
     if not isinstance(maxiter, int) or isinstance(maxiter, bool) or maxiter < 1:
         pc.add("optimization.maxiter", f"expected a positive integer, found {maxiter!r}")
     ftol = read_number(spec.get("ftol", 1e-6), "optimization.ftol", pc, positive=True)
+    verification = _verification(spec.get("verification"), pc)
     if len(pc.problems) > n0:
         return None
-    return OptimizationSpec(str(obj), tuple(cons), method, maxiter, float(ftol or 0.0))   # None: returned above
+    return OptimizationSpec(str(obj), tuple(cons), method, maxiter, float(ftol or 0.0),   # None: returned above
+                            verification=verification)
+
+
+def _integer(spec: dict, key: str, default: int, least: int, pc: ProblemCollector) -> int:
+    v = spec.get(key, default)
+    if not isinstance(v, int) or isinstance(v, bool) or v < least:
+        pc.add(f"optimization.verification.{key}", f"expected an integer >= {least}, found {v!r}")
+        return default
+    return v
+
+
+def _verification(spec: Any, pc: ProblemCollector) -> VerificationSpec:
+    """``optimization.verification`` (defaults where absent)."""
+    if spec is None:
+        return VerificationSpec()
+    p = "optimization.verification"
+    if not check_keys(spec, p, allowed(p), pc):
+        return VerificationSpec()
+    enabled = spec.get("enabled", True)
+    if not isinstance(enabled, bool):
+        pc.add(f"{p}.enabled", f"expected true or false, found {enabled!r}")
+    refine = _integer(spec, "refine", 2, 2, pc)
+    rounds = _integer(spec, "rounds", 0, 0, pc)
+    horizon: float | str | None = spec.get("horizon", "auto")
+    if horizon in ("none", None):
+        horizon = None
+    elif horizon != "auto":
+        horizon = read_number(horizon, f"{p}.horizon", pc, positive=True)
+    tail = read_number(spec.get("tail", 0.1), f"{p}.tail", pc)
+    if tail is not None and not 0.0 <= tail < 1.0:
+        pc.add(f"{p}.tail", f"expected a share of the window in [0, 1), found {tail!r}")
+    safety = read_number(spec.get("safety", 1.5), f"{p}.safety", pc)
+    if safety is not None and not safety >= 1.0:
+        pc.add(f"{p}.safety", f"expected a factor >= 1, found {safety!r}")
+    return VerificationSpec(bool(enabled), refine, horizon, float(tail or 0.0), rounds, float(safety or 1.5))

@@ -151,7 +151,24 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _k("method", "enum", "optimizer", values=("SLSQP",), default="SLSQP"),
         _k("maxiter", "integer", "SLSQP iterations", default=100),
         _k("ftol", "number", "SLSQP tolerance on the scaled objective", default=1e-6),
+        _k("verification", "section", "the verification run at the optimum (on by default)",
+           item="optimization.verification"),
     )),
+    "optimization.verification": Section(
+        "optimization.verification", "After the optimization, the optimum is run again at a refined step and "
+        "on a longer window; every constraint and every member is checked in those runs (see the README, "
+        "Verifying an optimum).", (
+            _k("enabled", "bool", "run the verification after `dynsens optimize`", default=True),
+            _k("refine", "integer", "the refined run's step is dt/refine (at least 2)", default=2),
+            _k("horizon", "any", "auto (extend the window by its length until the constrained peaks settle), "
+               "none, or an end time (s) beyond t_end", default="auto"),
+            _k("tail", "number", "a constrained peak in this last share of the window is reported (0: not "
+               "checked)", default=0.1),
+            _k("rounds", "integer", "re-optimize from the optimum with each failing bound tightened by the "
+               "shortfall the verification measured (times `safety`), at most this many times", default=0),
+            _k("safety", "number", "factor on the measured shortfall when a bound is tightened (>= 1)",
+               default=1.5),
+        )),
     "optimization.constraint": Section("optimization.constraints[i]", "One constraint (either bound may be omitted; "
                                        "lower == upper is an equality).", (
         _req("response", "name", "constrained response"),

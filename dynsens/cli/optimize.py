@@ -1,4 +1,5 @@
-"""``dynsens optimize``: SLSQP on the direct sensitivities, history appended to HDF5 per iteration."""
+"""``dynsens optimize``: SLSQP on the design sensitivities, history appended to HDF5 per iteration, and the
+optimum's verification."""
 from __future__ import annotations
 
 import math
@@ -9,8 +10,9 @@ import click
 import numpy as np
 
 from ..case.load import load_case
-from ..optimize import (FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, optimize_case,
-                        plot_optimization)
+from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, plot_optimization
+from ..optimize.verified import optimize_verified
+from ..optimize.verify import Verification, format_verification
 from ..optimize.summary import decision_summary
 from ..progress import Progress
 from .main import cli
@@ -96,19 +98,28 @@ def format_verdict(o: StartOutcome) -> str:
               help="Worker processes for several starts [default: min(starts, CPUs)].")
 @scheduler_option
 @click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
+@click.option("--verify/--no-verify", "verify", default=None,
+              help="Run the optimum again at a refined step and on a longer window and check every constraint "
+                   "and member there [default: the case's optimization.verification.enabled, on].")
+@click.option("--rounds", type=click.IntRange(min=0), default=None,
+              help="While the verification fails, re-optimize with the failing bounds tightened by the measured "
+                   "shortfall, at most this many times [default: the case's optimization.verification.rounds].")
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write PNG plots to DIR: history (objective, violation, KKT), design variables and "
                    "constraints against their bounds in units, recorded quantities at start and optimum.")
 @verbosity_options
 def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
              maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
-             workers: int | None, scheduler: str | None, resume: bool, plots: str | None) -> None:
+             workers: int | None, scheduler: str | None, resume: bool, verify: bool | None, rounds: int | None,
+             plots: str | None) -> None:
     """Minimize the case's objective subject to its constraints with SLSQP.
 
-    Objective, constraints and gradients come from one simulation with direct
-    sensitivities per design point.  Design variables are scaled to [0, 1] in their
-    bounds; the objective is normalized by its value at x0.  Exit status 0 when the best
-    start converged to a feasible design, 1 otherwise.
+    Objective, constraints and gradients come from one simulation with design sensitivities
+    (direct or adjoint, as the case's sensitivity.method says) per design point.  Design
+    variables are scaled to [0, 1] in their bounds; the objective is normalized by its value
+    at x0.  The optimum is then verified at a refined step and on a longer window.  Exit
+    status 0 when the best start converged to a feasible design that passes the
+    verification, 1 otherwise.
     """
     from pathlib import Path
 
@@ -153,10 +164,20 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
                    f"({o.message}), {'feasible' if o.feasible else 'infeasible'}, {o.nit} iterations, "
                    f"{o.n_sim} simulations ({o.n_failed} failed)")
 
+    def on_round(k: int, v: Verification) -> None:
+        bar.close()
+        click.echo("")
+        click.echo(f"verification of the optimum{'' if k == 0 else f' (round {k}, bounds tightened)'}:")
+        click.echo(format_verification(v))
+        if not v.passed and k < n_rounds:
+            click.echo(f"round {k + 1}: re-optimizing from the optimum with the failing bounds tightened")
+
+    n_rounds = case.optimization.verification.rounds if rounds is None else rounds
     try:
-        result = optimize_case(case, output, starts=starts, seed=seed, x0=x0, maxiter=maxiter, ftol=ftol,
-                               workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
-                               on_message=on_message, on_start_done=on_done)
+        result, verification = optimize_verified(
+            case, output, verify=verify, rounds=rounds, on_round=on_round, starts=starts, seed=seed, x0=x0,
+            maxiter=maxiter, ftol=ftol, workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
+            on_message=on_message, on_start_done=on_done)
     except KeyboardInterrupt:
         bar.close()
         click.echo(f"interrupted: the history so far is in {output}; continue with --resume", err=True)
@@ -173,6 +194,9 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     if plots:
         for p in plot_optimization(output, plots):
             click.echo(f"plot: {p}")
+    if verification is not None:
+        click.echo("verified: the optimum passes the verification" if verification.passed else
+                   "NOT VERIFIED: the optimum fails the verification (see above and /verification in the file)")
     click.echo(f"written: {output}")
-    if not (result.converged and result.feasible):
+    if not (result.converged and result.feasible) or (verification is not None and not verification.passed):
         sys.exit(1)

@@ -66,9 +66,9 @@ def start_points(case: Case, n: int, seed: int, x0: np.ndarray) -> np.ndarray:
     return np.array(pts)
 
 
-def resolve_x0(case: Case, x0: Mapping[str, float] | None) -> np.ndarray:
-    """The case's initial design with ``x0`` entries replaced; checks names and bounds."""
-    x = case.x0.copy()
+def resolve_x0(case: Case, x0: Mapping[str, float] | None, base: np.ndarray | None = None) -> np.ndarray:
+    """The case's initial design (or ``base``) with ``x0`` entries replaced; checks names and bounds."""
+    x = (case.x0 if base is None else np.asarray(base, dtype=float)).copy()
     names = case.design_names
     for name, v in (x0 or {}).items():
         # a family's name addresses all its members A[...]

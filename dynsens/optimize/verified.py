@@ -1,0 +1,107 @@
+"""Optimization followed by its verification, and bounds tightened until the optimum holds.
+
+An active constraint sits on its bound on the optimizer's time grid.  At half the step it moves
+by the constraint's discretization error, in either direction; a peak after the window can
+exceed it outright.  With ``optimization.verification.rounds`` > 0 the optimum is re-optimized,
+from where it stands, with every bound the verification found violated tightened by the
+shortfall it measured (times ``safety``): the margin is the measured error of the constraint,
+not a guess.  Verification always judges against the case's own bounds.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+from ..case.load import Case, load_case_dict
+from .problem import ScaledProblem
+from .runner import OptimizationResult, optimize_case
+from .verify import Verification, excesses, store_verification, verify_design
+
+
+def _term_keys(case: Case) -> list[tuple[int, str]]:
+    """(index in ``optimization.constraints``, ``upper`` | ``lower`` | ``eq``) of every term, in
+    the order :func:`~dynsens.optimize.problem.build_problem` makes them."""
+    keys: list[tuple[int, str]] = []
+    assert case.optimization is not None
+    for j, c in enumerate(case.optimization.constraints):
+        if c.lower is not None and c.upper is not None and c.lower == c.upper:
+            keys.append((j, "eq"))
+            continue
+        if c.upper is not None:
+            keys.append((j, "upper"))
+        if c.lower is not None:
+            keys.append((j, "lower"))
+    return keys
+
+
+def tightened_case(case: Case, problem: ScaledProblem, bounds: dict[int, float]) -> Case:
+    """``case`` with the bounds of constraint terms ``bounds`` (term index → new bound) replaced."""
+    raw = yaml.safe_load(case.text)
+    keys = _term_keys(case)
+    for i, b in bounds.items():
+        j, kind = keys[i]
+        raw["optimization"]["constraints"][j][kind] = float(b)
+    return load_case_dict(raw, case.source)
+
+
+def optimize_verified(case: Case, output: str | Path, *, verify: bool | None = None, rounds: int | None = None,
+                      on_round: Callable[[int, Verification], None] | None = None,
+                      **optimize_kwargs: Any) -> tuple[OptimizationResult, Verification | None]:
+    """:func:`~dynsens.optimize.runner.optimize_case`, then :func:`verify_design` at the best design.
+
+    Parameters
+    ----------
+    verify : run the verification (default: the case's ``optimization.verification.enabled``).
+    rounds : re-optimizations with tightened bounds while the verification fails (default: the
+        case's ``optimization.verification.rounds``); each starts from the last optimum, one start.
+    on_round : called with (round, verification) after every verification (round 0: the first).
+    optimize_kwargs : passed to ``optimize_case`` for the first round.
+
+    Returns the last round's result (its file is ``output``; ``/verification`` holds the
+    verification against the case's own bounds and, after tightening, a ``rounds`` table) and
+    the verification (None when not run).
+    """
+    assert case.optimization is not None
+    spec = case.optimization.verification
+    result = optimize_case(case, output, **optimize_kwargs)
+    if not (spec.enabled if verify is None else verify):
+        return result, None
+    n_rounds = spec.rounds if rounds is None else int(rounds)
+    problem0 = result.problem             # the case's own bounds and scaling judge every round
+
+    def check(res: OptimizationResult) -> Verification:
+        return verify_design(case, res.best_outcome.x, refine=spec.refine, horizon=spec.horizon,
+                             tail=spec.tail, problem=problem0)
+
+    v = check(result)
+    table = [_row(problem0, {}, result, v)]
+    if on_round is not None:
+        on_round(0, v)
+    bounds: dict[int, float] = {}
+    for k in range(1, n_rounds + 1):
+        if v.passed or not np.isfinite(result.best_outcome.f):
+            break
+        for i, excess in excesses(v, problem0).items():
+            term = problem0.constraints[i]
+            sign = -1.0 if term.kind == "upper" else 1.0
+            bounds[i] = bounds.get(i, term.bound) + sign * spec.safety * excess
+        tight = tightened_case(case, problem0, bounds)
+        x_start = dict(zip(case.design_names, result.best_outcome.x))
+        kwargs = {key: val for key, val in optimize_kwargs.items() if key not in ("starts", "x0", "resume", "seed")}
+        kwargs["overwrite"] = True
+        result = optimize_case(tight, output, x0=x_start, starts=1, seed=0, **kwargs)
+        v = check(result)
+        table.append(_row(problem0, bounds, result, v))
+        if on_round is not None:
+            on_round(k, v)
+    store_verification(output, v, table if len(table) > 1 else None)
+    return result, v
+
+
+def _row(problem: ScaledProblem, bounds: dict[int, float], result: OptimizationResult,
+         v: Verification) -> dict[str, Any]:
+    return {"bounds": [bounds.get(i, t.bound) for i, t in enumerate(problem.constraints)],
+            "f": result.best_outcome.f, "passed": v.passed, "x": result.best_outcome.x}

@@ -1,0 +1,374 @@
+"""Verification of a design beyond the run that computed it.
+
+An optimizer sees the constraints on one time grid and one window.  A constraint whose peak
+moves when the step is halved, or that is still rising when the window ends, can pass there
+and fail in the structure.  :func:`verify_design` runs the design again
+
+* ``case``: as the case says (the optimizer's run);
+* ``dt/R``: with the time step divided by ``refine`` (adaptive runs: tolerances by R², the
+  error of a second-order scheme falling as h²);
+* ``horizon``: with the window extended, by its own length at a time, until every peak-type
+  constraint response (maximum, minimum, KS, stress, buckling and displacement ratios) changes
+  by less than the feasibility tolerance, or to a stated end time;
+* ``tail``: with the window cut at (1 − ``tail``) of its length, to tell whether a constrained
+  peak lies in the last part of the window,
+
+and checks every constraint in every run, and, for structural models with bars, every member's
+stress and buckling ratio at every stored step (:mod:`dynsens.postcheck`).  A design *passes*
+when every constraint holds (scaled g ≥ −``FEAS_TOL``) and every member ratio is ≤ 1 + 1e-3 in
+the ``dt/R`` and ``horizon`` runs.  A peak in the tail is a warning, not a failure, when the
+extended window shows that it holds.
+
+Responses that are defined on the window itself (a value at t_end, an integral, an event time,
+a mass) keep their meaning only on the case's window: they are checked at the refined step,
+not on the extended horizon.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..case.load import Case
+from ..errors import DynsensError
+from ..postcheck import MemberCheck, check_members, stress_limits
+from ..responses_sizing import Aggregate, MagnitudeAggregate
+from ..simulation import run_case
+from .problem import FEAS_TOL, OptimizationError, ScaledProblem, build_problem
+
+MEMBER_TOL = 1e-3         # member ratios up to 1 + MEMBER_TOL pass (as dynsens.postcheck)
+MAX_EXTENSIONS = 4        # the horizon grows to at most (1 + MAX_EXTENSIONS) windows
+FULL_TABLE = 20           # more constraints than this: the summary lists the failing and the tightest
+RUNS = ("case", "refined", "horizon", "tail")
+
+
+@dataclass
+class RunInfo:
+    """One verification run: its name, step (s), window end (s), wall time (s) and how it ended."""
+
+    name: str
+    dt: float
+    t_end: float
+    wall_time: float
+    message: str
+    failed: bool = False
+
+
+@dataclass
+class ConstraintCheck:
+    """One constraint bound in every verification run.
+
+    values : response value per run name (its unit; NaN where not run or not applicable);
+    margins : scaled g per run (≥ 0 holds; the optimizer's scaling);
+    status : ``ok``, ``violated``, ``late peak`` (holds, but its peak lies in the tail of the
+        window), or ``failed`` (a run could not be completed).
+    """
+
+    label: str
+    response: str
+    peak_type: bool
+    values: dict[str, float]
+    margins: dict[str, float]
+    status: str
+    note: str = ""
+
+
+@dataclass
+class Verification:
+    """The verification of one design (see the module docstring)."""
+
+    x: np.ndarray
+    refine: int
+    runs: list[RunInfo]
+    constraints: list[ConstraintCheck]
+    members: dict[str, MemberCheck] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        """Every constraint holds and every member ratio ≤ 1 + MEMBER_TOL in every run."""
+        return (all(c.status in ("ok", "late peak") for c in self.constraints)
+                and all(m.largest <= 1.0 + MEMBER_TOL for m in self.members.values())
+                and not any(r.failed for r in self.runs))
+
+    def worst_margin(self, run: str) -> float:
+        """Smallest scaled margin of any constraint in ``run`` (NaN: none)."""
+        vals = [c.margins.get(run, np.nan) for c in self.constraints]
+        vals = [v for v in vals if np.isfinite(v)]
+        return min(vals) if vals else float("nan")
+
+
+def _variant(case: Case, *, dt_factor: float = 1.0, t_end: float | None = None) -> Case:
+    """``case`` with its step divided by ``dt_factor`` and/or its window ending at ``t_end``."""
+    plan = case.plan
+    changes: dict[str, Any] = {}
+    if dt_factor != 1.0:
+        if plan.adaptive is not None:
+            a = plan.adaptive
+            changes["adaptive"] = replace(a, rtol=a.rtol / dt_factor ** 2, atol=a.atol / dt_factor ** 2,
+                                          dt_max=a.dt_max / dt_factor)
+        changes["dt"] = plan.dt / dt_factor
+    if t_end is not None:
+        changes["t_end"] = float(t_end)
+    return replace(case, plan=replace(plan, **changes)) if changes else case
+
+
+def peak_type_responses(case: Case) -> set[str]:
+    """Names of the responses that aggregate over the window (max, min, KS, ratios)."""
+    rs = case.new_response_set(record=False)
+    return {r.name for r in rs.responses if isinstance(r, (Aggregate, MagnitudeAggregate))}
+
+
+def _has_members(case: Case) -> bool:
+    from ..models.structural import StructuralModel
+    return isinstance(case.model, StructuralModel) and bool(case.model.bar_names)
+
+
+@dataclass
+class _Run:
+    info: RunInfo
+    responses: dict[str, float]
+    peaks: dict[str, float]          # the sampled extreme of a KS (its value for the others)
+    members: MemberCheck | None
+
+
+def _run(case: Case, x: np.ndarray, name: str, members: bool) -> _Run:
+    t0 = time.perf_counter()
+    try:
+        res = run_case(case, x, sensitivities=False, history=("q",) if members else ())
+    except DynsensError as exc:
+        info = RunInfo(name, case.plan.dt, case.plan.t_end, time.perf_counter() - t0,
+                       f"{type(exc).__name__}: {exc}", failed=True)
+        return _Run(info, {}, {}, None)
+    values = {k: (float(np.real(v.value)) if not v.missing else float("nan")) for k, v in res.responses.items()}
+    # a KS grows with the number of samples it sums (up to ln(N)/rho), so a longer window or a
+    # finer step raises it without any larger peak: where the peaks are compared, compare the
+    # sampled extremes
+    peaks = {k: float(v.extra.get("sampled_max", v.extra.get("sampled_min", values[k])))
+             if v.extra else values[k] for k, v in res.responses.items()}
+    chk = check_members(case, x, result=res) if members else None
+    info = RunInfo(name, case.plan.dt, case.plan.t_end, time.perf_counter() - t0, res.message)
+    return _Run(info, values, peaks, chk)
+
+
+def _margin(term: Any, value: float) -> float:
+    sign = -1.0 if term.kind == "upper" else 1.0
+    g = sign * (value - term.bound) / term.divisor
+    return -abs(g) if term.kind == "eq" else g
+
+
+def verify_design(case: Case, x: Any = None, *, refine: int = 2, horizon: float | str | None = "auto",
+                  tail: float = 0.1, problem: ScaledProblem | None = None) -> Verification:
+    """Run ``case`` at design ``x`` (default x0) at a refined step and on a longer window.
+
+    Parameters
+    ----------
+    refine : the step of the ``refined`` run is dt/refine (an integer ≥ 2).
+    horizon : ``"auto"`` (extend by the window's length until the peak-type constraint
+        responses settle, at most ``MAX_EXTENSIONS`` times), an end time (s), or None (no
+        extended run).
+    tail : share of the window whose peaks are reported as late (0 < tail < 1; 0: no tail run).
+    problem : the optimizer's scaled problem (its constraint scaling); default: built from the
+        case's own run at ``x``.
+
+    Raises DynsensError when the case has no ``optimization`` section or its own run fails.
+    """
+    if refine < 2:
+        raise OptimizationError(f"the verification's refine must be an integer >= 2, found {refine}")
+    if not 0.0 <= tail < 1.0:
+        raise OptimizationError(f"the verification's tail must lie in [0, 1), found {tail}")
+    x = case.x0 if x is None else np.asarray(x, dtype=float)
+    members = _has_members(case) and any(stress_limits(case))
+    base = _run(case, x, "case", members)
+    if base.info.failed:
+        raise OptimizationError(f"the design cannot be verified: its own run failed: {base.info.message}")
+    if problem is None:
+        problem = build_problem(case, base.responses)
+    peaks = peak_type_responses(case)
+    runs: dict[str, _Run] = {"case": base,
+                             "refined": _run(_variant(case, dt_factor=refine), x, "refined", members)}
+    warnings: list[str] = []
+    plan = case.plan
+    window = plan.t_end - plan.t0
+    constrained_peaks = [c for c in problem.constraints if c.response in peaks]
+    if horizon is not None and constrained_peaks:
+        runs["horizon"] = _extend(case, x, base, constrained_peaks, horizon, members, warnings)
+    if tail > 0 and constrained_peaks:
+        cut = plan.t0 + (1.0 - tail) * window
+        runs["tail"] = _run(_variant(case, t_end=cut), x, "tail", False)
+    checks = [_check(term, runs, term.response in peaks, tail) for term in problem.constraints]
+    for r in runs.values():
+        if r.info.failed:
+            warnings.append(f"the {r.info.name} run failed: {r.info.message}")
+    member_checks = {k: r.members for k, r in runs.items() if r.members is not None}
+    return Verification(np.asarray(x, dtype=float), refine, [r.info for r in runs.values()], checks,
+                        member_checks, warnings)
+
+
+def _extend(case: Case, x: np.ndarray, base: _Run, terms: list[Any], horizon: float | str, members: bool,
+            warnings: list[str]) -> _Run:
+    """The ``horizon`` run: a stated end time, or windows added until the peaks settle."""
+    plan = case.plan
+    if horizon != "auto":
+        t_end = float(horizon)
+        if not t_end > plan.t_end:
+            raise OptimizationError(f"the verification horizon {t_end:g} s must lie beyond t_end = {plan.t_end:g} s")
+        return _run(_variant(case, t_end=t_end), x, "horizon", members)
+    window = plan.t_end - plan.t0
+    prev = base
+    for k in range(1, MAX_EXTENSIONS + 1):
+        run = _run(_variant(case, t_end=plan.t_end + k * window), x, "horizon", members)
+        if run.info.failed:
+            return run
+        settled = all(abs(run.peaks[t.response] - prev.peaks[t.response]) <= FEAS_TOL * t.divisor
+                      for t in terms)
+        if settled:
+            return run
+        prev = run
+    warnings.append(f"the constrained peaks still change at {prev.info.t_end:g} s "
+                    f"({1 + MAX_EXTENSIONS} windows): the structure has not settled")
+    return prev
+
+
+def _check(term: Any, runs: dict[str, _Run], peak_type: bool, tail: float) -> ConstraintCheck:
+    """The constraint ``term`` in every run: the case's run as the optimizer saw it, the others by
+    their sampled peaks (a KS rises with its number of samples, so a finer step or a longer
+    window would raise it with no larger peak; the requirement is on the peak)."""
+    values: dict[str, float] = {}
+    margins: dict[str, float] = {}
+    for name, r in runs.items():
+        if name in ("horizon", "tail") and not peak_type:
+            continue
+        v = (r.responses if name == "case" else r.peaks).get(term.response, float("nan"))
+        values[name] = v
+        margins[name] = _margin(term, v) if np.isfinite(v) else float("nan")
+    judged = ("case", "refined", "horizon")
+    if any(runs[n].info.failed for n in judged if n in margins):
+        return ConstraintCheck(term.label, term.response, peak_type, values, margins, "failed",
+                               "a verification run failed")
+    notes = []
+    status = "ok"
+    bad = [(margins[n], n) for n in judged if n in margins and np.isfinite(margins[n]) and margins[n] < -FEAS_TOL]
+    if bad:
+        status = "violated"
+        g, n = min(bad)
+        notes.append(f"violated in the {n} run (scaled margin {g:.3g})")
+    if "tail" in margins and np.isfinite(margins["tail"]) and term.kind != "eq":
+        # the sampled extreme over the full window is beyond the one over the window less its
+        # tail: the constrained peak lies in the last part of the window
+        full, cut = runs["case"].peaks[term.response], runs["tail"].peaks.get(term.response, np.nan)
+        beyond = (full - cut) if term.kind == "upper" else (cut - full)
+        if np.isfinite(beyond) and beyond > FEAS_TOL * term.divisor:
+            notes.append(f"its peak lies in the last {100 * tail:.0f} % of the window")
+            if status == "ok":
+                status = "late peak"
+    return ConstraintCheck(term.label, term.response, peak_type, values, margins, status, "; ".join(notes))
+
+
+def format_verification(v: Verification) -> str:
+    """The verification as a table and plain sentences, for the terminal."""
+    names = [r.name for r in v.runs]
+    head = {"case": "case", "refined": f"dt/{v.refine}", "horizon": "horizon", "tail": "no tail"}
+    lines = ["verification runs: " + "; ".join(
+        f"{head[r.name]}: dt = {r.dt:.4g} s, t_end = {r.t_end:.4g} s ({r.wall_time:.1f} s"
+        + (", FAILED" if r.failed else "") + ")" for r in v.runs)]
+    width = max([len(c.label) for c in v.constraints] + [10])
+    lines.append(f"{'constraint':<{width}}  " + "  ".join(f"{head[n]:>12}" for n in names)
+                 + "  change  status")
+    shown = v.constraints
+    if len(shown) > FULL_TABLE:
+        # a sizing case has one constraint per member group: show those that matter
+        order = sorted(shown, key=lambda c: min([g for g in c.margins.values() if np.isfinite(g)] or [np.inf]))
+        keep = {id(c) for c in shown if c.status != "ok"} | {id(c) for c in order[:5]}
+        shown = [c for c in shown if id(c) in keep]
+    for c in shown:
+        cells = []
+        for n in names:
+            val = c.values.get(n)
+            cells.append(f"{val:>12.6g}" if val is not None and np.isfinite(val) else f"{'-':>12}")
+        ref = c.values.get("case", np.nan)
+        later = [c.values[n] for n in ("refined", "horizon") if n in c.values and np.isfinite(c.values[n])]
+        change = max((abs(w - ref) for w in later), default=0.0) / max(abs(ref), 1e-300) if np.isfinite(ref) else 0
+        mark = c.status.upper() if c.status != "ok" else "ok"
+        lines.append(f"{c.label:<{width}}  " + "  ".join(cells) + f"  {100 * change:5.1f}%  {mark}"
+                     + (f" ({c.note})" if c.note else ""))
+    if len(shown) < len(v.constraints):
+        lines.append(f"({len(v.constraints) - len(shown)} more constraints hold in every run with larger margins)")
+    for run, m in v.members.items():
+        member, kind, ratio = m.worst()
+        lines.append(f"members ({head[run]}): largest ratio {ratio:.4f} ({member}, {kind}) over {m.steps} steps"
+                     + ("" if m.largest <= 1 + MEMBER_TOL else f"; {int(_count_over(m))} member(s) above 1"))
+    lines += [f"warning: {w}" for w in v.warnings]
+    late = [c.label for c in v.constraints if c.status == "late peak"]
+    if late:
+        lines.append("warning: the peak of " + ", ".join(late) + " lies in the last part of the window")
+    lines.append("The design PASSES the verification." if v.passed else
+                 "The design does NOT pass the verification: a constraint that holds only on the optimizer's "
+                 "time grid and window is not a result (see the README, 'Verifying an optimum').")
+    return "\n".join(lines)
+
+
+def _count_over(m: MemberCheck) -> float:
+    stacked = np.vstack([m.tension, m.compression, m.buckling])
+    return float(np.sum(np.nanmax(np.where(np.isfinite(stacked), stacked, -np.inf), axis=0) > 1 + MEMBER_TOL))
+
+
+def excesses(v: Verification, problem: ScaledProblem) -> dict[int, float]:
+    """For each constraint term (its index) the verification found violated: how far its worst
+    run goes beyond the bound, in the response's unit (> 0)."""
+    out: dict[int, float] = {}
+    for i, (term, c) in enumerate(zip(problem.constraints, v.constraints)):
+        if c.status != "violated" or term.kind == "eq":
+            continue
+        worst = min(g for g in c.margins.values() if np.isfinite(g))
+        out[i] = -worst * term.divisor
+    return out
+
+
+def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] | None = None) -> None:
+    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced).
+
+    Attributes: ``passed``, ``refine``, ``warnings`` (JSON), ``x``; datasets ``runs/{name, dt,
+    t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
+    ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
+    applicable), ``members/<run>/{tension, compression, buckling}`` (per member, the largest ratio
+    over the stored steps) with attribute ``names``; ``rounds/*`` when the bounds were tightened.
+    """
+    import json
+
+    import h5py
+    text = h5py.string_dtype()
+    with h5py.File(path, "a") as f:
+        if "verification" in f:
+            del f["verification"]
+        g = f.create_group("verification")
+        g.attrs.update({"passed": v.passed, "refine": v.refine, "warnings": json.dumps(v.warnings),
+                        "x": np.asarray(v.x, dtype=float)})
+        r = g.create_group("runs")
+        r.create_dataset("name", data=np.array([i.name for i in v.runs], dtype=text))
+        r.create_dataset("dt", data=np.array([i.dt for i in v.runs], dtype=float))
+        r.create_dataset("t_end", data=np.array([i.t_end for i in v.runs], dtype=float))
+        r.create_dataset("wall_time", data=np.array([i.wall_time for i in v.runs], dtype=float))
+        r.create_dataset("failed", data=np.array([i.failed for i in v.runs]))
+        r.create_dataset("message", data=np.array([i.message for i in v.runs], dtype=text))
+        c = g.create_group("constraints")
+        c.create_dataset("label", data=np.array([k.label for k in v.constraints], dtype=text))
+        c.create_dataset("status", data=np.array([k.status for k in v.constraints], dtype=text))
+        c.create_dataset("note", data=np.array([k.note for k in v.constraints], dtype=text))
+        for run in (i.name for i in v.runs):
+            c.create_dataset(f"value_{run}", data=np.array([k.values.get(run, np.nan) for k in v.constraints]))
+            c.create_dataset(f"margin_{run}", data=np.array([k.margins.get(run, np.nan) for k in v.constraints]))
+        for run, m in v.members.items():
+            mg = g.create_group(f"members/{run}")
+            mg.attrs["names"] = np.array(m.names, dtype=text)
+            mg.attrs["steps"] = m.steps
+            for kind in ("tension", "compression", "buckling"):
+                mg.create_dataset(kind, data=np.asarray(getattr(m, kind), dtype=float))
+        if rounds:
+            rg = g.create_group("rounds")
+            rg.create_dataset("bounds", data=np.array([row["bounds"] for row in rounds], dtype=float))
+            rg.create_dataset("f", data=np.array([row["f"] for row in rounds], dtype=float))
+            rg.create_dataset("passed", data=np.array([row["passed"] for row in rounds]))
+            rg.create_dataset("x", data=np.array([row["x"] for row in rounds], dtype=float))
