@@ -1,0 +1,1 @@
+"""Analyses of a model beside the transient: natural modes and linear buckling (:mod:`.modes`)."""
