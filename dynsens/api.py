@@ -189,8 +189,8 @@ class OptimizeResult(_ScipyResult):
     """Result of :func:`optimize`, with scipy's names (a dict with attribute access).
 
     ``x`` (optimum, case units), ``fun`` (objective there, its unit), ``jac`` (∂f/∂x there,
-    objective unit per design unit), ``nit`` (SLSQP iterations), ``nfev`` (simulations),
-    ``success``, ``status`` (SLSQP's exit mode), ``message``; and ``feasible``,
+    objective unit per design unit), ``nit`` (the optimizer's iterations), ``nfev`` (simulations),
+    ``success``, ``status`` (the optimizer's exit code), ``message``; and ``feasible``,
     ``max_violation`` (scaled), ``constraints`` (name -> value of the constrained response),
     ``design_names``, ``starts`` (one dict per start), ``history`` (the best start's
     per-iteration arrays), ``path`` (the OPT.h5 file, None when run in memory), ``verification``
@@ -203,7 +203,8 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
              ftol: float | None = None, workers: int | None = None, scheduler: str | None = None,
              overwrite: bool = False, resume: bool = False, verify: bool | None = None,
              **overrides: Any) -> OptimizeResult:
-    """Minimize the case's objective subject to its constraints (SLSQP, exact gradients).
+    """Minimize the case's objective subject to its constraints (the case's optimization.method,
+    SLSQP by default; exact gradients).
 
     Parameters
     ----------

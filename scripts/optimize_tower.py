@@ -49,6 +49,10 @@ def main() -> None:
         responses = dict(zip(names, np.asarray(st["responses_opt"], float).tolist()))
         labels = [c["response"] for c in json.loads(f["optimization"].attrs["constraints"])]
         rounds = len(f["verification/rounds/f"]) - 1 if "verification/rounds" in f else 0
+        if rounds:   # every round's iterations, simulations and wall time
+            stats = {"iterations": int(np.sum(f["verification/rounds/nit"])),
+                     "simulations": int(np.sum(f["verification/rounds/n_sim"]))}
+            wall = float(np.sum(f["verification/rounds/wall_time"]))
         tightened = {}
         if rounds:
             base = [float(b) for b in f["verification/rounds/bounds"][0]]

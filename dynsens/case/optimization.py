@@ -12,6 +12,8 @@ from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 from .responses_spec import read_number
 
+METHODS = ("SLSQP", "MMA", "CCSAQ", "trust-constr")   # dynsens.optimize.methods serves them
+
 
 @dataclass(frozen=True)
 class ConstraintSpec:
@@ -77,8 +79,8 @@ def validate_optimization(spec: Any, response_names: tuple[str, ...],
             pc.add(p, f"lower > upper ({lo} > {up}): did you swap the bounds?")
         cons.append(ConstraintSpec(str(name), lo, up))
     method = spec.get("method", "SLSQP")
-    if method != "SLSQP":
-        pc.add("optimization.method", f"only SLSQP is available, found {method!r}")
+    if method not in METHODS:
+        pc.add("optimization.method", f"expected one of {', '.join(METHODS)}, found {method!r}")
     maxiter = spec.get("maxiter", 100)
     if not isinstance(maxiter, int) or isinstance(maxiter, bool) or maxiter < 1:
         pc.add("optimization.maxiter", f"expected a positive integer, found {maxiter!r}")

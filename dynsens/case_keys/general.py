@@ -148,9 +148,12 @@ GENERAL_SECTIONS: dict[str, Section] = {
     "optimization": Section("optimization", "Objective and constraints for `dynsens optimize`.", (
         _req("objective", "name", "response to minimize"),
         _k("constraints", "list", "lower <= response <= upper", item="optimization.constraint"),
-        _k("method", "enum", "optimizer", values=("SLSQP",), default="SLSQP"),
-        _k("maxiter", "integer", "SLSQP iterations", default=100),
-        _k("ftol", "number", "SLSQP tolerance on the scaled objective", default=1e-6),
+        _k("method", "enum", "optimizer: SLSQP (dense quasi-Newton, tens of variables), MMA or CCSAQ (Svanberg's "
+           "moving asymptotes, many variables; `pip install 'dynsens[mma]'`), trust-constr (interior point)",
+           values=("SLSQP", "MMA", "CCSAQ", "trust-constr"), default="SLSQP"),
+        _k("maxiter", "integer", "iterations of the optimizer", default=100),
+        _k("ftol", "number", "tolerance on the scaled objective (MMA: its relative change; trust-constr: the "
+           "optimality measure)", default=1e-6),
         _k("verification", "section", "the verification run at the optimum (on by default)",
            item="optimization.verification"),
     )),

@@ -34,8 +34,15 @@ def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]
     return out
 
 
+SHOWN_VALUES = 12   # a longer design vector is shortened in the terminal (the file has it whole)
+
+
 def _vec(v: Any) -> str:
-    return "[" + ", ".join(f"{a:.6g}" for a in np.asarray(v, dtype=float)) + "]"
+    a = np.asarray(v, dtype=float)
+    if a.size <= SHOWN_VALUES:
+        return "[" + ", ".join(f"{x:.6g}" for x in a) + "]"
+    head = ", ".join(f"{x:.6g}" for x in a[:SHOWN_VALUES // 2])
+    return f"[{head}, ... ({a.size} values; min {a.min():.6g}, max {a.max():.6g})]"
 
 
 def progress_line(msg: dict[str, Any], objective: str) -> str | None:
@@ -58,6 +65,8 @@ def format_table(result: OptimizationResult, design_names: tuple[str, ...], obje
     labels = result.problem.constraint_labels
     head = (f"{'start':>5}  {objective:>14}  {'max viol':>9}  {'converged':>9}  {'feasible':>8}  "
             f"{'nit':>4}  {'sims':>5}  {'failed':>6}  x = [{', '.join(design_names)}]")
+    if len(design_names) > SHOWN_VALUES:
+        head = head.split("  x = [")[0] + f"  x = [{len(design_names)} design variables]"
     lines = [head]
     for o in result.starts:
         star = "*" if o.index == result.best_outcome.index else " "
@@ -71,8 +80,8 @@ def format_table(result: OptimizationResult, design_names: tuple[str, ...], obje
 
 def format_verdict(o: StartOutcome) -> str:
     """Plain sentences: did the optimizer converge, is the design feasible."""
-    conv = (f"The optimizer converged (SLSQP: {o.message})." if o.success else
-            f"The optimizer did NOT converge (SLSQP: {o.message}).")
+    conv = (f"The optimizer converged ({o.message})." if o.success else
+            f"The optimizer did NOT converge ({o.message}).")
     feas = ("The result is feasible" if o.feasible else "The result is NOT feasible") + \
         f" (max. scaled constraint violation {o.max_violation:.2e}, tolerance {FEAS_TOL:g})."
     return f"{conv} {feas}"
@@ -187,8 +196,9 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     click.echo(format_table(result, case.design_names, objective))
     b = result.best_outcome
     click.echo("")
-    click.echo(f"best: start {b.index}, {objective} = {b.f:.8g}, x = {_vec(b.x)} "
-               f"({', '.join(case.design_names)})")
+    names = case.design_names
+    shown = ", ".join(names) if len(names) <= SHOWN_VALUES else f"{len(names)} design variables"
+    click.echo(f"best: start {b.index}, {objective} = {b.f:.8g}, x = {_vec(b.x)} ({shown})")
     click.echo(format_verdict(b))
     click.echo(decision_summary(output, result, case.design_units, case.response_units))
     if plots:

@@ -1,4 +1,5 @@
-"""One optimization start: SLSQP driven by an :class:`~.problem.Evaluator`, rows streamed to a sink."""
+"""One optimization start: the case's optimizer driven by an :class:`~.problem.Evaluator`, rows streamed to a
+sink."""
 from __future__ import annotations
 
 import time
@@ -8,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..executor import cached_case, publish
+from .methods import run_method
 from .problem import FEAS_TOL, Evaluation, Evaluator, ScaledProblem, Sink, kkt_measure, max_violation
 
 # --------------------------------------------------------------------------------------
@@ -29,6 +31,7 @@ class StartJob:
     elapsed0: float = 0.0      # s, over earlier segments
     resume: bool = False
     seed_eval: Evaluation | None = None
+    method: str = "SLSQP"      # optimization.method (see dynsens.optimize.methods)
 
 
 @dataclass
@@ -64,9 +67,8 @@ def _plain(v: Any) -> Any:
 
 
 def run_start(job: StartJob) -> StartOutcome:
-    """Run SLSQP for one start; stream every evaluation and iteration row to the caller
-    (:func:`dynsens.executor.publish`)."""
-    from scipy.optimize import Bounds, minimize
+    """Run the case's optimizer for one start; stream every evaluation and iteration row to the
+    caller (:func:`dynsens.executor.publish`)."""
     t_begin = time.perf_counter()
     case = cached_case(job.case_text, job.case_source)
     problem = job.problem
@@ -131,22 +133,14 @@ def run_start(job: StartJob) -> StartOutcome:
     if remaining <= 0:
         return outcome(ev0, False, 9, "Iteration limit reached", job.iteration0)
 
-    def callback(xk: np.ndarray) -> None:
+    def on_iteration(uk: np.ndarray) -> None:
         state["it"] += 1
-        emit("iteration", iteration_row(evaluator(xk)))
+        emit("iteration", iteration_row(evaluator(uk)))
 
-    cons = []
-    for kind, typ in (("ineq", "ineq"), ("eq", "eq")):
-        idx = [i for i, c in enumerate(problem.constraints) if (c.kind == "eq") == (kind == "eq")]
-        if idx:
-            cons.append({"type": typ, "fun": evaluator.cons, "jac": evaluator.cons_jac, "args": (idx,)})
-    lo, up = problem.u_bounds
-    res = minimize(evaluator.fun, u0, jac=evaluator.jac, method="SLSQP", bounds=Bounds(lo, up),
-                   constraints=cons, callback=callback,
-                   options={"maxiter": int(remaining), "ftol": float(job.ftol)})
-    ev = evaluator(np.asarray(res.x, dtype=float))
+    res = run_method(job.method, evaluator, u0, int(remaining), float(job.ftol), on_iteration)
+    ev = evaluator(res.u)
     if ev.failed and evaluator.last_good is not None:
         ev = evaluator.last_good
-    out = outcome(ev, bool(res.success), int(res.status), str(res.message), state["it"])
-    out.slsqp_nit = job.iteration0 + int(res.nit)
+    out = outcome(ev, res.success, res.status, res.message, state["it"])
+    out.slsqp_nit = job.iteration0 + res.nit
     return out

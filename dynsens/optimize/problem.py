@@ -268,7 +268,7 @@ def max_violation(g: np.ndarray, problem: ScaledProblem) -> float:
 
 
 class Evaluator:
-    """Memoized objective/constraint functions for SLSQP: one simulation per design point.
+    """Memoized objective/constraint functions for the optimizers: one simulation per design point.
 
     Every simulation is reported to ``on_evaluation``.  Failed points return a finite
     penalty (see the module docstring) and the gradients of the last good point.

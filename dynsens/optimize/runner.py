@@ -13,6 +13,7 @@ from ..case.load import Case
 from ..executor import make_executor, remember_case
 from ..io.hdf5 import OutputExistsError
 from .jobs import StartJob, StartOutcome, run_start
+from .methods import check_method
 from .problem import OptimizationError, ScaledProblem, _fmt, _spec, build_problem, scaled_evaluation, simulate
 from .store import holds_writer_lock, validate_resume_file
 from .store import (_init_file, _outcome_attrs, _outcome_from_file, _problem_attrs, _problem_from_file,
@@ -146,6 +147,7 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
                       for n, r in res0.responses.items()} if res0 is not None else \
             {n: np.nan for n in case.response_names}
         problem = build_problem(case, ref_values)
+        check_method(spec.method, problem)
         ev0 = scaled_evaluation(problem, x_ref, res0, msg0, wall0)
         _set_attrs(path, "optimization", {**_problem_attrs(problem), "maxiter": maxiter, "ftol": ftol,
                                           "starts": n, "seed": seed, "x_starts": pts})
@@ -163,7 +165,7 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
             raise OptimizationError(text)
         for k, xs in enumerate(pts):
             jobs.append(StartJob(k, case.text, case.source, problem, xs, maxiter, ftol,
-                                 seed_eval=ev0 if k == 0 else None))
+                                 seed_eval=ev0 if k == 0 else None, method=spec.method))
     remember_case(case)
     if resume:
         _set_attrs(path, "", {"status": "running", "message": ""})
@@ -233,6 +235,8 @@ def _resume_jobs(path: Path, case: Case, starts: int | None, seed: int | None, x
             raise OptimizationError("--resume continues from the recorded designs: -x/--x0 cannot be combined "
                                     "with it")
         problem = _problem_from_file(f, case)
+        method = _spec(case).method
+        check_method(method, problem)
         pts = np.asarray(a["x_starts"], dtype=float)
         for k in range(n):
             g = f.get(_start_group(k))
@@ -243,9 +247,9 @@ def _resume_jobs(path: Path, case: Case, starts: int | None, seed: int | None, x
             if h is not None and h["x"].shape[0] > 0:
                 jobs.append(StartJob(k, case.text, case.source, problem, h["x"][-1], maxiter, ftol,
                                      iteration0=int(h["iteration"][-1]), segment=int(h["segment"][-1]) + 1,
-                                     elapsed0=float(h["elapsed"][-1]), resume=True))
+                                     elapsed0=float(h["elapsed"][-1]), resume=True, method=method))
             else:
-                jobs.append(StartJob(k, case.text, case.source, problem, pts[k], maxiter, ftol))
+                jobs.append(StartJob(k, case.text, case.source, problem, pts[k], maxiter, ftol, method=method))
     return problem, pts, jobs, done
 
 

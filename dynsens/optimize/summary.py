@@ -7,7 +7,7 @@ printed again for any finished file (:func:`decision_summary`).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -15,6 +15,7 @@ from .problem import ACTIVE_TOL, FEAS_TOL, ScaledProblem
 from .store import read_history
 
 BOUND_TOL = 1e-6    # a design variable within this fraction of its range of a bound is at it
+LISTED = 30         # more rows than this: the summary lists the active and free ones only
 
 
 def _u(unit: str) -> str:
@@ -58,6 +59,18 @@ def bound_rows(names: Sequence[str], x: np.ndarray, lower: np.ndarray, upper: np
     return lines
 
 
+def _condensed(rows: list[str], what: str, routine: Callable[[str], bool]) -> list[str]:
+    """All rows up to ``LISTED`` of them; beyond, the others than the routine ones (inactive
+    constraints, variables at a bound) and a count of the rest (the file has every one)."""
+    if len(rows) <= LISTED:
+        return rows
+    kept = [r for r in rows if not routine(r)]
+    if len(kept) > LISTED:
+        kept = kept[:LISTED] + [f"  ... {len(kept) - LISTED} more"]
+    return kept + [f"  ({len(rows)} {what} in all; {sum(map(routine, rows))} "
+                   + ("inactive" if what == "constraints" else "at a bound") + ", not listed)"]
+
+
 def decision_summary(path: str | Path, result: Any, design_units: Sequence[str] = (),
                      response_units: dict[str, str] | None = None) -> str:
     """Plain-text summary of the best start of an :class:`~.runner.OptimizationResult`."""
@@ -81,11 +94,12 @@ def decision_summary(path: str | Path, result: Any, design_units: Sequence[str] 
              f"  max. scaled constraint violation {b.max_violation:.2e} (feasible within {FEAS_TOL:g})"]
     if problem.constraints:
         lines.append("constraints (value against bound, in the response's unit):")
-        lines += constraint_rows(problem, np.asarray(b.responses, dtype=float), np.asarray(b.g, dtype=float),
-                                 mult, units)
+        rows = constraint_rows(problem, np.asarray(b.responses, dtype=float), np.asarray(b.g, dtype=float),
+                               mult, units)
+        lines += _condensed(rows, "constraints", lambda row: "inactive" in row)
     lines.append("design variables and bounds:")
-    lines += bound_rows(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper,
-                        design_units)
+    rows = bound_rows(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper, design_units)
+    lines += _condensed(rows, "design variables", lambda row: "(active)" in row)
     active = [c.response for i, c in enumerate(problem.constraints) if np.isfinite(b.g[i]) and
               (abs(b.g[i]) <= ACTIVE_TOL if c.kind == "eq" else -FEAS_TOL <= b.g[i] <= ACTIVE_TOL)]
     at_bound = [ln.split(" =")[0].strip() for ln in bound_rows(problem.names, np.asarray(b.x, dtype=float),

@@ -97,11 +97,13 @@ def optimize_verified(case: Case, output: str | Path, *, verify: bool | None = N
         table.append(_row(problem0, bounds, result, v))
         if on_round is not None:
             on_round(k, v)
+    v.rounds = table
     store_verification(output, v, table if len(table) > 1 else None)
     return result, v
 
 
 def _row(problem: ScaledProblem, bounds: dict[int, float], result: OptimizationResult,
          v: Verification) -> dict[str, Any]:
+    b = result.best_outcome
     return {"bounds": [bounds.get(i, t.bound) for i, t in enumerate(problem.constraints)],
-            "f": result.best_outcome.f, "passed": v.passed, "x": result.best_outcome.x}
+            "f": b.f, "passed": v.passed, "x": b.x, "nit": b.nit, "n_sim": b.n_sim, "wall_time": b.wall_time}

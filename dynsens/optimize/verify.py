@@ -86,6 +86,7 @@ class Verification:
     constraints: list[ConstraintCheck]
     members: dict[str, MemberCheck] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    rounds: list[dict[str, Any]] = field(default_factory=list)   # optimization rounds (verified.py)
 
     @property
     def passed(self) -> bool:
@@ -338,7 +339,8 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
     t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
     ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
     applicable), ``members/<run>/{tension, compression, buckling}`` (per member, the largest ratio
-    over the stored steps) with attribute ``names``; ``rounds/*`` when the bounds were tightened.
+    over the stored steps) with attribute ``names``; ``rounds/{bounds, f, passed, x, nit, n_sim,
+    wall_time}``, one row per round, when the bounds were tightened.
     """
     import json
 
@@ -376,3 +378,5 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
             rg.create_dataset("f", data=np.array([row["f"] for row in rounds], dtype=float))
             rg.create_dataset("passed", data=np.array([row["passed"] for row in rounds]))
             rg.create_dataset("x", data=np.array([row["x"] for row in rounds], dtype=float))
+            for key in ("nit", "n_sim", "wall_time"):
+                rg.create_dataset(key, data=np.array([row[key] for row in rounds]))
