@@ -74,6 +74,7 @@ class ConstraintCheck:
     status: str
     note: str = ""
     case_peak: float = float("nan")     # the case run's sampled peak (its value where not a KS)
+    divisor: float = 1.0                # the optimizer's scale of the bound (response unit)
 
 
 @dataclass
@@ -267,7 +268,7 @@ def _check(term: Any, runs: dict[str, _Run], peak_type: bool, tail: float) -> Co
             if status == "ok":
                 status = "late peak"
     return ConstraintCheck(term.label, term.response, peak_type, values, margins, status, "; ".join(notes),
-                           runs["case"].peaks.get(term.response, float("nan")))
+                           runs["case"].peaks.get(term.response, float("nan")), term.divisor)
 
 
 def format_verification(v: Verification) -> str:
@@ -281,7 +282,7 @@ def format_verification(v: Verification) -> str:
     lines.append(f"{'constraint':<{width}}  " + "  ".join(f"{head[n]:>12}" for n in names)
                  + "  change  status")
     lines.append("(case: the response as optimized; the other runs: its sampled peak, see the README; change: "
-                 "the largest change of the peak against the case's run)")
+                 "the largest change of the peak against the case's run, in % of the bound's scale)")
     shown = v.constraints
     if len(shown) > FULL_TABLE:
         # a sizing case has one constraint per member group: show those that matter
@@ -295,7 +296,7 @@ def format_verification(v: Verification) -> str:
             cells.append(f"{val:>12.6g}" if val is not None and np.isfinite(val) else f"{'-':>12}")
         ref = c.case_peak
         later = [c.values[n] for n in ("refined", "horizon") if n in c.values and np.isfinite(c.values[n])]
-        change = max((abs(w - ref) for w in later), default=0.0) / max(abs(ref), 1e-300) if np.isfinite(ref) else 0
+        change = max((abs(w - ref) for w in later), default=0.0) / c.divisor if np.isfinite(ref) else 0.0
         mark = c.status.upper() if c.status != "ok" else "ok"
         lines.append(f"{c.label:<{width}}  " + "  ".join(cells) + f"  {100 * change:5.1f}%  {mark}"
                      + (f" ({c.note})" if c.note else ""))
