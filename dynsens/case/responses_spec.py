@@ -155,9 +155,10 @@ def _modal(r: dict, p: str, name: str, kind: str, unit: str, model: Model | None
     default_unit = "Hz" if kind == "frequency" else "-"
 
     def make() -> Response:
-        # the design's start and scales are read when the case is complete (x0 only sets the
-        # complex-step sizes of the matrices, through the scales)
-        subject = ModelSubject(model, f"response {name!r}", plan, np.zeros(len(design_names)), np.ones(len(design_names)))
+        # the response analyses the design the run is at; the scales only size the matrices'
+        # complex steps of a variable that is zero there
+        m = len(design_names)
+        subject = ModelSubject(model, f"response {name!r}", plan, np.zeros(m), np.ones(m))
         return ModalResponse(name, kind, int(count), rho, subject, design_names, unit or default_unit, load_time)
     return make
 
