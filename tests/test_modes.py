@@ -182,3 +182,69 @@ def test_modes_command_prints_and_writes(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--overwrite" in r.output
     r = CliRunner().invoke(cli, ["modes", str(REPO / "cases" / "slider_crank.yaml")])
     assert r.exit_code == 2 and "structural model" in r.output and "Traceback" not in r.output
+
+
+def with_modal_responses(raw: dict) -> dict:
+    raw = copy.deepcopy(raw)
+    raw["responses"] += [{"name": "f1", "type": "frequency"},
+                         {"name": "f_low", "type": "frequency", "modes": 3, "rho": 0.5},
+                         {"name": "lam1", "type": "buckling_factor"},
+                         {"name": "mass", "type": "mass"}]
+    raw["sensitivity"] = {"partials": "complex"}
+    return raw
+
+
+@pytest.mark.parametrize("method", ["direct", "adjoint"])
+def test_frequency_and_buckling_responses_equal_the_analysis_and_complex_step(method: str) -> None:
+    from helpers import complex_step_gradients
+
+    import dynsens
+    raw = with_modal_responses(column())
+    raw["sensitivity"]["method"] = method
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case)
+    m, b = modes(case, count=3), buckling(case, count=1)
+    # (the eigensolver for one mode and for three differ by its round-off, ~1e-9 of f)
+    assert res.responses["f1"].value == pytest.approx(m.frequencies[0], rel=1e-8)
+    np.testing.assert_allclose(res.responses["f1"].gradient, m.gradient[0], rtol=1e-7, atol=1e-8)
+    assert res.responses["lam1"].value == pytest.approx(b.factors[0], rel=1e-8)
+    f = m.frequencies
+    assert f[0] - np.log(3) / 0.5 <= res.responses["f_low"].value <= f[0]            # a smooth minimum
+    cs = complex_step_gradients(case)
+    for name in ("f1", "f_low", "lam1"):
+        # d/db is zero by the closed form: round-off of the eigensolver (1e-9 of the value) sets atol
+        np.testing.assert_allclose(res.responses[name].gradient, cs[name], rtol=1e-7,
+                                   atol=1e-8 * abs(res.responses[name].value), err_msg=name)
+
+
+def test_minimum_mass_column_for_a_frequency_bound() -> None:
+    """Minimize the mass of the cantilever subject to f1 >= 50 Hz over its height h (b fixed):
+    f1 grows with h, so the bound is active at the optimum."""
+    import dynsens
+    raw = column()
+    raw["design"]["variables"] = [{"name": "h", "value": 40.0, "lower": 10.0, "upper": 100.0}]
+    for el in raw["model"]["elements"]:
+        el["section"]["b"] = 20.0
+    raw["responses"] += [{"name": "f1", "type": "frequency"}, {"name": "mass", "type": "mass"}]
+    raw["optimization"] = {"objective": "mass", "constraints": [{"response": "f1", "lower": 50.0}]}
+    res = dynsens.optimize(raw, verify=False)
+    assert res.success and res.feasible
+    assert res.constraints["f1"] == pytest.approx(50.0, rel=1e-5)
+    # f1 ∝ h (Euler–Bernoulli; the consistent mass's rotary terms move it by < 1e-4)
+    assert res.x[0] == pytest.approx(40.0 * 50.0 / modes(load_case_dict(raw), count=1).frequencies[0], rel=1e-3)
+
+
+def test_modal_responses_need_a_structural_model_and_their_keys() -> None:
+    from dynsens.errors import CaseError
+    raw = column()
+    raw["responses"].append({"name": "f_low", "type": "frequency", "modes": 3})
+    with pytest.raises(CaseError, match=r"responses\[1\].rho: required with modes: 3"):
+        load_case_dict(raw)
+    raw["responses"][-1] = {"name": "f_low", "type": "frequency", "modes": 0}
+    with pytest.raises(CaseError, match=r"responses\[1\].modes: expected an integer >= 1"):
+        load_case_dict(raw)
+    import yaml
+    mech = yaml.safe_load((REPO / "cases" / "slider_crank.yaml").read_text())
+    mech["responses"].append({"name": "f1", "type": "frequency"})
+    with pytest.raises(CaseError, match="needs a structural model"):
+        load_case_dict(mech)

@@ -28,18 +28,32 @@ nonlinear bars; a linear model has none, and no load factor.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 import scipy.linalg as sla
 
-from ..case.load import Case
 from ..errors import DynsensError
 from ..models.base import StepState, as_dense
 
 REPEATED_GAP = 1e-8      # eigenvalues closer than this (relative) are treated as repeated
 CS_STEP = 1e-30          # complex step of the design (relative to |x_j|, or its scale)
 FD_STEP = 1e-5           # relative step of the central differences of K_G in the design
+
+
+class Subject(Protocol):
+    """What the analyses read of a case (a :class:`~dynsens.case.load.Case` is one; a response
+    inside a run passes its model, plan and scales)."""
+
+    model: Any
+    source: str
+    plan: Any
+
+    @property
+    def x0(self) -> np.ndarray: ...
+
+    @property
+    def scale(self) -> np.ndarray: ...
 
 
 class AnalysisError(DynsensError, ValueError):
@@ -82,7 +96,7 @@ class Buckling:
     repeated: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
-def _structural(case: Case) -> Any:
+def _structural(case: Subject) -> Any:
     from ..models.structural import StructuralModel
     if not isinstance(case.model, StructuralModel):
         raise AnalysisError(f"{case.source}: modes and buckling need a structural model (model.type: structural); "
@@ -103,14 +117,17 @@ def _matrices(model: Any, t: float, q: np.ndarray, params: Any) -> tuple[np.ndar
     return np.array(K), np.array(as_dense(lin.R_z))
 
 
-def _state_at(case: Case, x: np.ndarray, time: float | None, sensitivities: bool
+def _state_at(case: Subject, x: np.ndarray, time: float | None, sensitivities: bool
               ) -> tuple[float, np.ndarray, np.ndarray | None]:
     """(t, q, dq/dx or None) of the initial state, or of the stored step nearest ``time``."""
     model = case.model
     if time is None:
         q0 = model.initial_state(model.parameters(x))[0]
         return case.plan.t0, np.real(q0), None        # dq0/dx: through the complex design
+    from ..case.load import Case
     from ..simulation import run_case
+    if not isinstance(case, Case):
+        raise AnalysisError("the modes at a time of a run need the case itself")
     if not case.plan.t0 <= time <= case.plan.t_end:
         raise AnalysisError(f"--time {time:g} s lies outside the case's window [{case.plan.t0:g}, "
                             f"{case.plan.t_end:g}] s")
@@ -122,7 +139,7 @@ def _state_at(case: Case, x: np.ndarray, time: float | None, sensitivities: bool
     return float(res.time[k]), np.real(res.history["q"][k]), dq
 
 
-def _design_derivatives(case: Case, x: np.ndarray, t: float, q: np.ndarray, dq: np.ndarray | None,
+def _design_derivatives(case: Subject, x: np.ndarray, t: float, q: np.ndarray, dq: np.ndarray | None,
                         matrices: Any, central: bool = False) -> list[tuple[np.ndarray, ...]]:
     """Per design variable j, the total derivatives of ``matrices(params, t, q)``: by complex step,
     or (``central``) by central differences of relative step ``FD_STEP``."""
@@ -175,7 +192,7 @@ def _eigen_derivatives(values: np.ndarray, shapes: np.ndarray,
     return grad, repeated
 
 
-def modes(case: Case, x: Any = None, *, count: int = 6, time: float | None = None,
+def modes(case: Subject, x: Any = None, *, count: int = 6, time: float | None = None,
           sensitivities: bool = True) -> Modes:
     """The ``count`` lowest natural modes of ``case`` at design ``x`` (default x0).
 
@@ -216,7 +233,7 @@ def _load(model: Any, t: float, q0: np.ndarray, params: Any) -> np.ndarray:
     return np.asarray(model._internal_force(q0, params)) - np.asarray(model.residual(t, _rest(q0), params))
 
 
-def _reference_load(case: Case, model: Any, q0: np.ndarray, params: Any, load_time: float | None
+def _reference_load(case: Subject, model: Any, q0: np.ndarray, params: Any, load_time: float | None
                     ) -> tuple[float, np.ndarray]:
     """(t, f): the external force at ``load_time``, or at the grid instant where it is largest."""
     if load_time is not None:
@@ -238,7 +255,7 @@ def _buckling_matrices(model: Any, t: float, q0: np.ndarray, f: np.ndarray, para
     return K0, KG
 
 
-def buckling(case: Case, x: Any = None, *, count: int = 3, load_time: float | None = None,
+def buckling(case: Subject, x: Any = None, *, count: int = 3, load_time: float | None = None,
              sensitivities: bool = True) -> Buckling:
     """The ``count`` lowest positive linear buckling load factors of the case's load.
 

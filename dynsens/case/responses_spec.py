@@ -134,6 +134,35 @@ def _expression_integral(r: dict, p: str, name: str, unit: str, output_id: Calla
     return make
 
 
+def _modal(r: dict, p: str, name: str, kind: str, unit: str, model: Model | None, plan: RunPlan | None,
+           design_names: tuple[str, ...], pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``type: frequency`` / ``type: buckling_factor`` (:mod:`dynsens.analysis.modal_responses`)."""
+    from ..analysis.modal_responses import ModalResponse, ModelSubject
+    from ..models.structural import StructuralModel
+    check_keys(r, p, allowed(f"response.{kind}"), pc)
+    n0 = len(pc.problems)
+    count = r.get("modes", 1)
+    if not isinstance(count, int) or isinstance(count, bool) or count < 1:
+        pc.add(f"{p}.modes", f"expected an integer >= 1, found {count!r}")
+    rho = read_number(r["rho"], f"{p}.rho", pc, positive=True) if r.get("rho") is not None else None
+    if isinstance(count, int) and count > 1 and r.get("rho") is None:
+        pc.add(f"{p}.rho", f"required with modes: {count} (the KS minimum's parameter)")
+    load_time = read_number(r["load_time"], f"{p}.load_time", pc) if r.get("load_time") is not None else None
+    if model is not None and not isinstance(model, StructuralModel):
+        pc.add(f"{p}.type", f"a {kind} response needs a structural model, found {type(model).__name__}")
+    if len(pc.problems) > n0 or model is None or plan is None:
+        return None
+    default_unit = "Hz" if kind == "frequency" else "-"
+
+    def make() -> Response:
+        # the response analyses the design the run is at; the scales only size the matrices'
+        # complex steps of a variable that is zero there
+        m = len(design_names)
+        subject = ModelSubject(model, f"response {name!r}", plan, np.zeros(m), np.ones(m))
+        return ModalResponse(name, kind, int(count), rho, subject, design_names, unit or default_unit, load_time)
+    return make
+
+
 def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_names: list[str],
                design_names: tuple[str, ...], model: Model | None, plan: RunPlan | None,
                pc: ProblemCollector) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
@@ -211,6 +240,10 @@ def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_
             if model is not None and type(model).structural_mass is Model.structural_mass:
                 pc.add(f"{p}.type", f"model type {type(model).__name__} defines no structural mass")
             makers.append(lambda n=name, u=unit or "mass": StructuralMass(n, u))
+        elif kind in ("frequency", "buckling_factor"):
+            maker = _modal(r, p, name, kind, unit, model, plan, design_names, pc)
+            if maker is not None:
+                makers.append(maker)
         elif kind == "expression":
             check_keys(r, p, allowed("response.expression"), pc, required=("expression",))
             try:

@@ -236,6 +236,22 @@ GENERAL_SECTIONS: dict[str, Section] = {
                                  "event).", _RESPONSE_COMMON, type_value="end_time"),
     "response.mass": Section("responses[i], type: mass", "Total structural mass (structural models).",
                              _RESPONSE_COMMON, type_value="mass"),
+    "response.frequency": Section("responses[i], type: frequency", "The lowest natural frequency (Hz) of a "
+                                  "structural model at its initial state, or a smooth (KS) minimum of the lowest "
+                                  "`modes` (see the README, Natural modes and linear buckling).", (
+        *_RESPONSE_COMMON,
+        _k("modes", "integer", "how many of the lowest modes the KS minimum takes (>= 1)", default=1),
+        _k("rho", "number", "KS parameter, 1/Hz (required with modes > 1)"),
+    ), type_value="frequency"),
+    "response.buckling_factor": Section("responses[i], type: buckling_factor", "The lowest linear buckling load "
+                                        "factor of the case's load (structural models), or a smooth (KS) minimum "
+                                        "of the lowest `modes`.", (
+        *_RESPONSE_COMMON,
+        _k("modes", "integer", "how many of the lowest factors the KS minimum takes (>= 1)", default=1),
+        _k("rho", "number", "KS parameter (required with modes > 1)"),
+        _k("load_time", "number", "the load of this time (s) is the reference load (default: the instant "
+           "of the window where it is largest)"),
+    ), type_value="buckling_factor"),
     "response.expression": Section("responses[i], type: expression", "An expression of earlier responses and "
                                    "design variables.", (
         *_RESPONSE_COMMON,
