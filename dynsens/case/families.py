@@ -19,8 +19,10 @@
 Expansion happens on the raw mapping before the model is built: each selected element's
 ``assign`` keys receive the expression with the family name replaced by the member's name, and
 the members join the design variables after the case's own ``variables`` (in element order).
-``assign`` may set only the numeric entries (expressions) of the selected element type, over a
-placeholder that must itself be a number or an expression; a problem the model or the start
+``assign`` may set only the numeric entries (expressions) of the selected element type, and
+those of its nested sections as ``section.KEY``: a beam's tube, box or rectangle dimensions and
+its section properties; a placeholder it replaces must
+itself be a number or an expression; a problem the model or the start
 design finds in an assigned entry is reported once, at the family's ``assign`` key, naming the
 members concerned (:func:`fold_assigned_problems`).
 """
@@ -98,18 +100,35 @@ def fold_assigned_problems(pc: ProblemCollector, assigned: Assigned, start: int 
     pc.problems = out
 
 
+def numeric_entries(kind: Any) -> list[str] | None:
+    """The entries a family may assign in an element of type ``kind``: its numeric keys, and
+    ``SECTION.KEY`` for the numeric keys of its nested sections (a beam's ``section.D``); None for
+    an unknown type (reported where the type is read)."""
+    section = SECTIONS.get(f"structural.{kind}")
+    if section is None:
+        return None
+    out = [k.name for k in section.keys if k.kind == "expr"]
+    for k in section.keys:
+        if k.kind == "section" and isinstance(k.item, str) and k.item in SECTIONS:
+            out += [f"{k.name}.{sub.name}" for sub in SECTIONS[k.item].keys if sub.kind == "expr"]
+    return out
+
+
 def _assignable(assign: Any, kind: Any, path: str, pc: ProblemCollector) -> dict[str, str]:
     """The ``assign`` entries as text, each checked once: a numeric entry (expression) of element
-    type ``kind`` (not its name, nodes or type) set to a number or an expression."""
+    type ``kind`` (not its name, nodes or type; ``section.KEY`` inside its section) set to a
+    number or an expression."""
     if not isinstance(assign, dict) or not assign:
         pc.add(path, "expected a mapping element key -> expression of the family name")
         return {}
-    section = SECTIONS.get(f"structural.{kind}")
-    numeric = [k.name for k in section.keys if k.kind == "expr"] if section else None
+    numeric = numeric_entries(kind)
     out = {}
     for key, expr in assign.items():
         if numeric is not None and key not in numeric:
-            what = "not a numeric entry" if key in allowed(f"structural.{kind}") else "unknown key"
+            head = str(key).split(".", 1)[0]
+            sections = {k.split(".", 1)[0] for k in numeric if "." in k}
+            what = "not a numeric entry" if head in allowed(f"structural.{kind}") and head not in sections \
+                else "unknown key"
             pc.add(f"{path}.{key}", f"{what} of a {kind} element{did_you_mean(key, numeric)} "
                                     f"(assign sets one of: {', '.join(numeric)})")
         elif isinstance(expr, bool) or not isinstance(expr, (str, int, float)):
@@ -117,6 +136,18 @@ def _assignable(assign: Any, kind: Any, path: str, pc: ProblemCollector) -> dict
         else:
             out[str(key)] = str(expr)
     return out
+
+
+def _slot(el: dict, key: str, ep: str, family_path: str, pc: ProblemCollector) -> tuple[dict, str] | None:
+    """The mapping and key that ``key`` (``area``, or ``section.D``) names in element ``el``."""
+    if "." not in key:
+        return el, key
+    head, sub = key.split(".", 1)
+    inner = el.get(head)
+    if not isinstance(inner, dict):
+        pc.add(f"{ep}.{head}", f"expected a mapping in which {family_path}.assign sets {sub!r}, found {inner!r}")
+        return None
+    return inner, sub
 
 
 def _numbers(spec: dict, keys: tuple[str, ...], path: str, pc: ProblemCollector) -> dict[str, float] | None:
@@ -173,11 +204,15 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
         taken.add(member)
         ep = f"model.elements[{index[id(el)]}]"
         for key, text in assign.items():
-            old = el.get(key)      # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
-            if key in el and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
+            slot = _slot(el, key, ep, path, pc)
+            if slot is None:
+                continue
+            target, sub = slot
+            old = target.get(sub)  # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
+            if sub in target and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
                 pc.add(f"{ep}.{key}", f"expected a number or an expression (a placeholder that "
                                       f"{path}.assign replaces), found {old!r}")
-            el[key] = symbol.sub(member, text)
+            target[sub] = symbol.sub(member, text)
             assigned[f"{ep}.{key}"] = (f"{path}.assign.{key}", member)
         var = {"name": member, **shared}
         entry = overrides.get(el_name)
