@@ -3,7 +3,9 @@
 Layout (a contract; see the README):
 
 * root attributes ``dynsens_version``, ``created`` (ISO 8601 UTC), ``case`` (YAML text),
-  ``case_source``, ``status``, ``message``;
+  ``case_source``, ``status``, ``message``, and what produced the file: ``provenance_versions``
+  (JSON), ``provenance_git``, ``provenance_command``, ``provenance_host``,
+  ``provenance_timezone``, ``case_sha256`` (:mod:`dynsens.io.provenance`);
 * ``/time`` (N,) s, a dimension scale, like ``/dof``, ``/multiplier``, ``/pressure``,
   ``/design_variable`` and ``/<quantity>_component`` (see :mod:`dynsens.io.series`);
 * ``/<quantity>`` (N,) or (N, k): the recorded quantities (``output.quantities``), attributes
@@ -36,6 +38,7 @@ import numpy as np
 from .. import __version__
 from ..errors import DynsensError
 from .paths import OutputExistsError, atomic_path  # noqa: F401  (OutputExistsError: re-exported)
+from .provenance import provenance
 from .series import attach, decode, read_series, write_series
 
 
@@ -60,6 +63,7 @@ def write_header(f: h5py.File, case_text: str, case_source: str, status: str, me
     f.attrs["case_source"] = case_source
     f.attrs["status"] = status
     f.attrs["message"] = message
+    f.attrs.update(provenance(case_text))
 
 
 def write_design(f: h5py.File, names: tuple[str, ...], values: np.ndarray,
