@@ -1,4 +1,5 @@
-"""Defects of the second hostile campaign (issue 37) in inputs, the API and messages, each with the check that failed before its fix."""
+"""Defects of the second hostile campaign (issue 37) in inputs, the API and messages, each with the
+check that failed before its fix."""
 from __future__ import annotations
 
 import re
