@@ -157,6 +157,23 @@ class Simulation:
         return f"<Simulation {self.case.name}: {self.status}; {vals}>"
 
 
+def _check_run_arguments(sensitivities: Any, history: Any) -> None:
+    """TypeError/ValueError for arguments that would otherwise run with a silent meaning
+    (``history="q"`` read as its letters, ``sensitivities="no"`` as true)."""
+    from .stepping import HISTORY_FIELDS
+    if sensitivities is not None and not isinstance(sensitivities, (bool, np.bool_)):
+        raise TypeError(f"sensitivities: expected True, False or None, found {type(sensitivities).__name__} "
+                        f"{sensitivities!r}")
+    if history is None:
+        return
+    if isinstance(history, (str, bytes)) or not isinstance(history, (Sequence, set, frozenset)):
+        raise TypeError(f"history: expected a sequence of field names such as ('q', 'qd'), found "
+                        f"{type(history).__name__} {history!r}")
+    unknown = [h for h in history if h not in HISTORY_FIELDS]
+    if unknown:
+        raise ValueError(f"history: unknown field(s) {unknown} (fields: {', '.join(HISTORY_FIELDS)})")
+
+
 def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
              sensitivities: bool | None = None, history: Sequence[str] | None = None,
              **overrides: Any) -> Simulation:
@@ -176,6 +193,7 @@ def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
     Simulation
         Responses (``values``, ``gradients``, ``units``), histories and run statistics.
     """
+    _check_run_arguments(sensitivities, history)
     c = as_case(case, overrides)
     xx = None if x is None else np.asarray(x)
     if xx is not None and xx.shape != (len(c.design_names),):

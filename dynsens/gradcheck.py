@@ -70,7 +70,9 @@ class GradientReport:
     def failing(self, rtol: float) -> list[str]:
         """Responses whose best relative difference exceeds rtol (fixed-time gradients and
         missing responses are not compared: finite differences of the whole run measure the
-        total derivative)."""
+        total derivative).  Raises ValueError for an rtol that is not a finite number > 0."""
+        if isinstance(rtol, bool) or not isinstance(rtol, (int, float, np.floating)) or not 0 < rtol < np.inf:
+            raise ValueError(f"rtol: expected a finite number > 0, found {rtol!r}")
         return [n for n in self.responses if n not in self.missing and n not in self.fixed_time
                 and not self.best_rel_diff(n) <= rtol]
 

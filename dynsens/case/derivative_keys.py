@@ -13,6 +13,9 @@ _UNITS = {"": 1, "b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "kib": 2**10, "mib": 2
 _SIZE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*([a-zA-Z]*)\s*$")
 
 
+MAX_MEMORY_BUDGET = 2.0 ** 62   # bytes: beyond any machine, and still an exact integer count
+
+
 def derivative_settings(sens: dict[str, Any], pc: ProblemCollector) -> dict[str, Any]:
     """RunPlan fields ``method`` and ``memory_budget`` (bytes) from the ``sensitivity`` mapping;
     problems are reported under their key paths."""
@@ -26,9 +29,11 @@ def derivative_settings(sens: dict[str, Any], pc: ProblemCollector) -> dict[str,
         value = float(budget)
     elif isinstance(budget, str) and (m := _SIZE.match(budget)) and m.group(2).lower() in _UNITS:
         value = float(m.group(1)) * _UNITS[m.group(2).lower()]
-    if value is None or not value > 0:
+    # an infinite or overflowing budget would reach the record counts as inf/nan (a traceback)
+    if value is None or not 0 < value <= MAX_MEMORY_BUDGET:
         pc.add("sensitivity.memory_budget",
-               f"expected a positive size in bytes or with a unit (e.g. 2 GiB, 500 MB), found {budget!r}")
+               f"expected a positive, finite size in bytes or with a unit (e.g. 2 GiB, 500 MB; at most "
+               f"{MAX_MEMORY_BUDGET:.0e} bytes), found {budget!r}")
         value = DEFAULT_MEMORY_BUDGET
     return {"method": str(method), "memory_budget": value}
 

@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from ..case.load import load_case
-from ..io.hdf5 import write_result
+from ..io.hdf5 import redundant_equations, write_result
 from ..progress import Progress
 from ..io.paths import check_output_path
 from ..simulation import run_case
@@ -125,6 +125,11 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
                    f"{mon['sensitivity_constraint_velocity'].max():.3g} (scale max |J_Phi grad q| "
                    f"{mon['sensitivity_constraint_scale'].max():.3g}); state drift max "
                    f"{mon['constraint_position'].max():.3g}")
+    dropped = redundant_equations(case.model)
+    if dropped:
+        click.echo(f"redundant joint equations left out of Phi: {', '.join(dropped)} (the loop's other joints carry "
+                   "their reactions; the split of a statically indeterminate reaction follows the joints' order in "
+                   "the file, the resultant force on each body does not)")
     zero = zero_gradient_columns(result, case.design_names)
     if zero:
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "

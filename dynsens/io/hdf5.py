@@ -28,6 +28,7 @@ crash never leaves a complete-looking file behind.
 from __future__ import annotations
 
 import contextlib
+import json
 import datetime as _dt
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -94,9 +95,18 @@ def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = Fal
         for k, v in result.counters.items():
             st.attrs[k] = v
         st.attrs["wall_time_s"] = result.wall_time
+        dropped = redundant_equations(case.model)
+        if dropped:
+            f.attrs["redundant_equations"] = json.dumps(dropped)
         if getattr(result, "method", ""):
             st.attrs["derivative_method"] = result.method
             st.attrs["derivative_method_reason"] = result.method_reason
+
+
+def redundant_equations(model: Any) -> list[str]:
+    """``JOINT.EQUATION`` of the joint equations a multibody model left out as redundant (empty
+    for any other model)."""
+    return [f"{joint}.{label}" for joint, label, _ in getattr(model, "redundant", None) or []]
 
 
 def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:

@@ -18,8 +18,12 @@ BOUND_TOL = 1e-6    # a design variable within this fraction of its range of a b
 LISTED = 30         # more rows than this: the summary lists the active and free ones only
 
 
+DIMENSIONLESS = ("", "-", "1")
+
+
 def _u(unit: str) -> str:
-    return f" {unit}" if unit else ""
+    """`` unit`` after a number; nothing for a dimensionless one (``stress_ks = 1``, not ``1 -``)."""
+    return "" if unit.strip() in DIMENSIONLESS else f" {unit}"
 
 
 def constraint_rows(problem: ScaledProblem, responses: np.ndarray, g: np.ndarray,
