@@ -17,8 +17,10 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+# in parallel, one worker per core (pytest-xdist); a test file's tests stay on one worker so that
+# its module fixtures (shared runs) are made once
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 # ruff and mypy with the configuration in pyproject.toml (CI runs this)
 LINT_STAMP := $(VENV)/.lint-installed
