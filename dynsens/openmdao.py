@@ -26,7 +26,7 @@ try:
 except ImportError as exc:  # pragma: no cover - exercised by monkeypatching the import
     raise ImportError("dynsens.openmdao needs OpenMDAO: pip install 'dynsens[openmdao]'") from exc
 
-from .api import CaseLike, as_case
+from .api import as_case
 from .case.load import Case
 from .optimize.problem import simulate
 
