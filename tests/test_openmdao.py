@@ -84,7 +84,13 @@ def test_scipy_optimize_driver_reaches_the_dynsens_optimum(tmp_path: Path) -> No
     assert prob.get_val("truss.buckling_ks")[0] == pytest.approx(1.0, abs=1e-4)
 
 
-def test_example_couples_two_load_cases_with_a_cost_model(capsys) -> None:
+def readme_openmdao_block() -> str:
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    section = text.split("### Using dynsens from OpenMDAO", 1)[1]
+    return section.split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def test_example_couples_two_load_cases_with_a_cost_model(capsys, monkeypatch) -> None:
     ns = runpy.run_path(str(REPO / "scripts" / "openmdao_example.py"))
     prob = ns["main"]()
     out = capsys.readouterr().out
@@ -99,6 +105,11 @@ def test_example_couples_two_load_cases_with_a_cost_model(capsys) -> None:
     # both components saw the same areas
     for n in NAMES:
         assert prob.get_val(f"nominal.{n}")[0] == prob.get_val(f"severe.{n}")[0]
+    # the README's block is the same model: it reaches the same design
+    monkeypatch.chdir(REPO)
+    readme: dict = {}
+    exec(compile(readme_openmdao_block(), "README.md", "exec"), readme)
+    np.testing.assert_allclose([readme["prob"].get_val(f"areas.{n}")[0] for n in NAMES], x, rtol=1e-8)
 
 
 def test_unknown_response_is_a_clear_error() -> None:
