@@ -61,6 +61,7 @@ class CaseComponent(om.ExplicitComponent):
     Attributes
     ----------
     n_simulations : simulations run so far (one per distinct design point).
+    counters : run statistics of the last simulation (steps, solves, backward solves, ...).
     input_names, output_names : case name -> component variable name.
     """
 
@@ -71,6 +72,7 @@ class CaseComponent(om.ExplicitComponent):
         self.options.declare("responses", default=None, allow_none=True, types=(list, tuple),
                              desc="responses to output (default: objective and constraints)")
         self.n_simulations = 0
+        self.counters: dict[str, int] = {}
         self._cache: tuple[bytes, dict[str, float], dict[str, np.ndarray]] | None = None
 
     @property
@@ -122,6 +124,7 @@ class CaseComponent(om.ExplicitComponent):
         self.n_simulations += 1
         if res is None:
             raise om.AnalysisError(f"{self.case.source} at {dict(zip(self.case.design_names, x))}: {message}")
+        self.counters = dict(res.counters)
         values, grads = {}, {}
         for name in self.output_names:
             r = res.responses[name]
