@@ -35,6 +35,8 @@ class ParameterTable:
         self._paths: list[str] = []
         self._rules: list[tuple[int, str, str]] = []
         self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
+        # hollow sections whose wall must leave a hole: (wall index, {width name: index}, path)
+        self._walls: list[tuple[int, dict[str, int], str]] = []
 
     def __len__(self) -> int:
         return len(self._constants)
@@ -94,6 +96,12 @@ class ParameterTable:
         if all(i >= 0 for i in indices):
             self._nonzero.append((tuple(indices), path, what))
 
+    def require_wall(self, wall: int, widths: Mapping[str, int], path: str) -> None:
+        """A hollow section's wall thickness (entry ``wall``) must leave a hole at every design:
+        2·t < each outer width in ``widths`` (name -> entry, e.g. {"D": i} for a tube)."""
+        if wall >= 0 and all(i >= 0 for i in widths.values()):
+            self._walls.append((wall, dict(widths), path))
+
     def check(self, x: Array) -> list[tuple[str, str]]:
         """(YAML path, problem) for every entry that has no finite value at the real design ``x``
         or breaks its range rule (> 0, >= 0, a vector not zero); empty when all hold."""
@@ -135,6 +143,15 @@ class ParameterTable:
         for idx, path, what in self._nonzero:
             if not bad.intersection(idx) and not np.any(values[list(idx)]):
                 out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
+        for wall, widths, path in self._walls:
+            if bad.intersection([wall, *widths.values()]):
+                continue
+            t = values[wall]
+            thick = {n: values[i] for n, i in widths.items() if 2 * t > values[i]}
+            if thick:
+                found = ", ".join(f"{n} = {v:.6g}" for n, v in thick.items())
+                out.append((path, f"expected a wall t <= {' and '.join(f'{n}/2' for n in widths)} "
+                                  f"(a section that exists), found t = {t:.6g} with {found}"))
         return out
 
     def depends_on_design(self, index: int) -> bool:
