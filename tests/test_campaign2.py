@@ -5,6 +5,7 @@ never a traceback or a silently wrong result.
 """
 from __future__ import annotations
 
+import codecs
 import copy
 
 import numpy as np
@@ -12,9 +13,18 @@ import pytest
 
 import dynsens
 from dynsens import CaseError
-from dynsens.case.load import load_case_dict
+from click.testing import CliRunner
+
+import dynsens.cli.study  # noqa: F401  (registers the command)
+from dynsens.case.load import load_case, load_case_dict
+from dynsens.cli.main import cli
 from dynsens.errors import DesignError
 from test_beams import cantilever, portal_frame
+
+
+def invoke(*args: object) -> object:
+    """The command line in-process; a crash shows as exit status 1 with its exception kept."""
+    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def _problems(raw: dict) -> list[tuple[str, str]]:
@@ -56,3 +66,77 @@ def test_sections_that_cannot_exist_during_optimization() -> None:
     x[case.design_names.index("D")] = 9.0                     # t = 5 > D/2
     with pytest.raises(DesignError, match=r"model\.elements\[0\]\.section\.t: expected a wall t <= D/2"):
         dynsens.run_case(case, x)
+
+
+def _yaml(path: str) -> dict:
+    import yaml
+    with open(path, encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+@pytest.mark.parametrize("kind, dofs, needle", [
+    ("spring", ["ground"], "ground"),
+    ("damper", ["ground"], "ground"),
+    ("spring", ["u", "u"], "one DOF"),
+    ("damper", ["ground", "ground"], "ground"),
+])
+def test_degenerate_elements(kind: str, dofs: list, needle: str) -> None:
+    from helpers import SDOF_DESIGN
+    raw = copy.deepcopy(SDOF_DESIGN)
+    value = {"k": 5.0} if kind == "spring" else {"c": 1.0}
+    raw["model"]["elements"].append({"type": kind, "name": "extra", "dofs": dofs, **value})
+    found = _problems(raw)
+    assert [m for p, m in found if p == "model.elements[3].dofs" and needle in m], found
+
+
+def test_degenerate_inertia_tensor_is_refused() -> None:
+    raw = _yaml("cases/pendulum_3d.yaml")
+    bodies = raw["model"]["bodies"]
+    name = next(n for n, b in bodies.items() if isinstance(b, dict) and "inertia" in b)
+    bodies[name]["inertia"] = [1.0, 1.0, 1.0, 2.0, 0.0, 0.0]     # eigenvalues -1, 1, 3
+    found = _problems(raw)
+    msgs = [m for p, m in found if p == f"model.bodies.{name}.inertia"]
+    assert msgs and "positive definite inertia tensor" in msgs[0] and "-1" in msgs[0], found
+    bodies[name]["inertia"] = [1.0, 1.0, 1.0, 0.5, 0.0, 0.0]     # a valid tensor with a product
+    load_case_dict(raw)
+
+
+@pytest.mark.parametrize("budget", [".inf", "1e400", "1e400 GiB", str(10 ** 400)])
+def test_inputs_that_overflow_memory_budget(budget: str) -> None:
+    import yaml
+    from helpers import SDOF_DESIGN
+    raw = copy.deepcopy(SDOF_DESIGN)
+    raw["sensitivity"]["memory_budget"] = yaml.safe_load(budget)
+    found = _problems(raw)
+    assert [m for p, m in found if p == "sensitivity.memory_budget" and "expected a positive size" in m], found
+
+
+@pytest.mark.parametrize("spec", ["lhs:100000000000", "sobol:1099511627776", "grid:100000", "grid:4000x4000x4000"])
+def test_inputs_that_overflow_study_samples(tmp_path, spec: str) -> None:
+    from test_study import SDOF
+    r = invoke("study", SDOF, "-o", tmp_path / "s.h5", "--sample", spec)
+    assert r.exit_code == 2 and "at most 10,000,000 designs" in r.output and "Traceback" not in r.output, r.output
+    assert not (tmp_path / "s.h5").exists()
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-8-sig"])
+def test_csv_not_utf8_read_by_its_byte_order_mark(tmp_path, encoding: str) -> None:
+    from dynsens.study import sample_designs
+    from test_study import SDOF
+    csv = tmp_path / "d.csv"
+    text = "k,m\n60,1.5\n80,2.0\n"
+    csv.write_bytes((codecs.BOM_UTF16_BE + text.encode(encoding)) if encoding == "utf-16-be" else text.encode(encoding))
+    case = load_case(SDOF)
+    x = sample_designs(case, str(csv), None)
+    np.testing.assert_array_equal(x[:, [case.design_names.index("k"), case.design_names.index("m")]],
+                                  [[60, 1.5], [80, 2.0]])
+
+
+@pytest.mark.parametrize("encoding", ["latin-1", "cp1252"])
+def test_csv_not_utf8(tmp_path, encoding: str) -> None:
+    from test_study import SDOF
+    csv = tmp_path / "d.csv"
+    csv.write_bytes("k,m\n60,1.5\n80,2.0\n# Müller\n".encode(encoding))
+    r = invoke("study", SDOF, "-o", tmp_path / "s.h5", "--sample", csv)
+    assert r.exit_code == 2 and "expected a UTF-8 text file" in r.output and str(csv) in r.output, r.output
+    assert not (tmp_path / "s.h5").exists()

@@ -2,6 +2,7 @@
 ``sensitivity.memory_budget`` (kept apart from the loader so that it stays one place to read)."""
 from __future__ import annotations
 
+import math
 import re
 from typing import Any
 
@@ -22,11 +23,14 @@ def derivative_settings(sens: dict[str, Any], pc: ProblemCollector) -> dict[str,
         method = "direct"
     budget = sens.get("memory_budget", DEFAULT_MEMORY_BUDGET)
     value = None
-    if isinstance(budget, (int, float)) and not isinstance(budget, bool):
-        value = float(budget)
-    elif isinstance(budget, str) and (m := _SIZE.match(budget)) and m.group(2).lower() in _UNITS:
-        value = float(m.group(1)) * _UNITS[m.group(2).lower()]
-    if value is None or not value > 0:
+    try:        # a size too large for a float (10**400, "1e400 GiB") is no size: refused below
+        if isinstance(budget, (int, float)) and not isinstance(budget, bool):
+            value = float(budget)
+        elif isinstance(budget, str) and (m := _SIZE.match(budget)) and m.group(2).lower() in _UNITS:
+            value = float(m.group(1)) * _UNITS[m.group(2).lower()]
+    except OverflowError:
+        value = None
+    if value is None or not 0 < value < math.inf:
         pc.add("sensitivity.memory_budget",
                f"expected a positive size in bytes or with a unit (e.g. 2 GiB, 500 MB), found {budget!r}")
         value = DEFAULT_MEMORY_BUDGET

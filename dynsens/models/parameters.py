@@ -37,6 +37,8 @@ class ParameterTable:
         self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
         # hollow sections whose wall must leave a hole: (wall index, {width name: index}, path)
         self._walls: list[tuple[int, dict[str, int], str]] = []
+        # symmetric matrices that must be positive definite: (index matrix, path, what)
+        self._definite: list[tuple[tuple[tuple[int, ...], ...], str, str]] = []
 
     def __len__(self) -> int:
         return len(self._constants)
@@ -102,6 +104,12 @@ class ParameterTable:
         if wall >= 0 and all(i >= 0 for i in widths.values()):
             self._walls.append((wall, dict(widths), path))
 
+    def require_positive_definite(self, matrix: Sequence[Sequence[int]], path: str, what: str) -> None:
+        """The symmetric matrix of entries ``matrix`` (an index per row and column, e.g. an
+        inertia tensor) must be positive definite at every design."""
+        if all(i >= 0 for row in matrix for i in row):
+            self._definite.append((tuple(tuple(row) for row in matrix), path, what))
+
     def check(self, x: Array) -> list[tuple[str, str]]:
         """(YAML path, problem) for every entry that has no finite value at the real design ``x``
         or breaks its range rule (> 0, >= 0, a vector not zero); empty when all hold."""
@@ -143,6 +151,13 @@ class ParameterTable:
         for idx, path, what in self._nonzero:
             if not bad.intersection(idx) and not np.any(values[list(idx)]):
                 out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
+        for matrix, path, what in self._definite:
+            if not bad.intersection(i for row in matrix for i in row):
+                A = values[np.array(matrix)]
+                lowest = float(np.linalg.eigvalsh(A)[0])
+                if lowest <= 0:
+                    out.append((path, f"expected a positive definite {what}, found {A.tolist()} "
+                                      f"(lowest eigenvalue {lowest:.6g})"))
         for wall, widths, path in self._walls:
             if bad.intersection([wall, *widths.values()]):
                 continue
