@@ -10,12 +10,14 @@ import copy
 
 import numpy as np
 import pytest
-
-import dynsens
-from dynsens import CaseError
 from click.testing import CliRunner
 
-import dynsens.cli.study  # noqa: F401  (registers the command)
+import dynsens
+import dynsens.cli.convergence  # noqa: F401  (registers the commands)
+import dynsens.cli.optimize  # noqa: F401
+import dynsens.cli.simulate  # noqa: F401
+import dynsens.cli.study  # noqa: F401
+from dynsens import CaseError
 from dynsens.case.load import load_case, load_case_dict
 from dynsens.cli.main import cli
 from dynsens.errors import DesignError
@@ -140,3 +142,72 @@ def test_csv_not_utf8(tmp_path, encoding: str) -> None:
     r = invoke("study", SDOF, "-o", tmp_path / "s.h5", "--sample", csv)
     assert r.exit_code == 2 and "expected a UTF-8 text file" in r.output and str(csv) in r.output, r.output
     assert not (tmp_path / "s.h5").exists()
+
+
+@pytest.fixture
+def sdof_files(tmp_path):
+    """The SDOF design case (short) as a file; returns (case path, folder)."""
+    import yaml
+    from helpers import SDOF_DESIGN
+    raw = copy.deepcopy(SDOF_DESIGN)
+    raw["integrator"]["t_end"] = 0.3
+    path = tmp_path / "sdof.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path, tmp_path
+
+
+def _refused(r, *needles: str) -> None:
+    assert r.exit_code == 2 and "Traceback" not in r.output, r.output
+    for n in needles:
+        assert n in r.output, r.output
+
+
+UNMAKEABLE = "/proc/dynsens_plots"          # the file system refuses a folder here, also for root
+
+
+def test_plots_folder_checked_before_the_run(sdof_files) -> None:
+    case, d = sdof_files
+    for cmd in (["simulate", case, "-o", d / "r.h5"], ["optimize", case, "-o", d / "r.h5", "--maxiter", "1"],
+                ["study", case, "-o", d / "r.h5", "--sample", "lhs:2"]):
+        _refused(invoke(*cmd, "--plots", UNMAKEABLE), "--plots", UNMAKEABLE)
+        assert not (d / "r.h5").exists()
+
+
+@pytest.mark.parametrize("command, existing", [("simulate", "r.png"), ("study", "study_responses.png"),
+                                               ("optimize", "r_design.png")])
+def test_plots_not_overwritten_without_overwrite(sdof_files, command: str, existing: str) -> None:
+    case, d = sdof_files
+    (d / "plots").mkdir()
+    (d / "plots" / existing).write_bytes(b"mine")
+    extra = {"simulate": [], "study": ["--sample", "lhs:2"], "optimize": ["--maxiter", "1"]}[command]
+    _refused(invoke(command, case, "-o", d / "r.h5", *extra, "--plots", d / "plots"), existing, "--overwrite")
+    assert (d / "plots" / existing).read_bytes() == b"mine" and not (d / "r.h5").exists()
+
+
+@pytest.mark.parametrize("output, needle", [
+    ("r" * 250 + ".h5", "expected a file name of at most"),
+    ("d" * 300 + "/r.h5", "expected folder and file names of at most 255 bytes"),
+    ("/".join(["d" * 200] * 25) + "/r.h5", "(the file system's limit)"),
+])
+def test_tracebacks_output_path_too_long(sdof_files, output: str, needle: str) -> None:
+    case, d = sdof_files
+    _refused(invoke("simulate", case, "-o", d / output), needle)
+
+
+def test_tracebacks_optimize_plots_unwritable(sdof_files) -> None:
+    case, d = sdof_files
+    _refused(invoke("optimize", case, "-o", d / "o.h5", "--maxiter", "1", "--plots", UNMAKEABLE),
+             "expected a folder that can be created and written")
+    assert not (d / "o.h5").exists()
+
+
+def test_tracebacks_resume_with_garbage_tail(sdof_files) -> None:
+    case, d = sdof_files
+    out = d / "o.h5"
+    assert invoke("optimize", case, "-o", out, "--maxiter", "2").exit_code in (0, 1)
+    data = bytearray(out.read_bytes())
+    data[-30000:] = np.random.default_rng(7).bytes(30000)
+    out.write_bytes(bytes(data))
+    _refused(invoke("optimize", case, "-o", out, "--maxiter", "3", "--resume"), "o.h5 is damaged",
+             "without --resume")
+    assert out.read_bytes() == bytes(data)

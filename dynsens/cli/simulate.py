@@ -11,7 +11,7 @@ import numpy as np
 from ..case.load import load_case
 from ..io.hdf5 import write_result
 from ..progress import Progress
-from ..io.paths import check_output_path
+from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli
 from .options import case_argument, overwrite_option, set_option, verbosity_options
@@ -103,6 +103,8 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
              no_sensitivities: bool, plots: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
     check_output_path(output, overwrite)     # before the run, not after it
+    if plots:
+        check_output_folder(plots, [Path(plots) / f"{Path(output).stem}.png"], overwrite, option="--plots")
     case = load_case(case_file, overrides)
     log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",
              case.name, case.plan.n_steps, case.plan.dt, len(case.design), len(case.response_names),
