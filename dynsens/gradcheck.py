@@ -71,6 +71,8 @@ class GradientReport:
         """Responses whose best relative difference exceeds rtol (fixed-time gradients and
         missing responses are not compared: finite differences of the whole run measure the
         total derivative)."""
+        if not 0 < rtol < np.inf:
+            raise ValueError(f"rtol: expected a finite number > 0, found {rtol!r}")
         return [n for n in self.responses if n not in self.missing and n not in self.fixed_time
                 and not self.best_rel_diff(n) <= rtol]
 

@@ -211,3 +211,25 @@ def test_tracebacks_resume_with_garbage_tail(sdof_files) -> None:
     _refused(invoke("optimize", case, "-o", out, "--maxiter", "3", "--resume"), "o.h5 is damaged",
              "without --resume")
     assert out.read_bytes() == bytes(data)
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"history": "q"}, "history: expected a sequence of names"),
+    ({"history": ["q", "velocity"]}, "found unknown 'velocity'"),
+    ({"sensitivities": "no"}, "sensitivities: expected True, False or None"),
+])
+def test_python_api_validates_simulate_arguments(kwargs: dict, needle: str) -> None:
+    with pytest.raises(ValueError, match=needle):
+        dynsens.simulate("cases/sdof_step.yaml", **kwargs)
+    # the valid spellings run
+    sim = dynsens.simulate("cases/sdof_step.yaml", history=["q"], sensitivities=False, **{"integrator.t_end": 0.1})
+    assert set(sim.history) == {"q"} and all(np.isnan(g).all() for g in sim.gradients.values())
+
+
+def test_python_api_validates_nan_tolerance() -> None:
+    from helpers import SDOF_DESIGN
+    with pytest.raises(ValueError, match="ftol: expected a finite number > 0, found nan"):
+        dynsens.optimize(SDOF_DESIGN, ftol=float("nan"))
+    report = dynsens.check_gradients("cases/sdof_step.yaml", steps=[1e-6], **{"integrator.t_end": 0.1})
+    with pytest.raises(ValueError, match="rtol: expected a finite number > 0"):
+        report.passes(float("nan"))
