@@ -233,3 +233,12 @@ def test_python_api_validates_nan_tolerance() -> None:
     report = dynsens.check_gradients("cases/sdof_step.yaml", steps=[1e-6], **{"integrator.t_end": 0.1})
     with pytest.raises(ValueError, match="rtol: expected a finite number > 0"):
         report.passes(float("nan"))
+
+
+@pytest.mark.parametrize("name", ["pi", "e", "sqrt"])
+def test_family_named_like_an_expression_constant(name: str) -> None:
+    from test_families import per_member
+    raw = per_member(name=name, assign={"area": name, "inertia": f"{name}**2*10/(8*pi)"})
+    found = _problems(raw)
+    msgs = [m for p, m in found if p == "design.families[0].name"]
+    assert msgs and "not a constant or function of the expressions" in msgs[0], found
