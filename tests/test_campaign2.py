@@ -242,3 +242,29 @@ def test_family_named_like_an_expression_constant(name: str) -> None:
     found = _problems(raw)
     msgs = [m for p, m in found if p == "design.families[0].name"]
     assert msgs and "not a constant or function of the expressions" in msgs[0], found
+
+
+@pytest.mark.parametrize("dts, needle", [("1", "expected steps of at most t_end - t0 = 0.5 s"),
+                                         ("0.02,1", "found 1"),
+                                         ("0.01", "expected at least two different steps")])
+def test_convergence_dt_checked_before_the_run(tmp_path, dts: str, needle: str) -> None:
+    from test_study import SDOF
+    r = invoke("convergence", SDOF, "--set", "integrator.t_end=0.5", "--dt", dts, "--methods", "ddm-forward",
+               "-o", tmp_path / "out")
+    assert r.exit_code == 2 and needle in r.output and "--dt" in r.output, r.output
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_convergence_case_name_stays_inside_output(tmp_path) -> None:
+    import yaml
+    from test_study import SDOF
+    raw = yaml.safe_load(SDOF.read_text())
+    raw["name"] = "../../escaped/x"
+    case = tmp_path / "a" / "b" / "c.yaml"
+    case.parent.mkdir(parents=True)
+    case.write_text(yaml.safe_dump(raw))
+    r = invoke("convergence", case, "--set", "integrator.t_end=0.2", "--dt", "0.02,0.01", "--methods", "ddm-forward",
+               "-o", tmp_path / "a" / "b" / "out")
+    assert r.exit_code == 0, r.output
+    written = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file())
+    assert all(p.parts[:3] == ("a", "b", "out") for p in written if p.name != "c.yaml"), written
