@@ -268,3 +268,44 @@ def test_convergence_case_name_stays_inside_output(tmp_path) -> None:
     assert r.exit_code == 0, r.output
     written = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file())
     assert all(p.parts[:3] == ("a", "b", "out") for p in written if p.name != "c.yaml"), written
+
+
+def test_messages_beam_buckling_refused_once_at_the_response_type() -> None:
+    raw = portal_frame()
+    raw["responses"].append({"name": "buckle", "type": "buckling_ratio", "rho": 20.0})
+    found = _problems(raw)
+    at = len(raw["responses"]) - 1
+    mine = [(p, m) for p, m in found if p.startswith(f"responses[{at}]")]
+    assert len(mine) == 1, found
+    path, msg = mine[0]
+    assert path == f"responses[{at}].type", found
+    assert "buckling_ratio of response 'buckle'" in msg and "not 'buckling'" in msg, msg
+    assert all(b in msg for b in ("col_a", "col_b", "girder_1", "girder_2")), msg
+
+
+def test_messages_ks_components_take_the_short_label() -> None:
+    raw = _yaml("cases/duffing_chain.yaml")
+    quantity = {"dof": [f"u{i}" for i in range(1, 21)], "kind": "displacement"}
+    raw["responses"].append({"name": "u10_ks", "type": "ks", "quantity": quantity, "components": ["u10"],
+                             "rho": 200.0})
+    raw["responses"].append({"name": "u10_end", "type": "value", "quantity": quantity, "component": "u10"})
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case, sensitivities=False)
+    assert res.responses["u10_ks"].value >= res.responses["u10_end"].value - 1e-12
+    raw["responses"][-2]["components"] = ["u99"]
+    assert [m for p, m in _problems(raw) if p == f"responses[{len(raw['responses']) - 2}].components"
+            and "'u99' not found" in m]
+
+
+def test_messages_dimensionless_unit_prints_bare() -> None:
+    from dynsens.optimize.summary import _u
+    assert _u("-") == "" and _u("MPa") == " MPa" and _u("") == ""
+
+
+def test_messages_monitor_labels_and_optimize_help() -> None:
+    from dynsens.cli.simulate import monitor_label
+    assert monitor_label("constraint_position") == "constraint position drift"
+    assert monitor_label("sensitivity_constraint_position") == "sensitivity constraint position residual"
+    assert "drift" not in monitor_label("sensitivity_constraint_scale")
+    r = invoke("optimize", "-h")
+    assert "adjoint" in " ".join(r.output.split()), r.output

@@ -1,4 +1,5 @@
-"""``dynsens optimize``: SLSQP on the direct sensitivities, history appended to HDF5 per iteration."""
+"""``dynsens optimize``: SLSQP on exact gradients (direct or adjoint sensitivities), history appended to
+HDF5 per iteration."""
 from __future__ import annotations
 
 import math
@@ -105,8 +106,9 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
              workers: int | None, scheduler: str | None, resume: bool, plots: str | None) -> None:
     """Minimize the case's objective subject to its constraints with SLSQP.
 
-    Objective, constraints and gradients come from one simulation with direct
-    sensitivities per design point.  Design variables are scaled to [0, 1] in their
+    Objective, constraints and gradients come from one simulation per design point, the
+    gradients from its direct or adjoint sensitivities (sensitivity.method: direct, adjoint
+    or auto).  Design variables are scaled to [0, 1] in their
     bounds; the objective is normalized by its value at x0.  Exit status 0 when the best
     start converged to a feasible design, 1 otherwise.
     """

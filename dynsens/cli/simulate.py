@@ -32,9 +32,18 @@ def format_run_notes(result: Any) -> list[str]:
                                               if cuts else ""))
     for name, v in result.monitors.items():
         if len(v):
-            lines.append(f"{name.replace('_', ' ')} drift: max {float(np.max(np.abs(v))):.3g}, "
+            lines.append(f"{monitor_label(name)}: max {float(np.max(np.abs(v))):.3g}, "
                          f"at the end {float(abs(v[-1])):.3g} (case units)")
     return lines
+
+
+def monitor_label(name: str) -> str:
+    """What a per-step monitor measures: the state's constraint drift, the sensitivities'
+    constraint residual (J_Phi grad q + dPhi/dx), or the scale that residual is read against."""
+    words = name.replace("_", " ")
+    if name == "sensitivity_constraint_scale":
+        return f"{words} (max |J_Phi grad q|)"
+    return f"{words} residual" if name.startswith("sensitivity_constraint_") else f"{words} drift"
 
 
 def format_summary(result: Any, design_names: tuple[str, ...]) -> str:

@@ -18,7 +18,7 @@ BOUND_TOL = 1e-6    # a design variable within this fraction of its range of a b
 
 
 def _u(unit: str) -> str:
-    return f" {unit}" if unit else ""
+    return f" {unit}" if unit and unit != "-" else ""     # a ratio (unit "-") reads best bare
 
 
 def constraint_rows(problem: ScaledProblem, responses: np.ndarray, g: np.ndarray,
