@@ -309,3 +309,22 @@ def test_messages_monitor_labels_and_optimize_help() -> None:
     assert "drift" not in monitor_label("sensitivity_constraint_scale")
     r = invoke("optimize", "-h")
     assert "adjoint" in " ".join(r.output.split()), r.output
+
+
+def test_docstrings_cite_tests_that_exist() -> None:
+    """Every tests/test_*.py (and test function named after it) a dynsens docstring or comment
+    cites exists."""
+    import re
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    cite = re.compile(r"tests/(test_\w+\.py)(?:,\s*(test_\w+)|::(test_\w+))?")
+    missing = []
+    for src in sorted((root / "dynsens").rglob("*.py")):
+        for m in cite.finditer(src.read_text(encoding="utf-8")):
+            test_file = root / "tests" / m.group(1)
+            function = m.group(2) or m.group(3)
+            if not test_file.exists():
+                missing.append(f"{src.relative_to(root)}: {m.group(0)}")
+            elif function and f"def {function}(" not in test_file.read_text(encoding="utf-8"):
+                missing.append(f"{src.relative_to(root)}: {m.group(0)} (no such test)")
+    assert not missing, missing

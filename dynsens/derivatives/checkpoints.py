@@ -8,7 +8,8 @@ convergence memory: a few state vectors).  While the records held stay within th
 are all kept; beyond it the oldest segments give up their records (their linearizations and
 factors).  The sweep takes the segments in reverse order and re-runs a dropped one forward from
 its checkpoint first: the same arithmetic on the same inputs, so the records — and the gradient
-— are bit-identical to those of a run that kept them (tests/test_adjoint_checkpoints.py).
+— are bit-identical to those of a run that kept them (tests/test_adjoint.py,
+test_checkpointing_recomputes_segments_bit_identically).
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """LU of a tridiagonal matrix with partial pivoting, for a compiled step: LAPACK's dgttrf and
 dgttrs (one right-hand side, no transpose) operation for operation, so that a factor made here
-equals, bit for bit, the one scipy's LAPACK makes of the same matrix (tests/test_tridiagonal.py),
+equals, bit for bit, the one scipy's LAPACK makes of the same matrix (tests/test_structural_step.py,
+test_tridiagonal_lu_equals_lapack_bit_for_bit),
 and the Python path's :class:`~dynsens.solver.banded.TridiagonalFactor` can solve with it.
 
 numba exposes no tridiagonal LAPACK routine, and a call through a ctypes pointer would keep the
