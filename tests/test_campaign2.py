@@ -169,7 +169,7 @@ def test_plots_folder_checked_before_the_run(sdof_files) -> None:
     case, d = sdof_files
     for cmd in (["simulate", case, "-o", d / "r.h5"], ["optimize", case, "-o", d / "r.h5", "--maxiter", "1"],
                 ["study", case, "-o", d / "r.h5", "--sample", "lhs:2"]):
-        _refused(invoke(*cmd, "--plots", UNMAKEABLE), "--plots", UNMAKEABLE)
+        _refused(invoke(*cmd, "--plots", UNMAKEABLE), "--plots", "/proc")
         assert not (d / "r.h5").exists()
 
 
@@ -196,8 +196,9 @@ def test_tracebacks_output_path_too_long(sdof_files, output: str, needle: str) -
 
 def test_tracebacks_optimize_plots_unwritable(sdof_files) -> None:
     case, d = sdof_files
+    # for root, permission bits allow /proc: the file system's own refusal is what is reported
     _refused(invoke("optimize", case, "-o", d / "o.h5", "--maxiter", "1", "--plots", UNMAKEABLE),
-             "expected a folder that can be created and written")
+             "--plots: expected a folder", "/proc")
     assert not (d / "o.h5").exists()
 
 
