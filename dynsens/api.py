@@ -30,6 +30,7 @@ from .optimize.verified import optimize_verified as _optimize_verified
 from .optimize.store import read_history as _read_history
 from .responses import ResponseValue
 from .simulation import run_case
+from .stepping import HISTORY_FIELDS
 
 CaseLike = Union[Case, str, Path, Mapping[str, Any]]
 
@@ -46,6 +47,26 @@ def _override_strings(overrides: Mapping[str, Any]) -> list[str]:
             value = value.item()
         out.append(f"{key.replace('__', '.')}={json.dumps(value)}")
     return out
+
+
+def _history_fields(history: Any) -> tuple[str, ...] | None:
+    """``history`` as a tuple of state-history names, or ValueError naming what was found."""
+    if history is None:
+        return None
+    expected = f"expected a sequence of names from {list(HISTORY_FIELDS)} (e.g. ('q', 'qd'); () for none)"
+    if isinstance(history, (str, bytes)) or not isinstance(history, (list, tuple, set, frozenset)):
+        raise ValueError(f"history: {expected}, found {history!r}")
+    unknown = [h for h in history if h not in HISTORY_FIELDS]
+    if unknown:
+        raise ValueError(f"history: {expected}, found unknown {', '.join(map(repr, unknown))}")
+    return tuple(history)
+
+
+def _flag(name: str, value: Any) -> bool | None:
+    """``value`` as an optional flag: None, True or False (a string such as "no" is no flag)."""
+    if value is None or isinstance(value, (bool, np.bool_)):
+        return None if value is None else bool(value)
+    raise ValueError(f"{name}: expected True, False or None, found {value!r}")
 
 
 def as_case(case: CaseLike, overrides: Mapping[str, Any] | None = None) -> Case:
@@ -157,23 +178,6 @@ class Simulation:
         return f"<Simulation {self.case.name}: {self.status}; {vals}>"
 
 
-def _check_run_arguments(sensitivities: Any, history: Any) -> None:
-    """TypeError/ValueError for arguments that would otherwise run with a silent meaning
-    (``history="q"`` read as its letters, ``sensitivities="no"`` as true)."""
-    from .stepping import HISTORY_FIELDS
-    if sensitivities is not None and not isinstance(sensitivities, (bool, np.bool_)):
-        raise TypeError(f"sensitivities: expected True, False or None, found {type(sensitivities).__name__} "
-                        f"{sensitivities!r}")
-    if history is None:
-        return
-    if isinstance(history, (str, bytes)) or not isinstance(history, (Sequence, set, frozenset)):
-        raise TypeError(f"history: expected a sequence of field names such as ('q', 'qd'), found "
-                        f"{type(history).__name__} {history!r}")
-    unknown = [h for h in history if h not in HISTORY_FIELDS]
-    if unknown:
-        raise ValueError(f"history: unknown field(s) {unknown} (fields: {', '.join(HISTORY_FIELDS)})")
-
-
 def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
              sensitivities: bool | None = None, history: Sequence[str] | None = None,
              **overrides: Any) -> Simulation:
@@ -193,13 +197,13 @@ def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
     Simulation
         Responses (``values``, ``gradients``, ``units``), histories and run statistics.
     """
-    _check_run_arguments(sensitivities, history)
+    fields, flag = _history_fields(history), _flag("sensitivities", sensitivities)   # before any work
     c = as_case(case, overrides)
     xx = None if x is None else np.asarray(x)
     if xx is not None and xx.shape != (len(c.design_names),):
         raise ValueError(f"x: expected {len(c.design_names)} values for {list(c.design_names)}, "
                          f"found shape {xx.shape}")
-    run = run_case(c, xx, sensitivities=sensitivities, history=None if history is None else tuple(history))
+    run = run_case(c, xx, sensitivities=flag, history=fields)
     return Simulation(c, run)
 
 
@@ -241,6 +245,9 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     OptimizeResult
         scipy's names for the best start; see :class:`OptimizeResult`.
     """
+    if ftol is not None and not (isinstance(ftol, (int, float)) and not isinstance(ftol, bool)
+                                 and np.isfinite(ftol) and ftol > 0):
+        raise ValueError(f"ftol: expected a finite number > 0, found {ftol!r}")
     if resume and output is None:
         raise ValueError("resume=True continues the run recorded in an output file: give output")
     c = as_case(case, overrides)

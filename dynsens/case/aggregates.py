@@ -16,6 +16,7 @@ from ..models._keys import check_keys
 from ..models.base import Output
 from ..responses import Response
 from ..responses_sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
+from .quantities import component_index
 
 __all__ = ["AGGREGATE_TYPES", "aggregate_maker"]
 
@@ -92,7 +93,11 @@ def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
             side_rows.append(-1.0 / given["compression_limit"])
     if len(pc.problems) > n0:
         return None
+    n1 = len(pc.problems)
     picked = _shared_output(elements, quantity_kind, f"{path}.elements", output_id, outputs, pc)
+    for p in pc.problems[n1:]:
+        if p.path == f"{path}.elements.kind":   # the kind is the response type's, not a key of the case
+            p.path, p.message = f"{path}.type", f"{kind} of response {name!r} reads '{quantity_kind}': {p.message}"
     if picked is None:
         return None
     oid, comps = picked
@@ -201,12 +206,11 @@ def _components(spec: Any, outs: list[Output], several: bool, path: str,
         sel = sel if isinstance(sel, list) else [sel]
         idx = []
         for c in sel:
-            if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(o.labels):
-                idx.append(c)
-            elif c in o.labels:
-                idx.append(o.labels.index(c))
-            else:
+            i = component_index(o.labels, c)
+            if i is None:
                 pc.add(p, f"component {c!r} not found (components: {list(o.labels)})")
+            else:
+                idx.append(i)
         if len(idx) != len(sel):
             return None
         if not idx:

@@ -25,14 +25,16 @@ def derivative_settings(sens: dict[str, Any], pc: ProblemCollector) -> dict[str,
         method = "direct"
     budget = sens.get("memory_budget", DEFAULT_MEMORY_BUDGET)
     value = None
-    if isinstance(budget, (int, float)) and not isinstance(budget, bool):
-        value = float(budget)
-    elif isinstance(budget, str) and (m := _SIZE.match(budget)) and m.group(2).lower() in _UNITS:
-        value = float(m.group(1)) * _UNITS[m.group(2).lower()]
-    # an infinite or overflowing budget would reach the record counts as inf/nan (a traceback)
+    try:        # a size too large for a float (10**400, "1e400 GiB") is no size: refused below
+        if isinstance(budget, (int, float)) and not isinstance(budget, bool):
+            value = float(budget)
+        elif isinstance(budget, str) and (m := _SIZE.match(budget)) and m.group(2).lower() in _UNITS:
+            value = float(m.group(1)) * _UNITS[m.group(2).lower()]
+    except OverflowError:
+        value = None
     if value is None or not 0 < value <= MAX_MEMORY_BUDGET:
         pc.add("sensitivity.memory_budget",
-               f"expected a positive, finite size in bytes or with a unit (e.g. 2 GiB, 500 MB; at most "
+               f"expected a positive size in bytes or with a unit (e.g. 2 GiB, 500 MB; finite, at most "
                f"{MAX_MEMORY_BUDGET:.0e} bytes), found {budget!r}")
         value = DEFAULT_MEMORY_BUDGET
     return {"method": str(method), "memory_budget": value}

@@ -34,8 +34,8 @@ from typing import Any, Callable
 
 from ..case_keys import SECTIONS, allowed
 from ..errors import Problem, ProblemCollector
-from ..models._keys import check_keys, did_you_mean
 from ..expressions import RESERVED_NAMES
+from ..models._keys import check_keys, did_you_mean
 from .checks import reserved_message
 from .responses_spec import read_number
 
@@ -168,7 +168,7 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
     if not isinstance(name, str) or not _IDENT.match(name):
         pc.add(f"{path}.name", f"expected an identifier (letters, digits, _), found {name!r}")
         return []
-    if name in RESERVED_NAMES:    # 'pi' would stand for the family and for the constant in assign
+    if name in RESERVED_NAMES:      # its expressions would read the constant or function
         pc.add(f"{path}.name", reserved_message(name))
         return []
     if name in taken:

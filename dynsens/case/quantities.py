@@ -14,7 +14,7 @@ and events use) and how to show it::
 from __future__ import annotations
 
 import re
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from ..errors import ProblemCollector
 from ..case_keys import allowed
@@ -26,6 +26,23 @@ QUANTITY_KEYS = allowed("output.quantity")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
+def component_index(labels: Sequence[str], c: Any) -> int | None:
+    """Index of component ``c`` among ``labels``: an index, a label in full ("Z.fx") or, where
+    it names one component, its last part ("fx") or its first ("u10" of "u10.displacement");
+    None when it names none.  Every key that picks a
+    component (output.quantities, responses) reads it so."""
+    if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(labels):
+        return c
+    if c in labels:
+        return list(labels).index(c)
+    if not isinstance(c, str):
+        return None
+    for short in ([lb.rsplit(".", 1)[-1] for lb in labels], [lb.split(".", 1)[0] for lb in labels]):
+        if short.count(c) == 1:
+            return short.index(c)
+    return None
+
+
 def _components(out: Output, comp: Any, path: str, pc: ProblemCollector) -> tuple[int, ...] | None:
     """Indices of the requested components (all when ``comp`` is None)."""
     if comp is None:
@@ -33,18 +50,11 @@ def _components(out: Output, comp: Any, path: str, pc: ProblemCollector) -> tupl
     wanted = comp if isinstance(comp, list) else [comp]
     idx = []
     for c in wanted:
-        if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(out.labels):
-            idx.append(c)
-            continue
-        # a label in full ("Z.fx") or its last part ("fx")
-        short = [lb.rsplit(".", 1)[-1] for lb in out.labels]
-        if c in out.labels:
-            idx.append(out.labels.index(c))
-        elif isinstance(c, str) and short.count(c) == 1:
-            idx.append(short.index(c))
-        else:
+        i = component_index(out.labels, c)
+        if i is None:
             pc.add(path, f"component {c!r} not found (components: {list(out.labels)})")
             return None
+        idx.append(i)
     return tuple(idx)
 
 

@@ -18,6 +18,7 @@ from ..responses import EventSpec, EventTime, ExpressionIntegral, Response, Time
 from ..responses_final import Combination, StructuralMass
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
+from .quantities import component_index
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -50,12 +51,10 @@ def _component(out: Output, comp: Any, path: str, pc: ProblemCollector) -> int |
             pc.add(path, f"the quantity has {len(out.labels)} components {list(out.labels)}: name one with 'component'")
             return None
         return 0
-    if isinstance(comp, int) and not isinstance(comp, bool) and 0 <= comp < len(out.labels):
-        return comp
-    if comp in out.labels:
-        return out.labels.index(comp)
-    pc.add(path, f"component {comp!r} not found (components: {list(out.labels)})")
-    return None
+    i = component_index(out.labels, comp)
+    if i is None:
+        pc.add(path, f"component {comp!r} not found (components: {list(out.labels)})")
+    return i
 
 
 def read_events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: str,

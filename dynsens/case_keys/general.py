@@ -9,12 +9,15 @@ _RESPONSE_COMMON = (
     _req("type", "enum", "response type", values=RESPONSE_TYPES),
     _k("unit", "string", "unit shown in reports and stored in the result file (default: the quantity's)"),
 )
+#: how every key that picks a component reads a label
+_LABEL = ("a label in full (`u10.displacement`, `Z.fx`) or, where it names one component, its first or last "
+          "part (`u10`, `fx`)")
 _AGGREGATE_KEYS = (
     *_RESPONSE_COMMON,
     _k("quantity", "any", "one quantity (or give `quantities`)"),
     _k("quantities", "list", "several quantities aggregated together", item="any"),
     _k("components", "any", "components taken: a list of labels or indices (one list per quantity with "
-                            "`quantities`; null: all)", default="all"),
+                            "`quantities`; null: all); " + _LABEL, default="all"),
     _k("absolute", "bool", "aggregate |value| (both signs)", default=False),
     _k("limit", "expr", "divide by this positive constant (the response becomes a ratio, unit '-')", default=1.0),
 )
@@ -131,7 +134,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
     "output.quantity": Section("output.quantities[i]", "A quantity recorded at every step.", (
         _req("name", "name", "name of the recorded series (an identifier)"),
         _req("quantity", "any", "the quantity (see Quantities), as responses and events name it"),
-        _k("component", "any", "a component or a list of them: index or label", default="all"),
+        _k("component", "any", "a component or a list of them: index or label; " + _LABEL, default="all"),
         _k("unit", "string", "unit shown in plots and stored in the file (default: the quantity's)"),
         _k("label", "string", "label for plots (default: the name)"),
         _k("sensitivity", "bool", "also store the design gradient at every step", default=False),
@@ -139,7 +142,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
     "event": Section("events[i]", "An event ends the run when its quantity crosses `value`.", (
         _req("name", "name", "event name (responses refer to it)"),
         _req("quantity", "any", "the watched quantity (see Quantities)"),
-        _k("component", "any", "component of a vector quantity: index or label", default=0),
+        _k("component", "any", "component of a vector quantity: index or label; " + _LABEL, default=0),
         _req("value", "expr", "level"),
         _k("direction", "enum", "crossing direction", values=("rising", "falling", "either"), default="either"),
         _k("action", "enum", "what the event does", values=("terminate",), default="terminate"),
@@ -183,7 +186,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
     "response.value": Section("responses[i], type: value", "A quantity at the end, at a time or at an event.", (
         *_RESPONSE_COMMON,
         _req("quantity", "any", "the quantity (see Quantities)"),
-        _k("component", "any", "component of a vector quantity: index or label", default=0),
+        _k("component", "any", "component of a vector quantity: index or label; " + _LABEL, default=0),
         _k("at", "enum", "'end' (default) unless `time` or `event` is given", values=("end",), default="end"),
         _k("time", "number", "read at this time (interpolated inside the step)"),
         _k("event", "name", "read at this event"),
@@ -224,7 +227,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
                                  "quantity's component or of an expression of quantities.", (
         *_RESPONSE_COMMON,
         _k("quantity", "any", "the quantity (see Quantities); required unless `expression` is given"),
-        _k("component", "any", "component of a vector quantity: index or label", default=0),
+        _k("component", "any", "component of a vector quantity: index or label; " + _LABEL, default=0),
         _k("expression", "string", "integrand as an expression of `symbols` (instead of quantity/component)"),
         _k("symbols", "map", "symbol -> {quantity, component}: the quantities the expression names", item="any"),
     ), type_value="integral"),

@@ -37,6 +37,15 @@ def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdi
         raise click.BadParameter(f"unknown methods {bad} (known: {', '.join(METHODS)})", param_hint="--methods")
     check_output_folder(outdir, report_files(case, outdir), overwrite)
     dts = dts or [case.plan.dt * f for f in (4, 2, 1, 0.5, 0.25)]
+    span = case.plan.t_end - case.plan.t0
+    too_long = [dt for dt in dts if dt > span]
+    if too_long:        # checked before any run, as integrator.dt is
+        raise click.BadParameter(f"expected steps of at most t_end - t0 = {span:g} s (a run of at least one full "
+                                 f"step), found {', '.join(f'{dt:g}' for dt in too_long)}", param_hint="--dt")
+    if len(set(dts)) < 2:
+        raise click.BadParameter(f"expected at least two different steps (the reference is extrapolated from "
+                                 f"the two finest, and an order needs two), found {', '.join(map(str, dts))}",
+                                 param_hint="--dt")
     with Progress(1, f"convergence of {case.name}") as bar:
         def progress(done: float, total: float, note: str) -> None:
             bar.total = total

@@ -11,7 +11,7 @@ import numpy as np
 from ..case.load import load_case
 from ..io.hdf5 import redundant_equations, write_result
 from ..progress import Progress
-from ..io.paths import check_output_path
+from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli
 from .options import case_argument, overwrite_option, set_option, verbosity_options
@@ -32,9 +32,18 @@ def format_run_notes(result: Any) -> list[str]:
                                               if cuts else ""))
     for name, v in result.monitors.items():
         if len(v):
-            lines.append(f"{name.replace('_', ' ')} drift: max {float(np.max(np.abs(v))):.3g}, "
+            lines.append(f"{monitor_label(name)}: max {float(np.max(np.abs(v))):.3g}, "
                          f"at the end {float(abs(v[-1])):.3g} (case units)")
     return lines
+
+
+def monitor_label(name: str) -> str:
+    """What a per-step monitor measures: the state's constraint drift, the sensitivities'
+    constraint residual (J_Phi grad q + dPhi/dx), or the scale that residual is read against."""
+    words = name.replace("_", " ")
+    if name == "sensitivity_constraint_scale":
+        return f"{words} (max |J_Phi grad q|)"
+    return f"{words} residual" if name.startswith("sensitivity_constraint_") else f"{words} drift"
 
 
 def format_summary(result: Any, design_names: tuple[str, ...]) -> str:
@@ -103,6 +112,8 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
              no_sensitivities: bool, plots: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
     check_output_path(output, overwrite)     # before the run, not after it
+    if plots:
+        check_output_folder(plots, [Path(plots) / f"{Path(output).stem}.png"], overwrite, option="--plots")
     case = load_case(case_file, overrides)
     log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",
              case.name, case.plan.n_steps, case.plan.dt, len(case.design), len(case.response_names),

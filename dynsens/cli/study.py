@@ -8,7 +8,9 @@ import click
 import numpy as np
 
 from ..case.load import load_case
+from ..io.paths import check_output_folder
 from ..study import format_summary, plot_study, read_study, run_study
+from ..study.plots import study_plot_files
 from .main import cli
 from .options import case_argument, overwrite_option, scheduler_option, seed_option, set_option, workers_option
 
@@ -39,6 +41,8 @@ def study(case_file: str, output: str, sample: str | None, gradients: bool, seed
     """
     case = load_case(case_file, overrides)
     names = case.design_names
+    if plots:       # before the run, not after it
+        check_output_folder(plots, study_plot_files(plots), overwrite or resume, option="--plots")
 
     def on_row(row: dict[str, Any], done: int, total: int) -> None:
         x = ", ".join(f"{n}={v:.6g}" for n, v in zip(names, row["x"]))

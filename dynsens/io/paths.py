@@ -58,6 +58,29 @@ def _name_max(folder: Path) -> int:
         return 255
 
 
+#: bytes that atomic_path's temporary name ".NAME.XXXXXXXX.tmp" adds to a file name
+_TEMPORARY_EXTRA = len(".") + len(".") + 8 + len(".tmp")
+
+
+def _check_lengths(path: Path, option: str) -> None:
+    """Every part of ``path`` and the whole of it within the file system's limits (checked
+    before anything looks the path up, which would fail with a traceback)."""
+    root = Path("/") if path.is_absolute() else Path(".")
+    name_max = _name_max(root)
+    for part in path.parts:
+        if len(os.fsencode(part)) > name_max:
+            raise OutputPathError(f"{option}: expected folder and file names of at most {name_max} bytes, "
+                                  f"found a name of {len(os.fsencode(part))} bytes in {str(path)[:80]}...")
+    try:
+        path_max = int(os.pathconf(root, "PC_PATH_MAX"))
+    except (OSError, ValueError, AttributeError):
+        path_max = 4096
+    whole = len(os.fsencode(os.path.abspath(path))) + _TEMPORARY_EXTRA
+    if whole >= path_max:
+        raise OutputPathError(f"{option}: expected a path of fewer than {path_max - _TEMPORARY_EXTRA} bytes "
+                              f"(the file system's limit), found {whole - _TEMPORARY_EXTRA} bytes")
+
+
 def check_output_path(path: str | Path, overwrite: bool = False, *, option: str = "-o/--output") -> Path:
     """Raise unless ``path`` can be written as a file: not a folder, legal name, its folder a
     folder (created later if missing) that this user may write, not existing unless
@@ -65,11 +88,14 @@ def check_output_path(path: str | Path, overwrite: bool = False, *, option: str 
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
         raise OutputPathError(f"{option}: expected a file name, found {str(path)!r}")
+    _check_lengths(p, option)
     if p.is_dir():
         raise OutputPathError(f"{option}: expected a file, found the folder {p}")
-    if len(os.fsencode(p.name)) > _name_max(_existing_ancestor(p.parent)):
-        raise OutputPathError(f"{option}: expected a file name of at most {_name_max(_existing_ancestor(p.parent))} "
-                              f"bytes, found {len(os.fsencode(p.name))} bytes")
+    name_max = _name_max(_existing_ancestor(p.parent))
+    if len(os.fsencode(p.name)) + _TEMPORARY_EXTRA > name_max:
+        raise OutputPathError(f"{option}: expected a file name of at most {name_max - _TEMPORARY_EXTRA} bytes "
+                              f"(the file system allows at most {name_max} bytes, and the temporary file "
+                              f"written first adds {_TEMPORARY_EXTRA}), found {len(os.fsencode(p.name))} bytes")
     _check_folder(p.parent, option)
     if p.exists() and not overwrite:
         raise OutputExistsError(f"{p} exists: pass --overwrite to replace it")
@@ -81,6 +107,7 @@ def check_output_folder(folder: str | Path, files: Iterable[Path], overwrite: bo
     """Raise unless ``folder`` is (or can be made) a writable folder and none of ``files`` exists
     (unless ``overwrite``)."""
     d = Path(folder)
+    _check_lengths(d, option)
     if d.exists() and not d.is_dir():
         raise OutputPathError(f"{option}: expected a folder, found the file {d}")
     _check_folder(d, option)
@@ -104,6 +131,32 @@ def _check_folder(folder: Path, option: str) -> None:
         raise OutputPathError(f"{option}: expected {folder} to be a folder, but {anc} is a file")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise OutputPathError(f"{option}: expected a folder you may write, found {anc} read-only for you")
+    _try_writing(folder, option)
+
+
+def _try_writing(folder: Path, option: str) -> None:
+    """Make the missing part of ``folder`` and an unnamed file in it, then remove what was made:
+    the file system's own answer (a read-only mount, /proc, a full quota), which permission
+    bits do not give (and never for root)."""
+    missing = []
+    d = folder if str(folder) else Path(".")
+    while not d.exists() and d != d.parent:
+        missing.append(d)
+        d = d.parent
+    made: list[Path] = []
+    try:
+        for m in reversed(missing):
+            m.mkdir()
+            made.append(m)
+        with tempfile.TemporaryFile(dir=folder if str(folder) else "."):
+            pass
+    except OSError as exc:
+        raise OutputPathError(f"{option}: expected a folder that can be created and written, found "
+                              f"{folder} refused ({exc.strerror or exc})") from None
+    finally:
+        for m in reversed(made):
+            with contextlib.suppress(OSError):
+                m.rmdir()
 
 
 @contextlib.contextmanager

@@ -40,6 +40,8 @@ from ._keys import check_keys, did_you_mean
 from .parameters import ParameterTable
 
 SHAPES = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"), "properties": ("A", "I", "c")}
+#: shapes with a wall t that must leave a hole (2·t below every outer width)
+HOLLOW = ("tube", "box")
 MASS_KINDS = ("lumped", "consistent")
 BEAM_KEYS = allowed("structural.beam")
 
@@ -312,5 +314,9 @@ def parse_beam(el: dict, ep: str, name: str, beams: BeamSet, table: ParameterTab
     beams.E.append(table.add(el.get("E"), f"{ep}.E", problems, positive=True))
     beams.rho.append(table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
     beams.shape.append(shape)
-    beams.dims.append([table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed])
+    dims = [table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed]
+    beams.dims.append(dims)
+    if shape in HOLLOW:
+        table.require_wall(dims[needed.index("t")], {k: i for k, i in zip(needed, dims) if k != "t"},
+                           f"{ep}.section.t")
     beams.consistent.append(mass == "consistent")

@@ -42,8 +42,9 @@ import numpy as np
 from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .parameters import ParameterTable
+from .beams import HOLLOW
 from .beams3d_corot import element_forces, local_deformations, local_forces
+from .parameters import ParameterTable
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),
            "properties": ("A", "Iy", "Iz", "J", "cy", "cz")}
@@ -336,7 +337,11 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
     beams.G.append(table.add(el.get("G"), f"{ep}.G", problems, positive=True))
     beams.rho.append(table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
     beams.shape.append(shape)
-    beams.dims.append([table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed])
+    dims = [table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed]
+    beams.dims.append(dims)
+    if shape in HOLLOW:
+        table.require_wall(dims[needed.index("t")], {k: i for k, i in zip(needed, dims) if k != "t"},
+                           f"{ep}.section.t")
     beams.consistent.append(mass == "consistent")
     beams.corot.append(kinematics == "corotational")
 

@@ -35,6 +35,10 @@ class ParameterTable:
         self._paths: list[str] = []
         self._rules: list[tuple[int, str, str]] = []
         self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
+        # hollow sections whose wall must leave a hole: (wall index, {width name: index}, path)
+        self._walls: list[tuple[int, dict[str, int], str]] = []
+        # symmetric matrices that must be positive definite: (index matrix, path, what)
+        self._definite: list[tuple[tuple[tuple[int, ...], ...], str, str]] = []
 
     def __len__(self) -> int:
         return len(self._constants)
@@ -94,6 +98,18 @@ class ParameterTable:
         if all(i >= 0 for i in indices):
             self._nonzero.append((tuple(indices), path, what))
 
+    def require_wall(self, wall: int, widths: Mapping[str, int], path: str) -> None:
+        """A hollow section's wall thickness (entry ``wall``) must leave a hole at every design:
+        2·t < each outer width in ``widths`` (name -> entry, e.g. {"D": i} for a tube)."""
+        if wall >= 0 and all(i >= 0 for i in widths.values()):
+            self._walls.append((wall, dict(widths), path))
+
+    def require_positive_definite(self, matrix: Sequence[Sequence[int]], path: str, what: str) -> None:
+        """The symmetric matrix of entries ``matrix`` (an index per row and column, e.g. an
+        inertia tensor) must be positive definite at every design."""
+        if all(i >= 0 for row in matrix for i in row):
+            self._definite.append((tuple(tuple(row) for row in matrix), path, what))
+
     def check(self, x: Array) -> list[tuple[str, str]]:
         """(YAML path, problem) for every entry that has no finite value at the real design ``x``
         or breaks its range rule (> 0, >= 0, a vector not zero); empty when all hold."""
@@ -135,6 +151,22 @@ class ParameterTable:
         for idx, path, what in self._nonzero:
             if not bad.intersection(idx) and not np.any(values[list(idx)]):
                 out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
+        for matrix, path, what in self._definite:
+            if not bad.intersection(i for row in matrix for i in row):
+                A = values[np.array(matrix)]
+                lowest = float(np.linalg.eigvalsh(A)[0])
+                if lowest <= 0:
+                    out.append((path, f"expected a positive definite {what}, found {A.tolist()} "
+                                      f"(lowest eigenvalue {lowest:.6g})"))
+        for wall, widths, path in self._walls:
+            if bad.intersection([wall, *widths.values()]):
+                continue
+            t = values[wall]
+            thick = {n: values[i] for n, i in widths.items() if 2 * t > values[i]}
+            if thick:
+                found = ", ".join(f"{n} = {v:.6g}" for n, v in thick.items())
+                out.append((path, f"expected a wall t <= {' and '.join(f'{n}/2' for n in widths)} "
+                                  f"(a section that exists), found t = {t:.6g} with {found}"))
         return out
 
     def depends_on_design(self, index: int) -> bool:

@@ -140,7 +140,13 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             if not isinstance(pair, list) or len(pair) not in (1, 2):
                 problems.add(f"{ep}.dofs", f"expected [dof] or [dof_a, dof_b|ground], found {pair!r}")
                 continue
+            n_known = len(problems.problems)
             ids = [dof(d, f"{ep}.dofs") for d in pair] + ([n] if len(pair) == 1 else [])
+            if ids[0] == ids[1] and len(problems.problems) == n_known:
+                problems.add(f"{ep}.dofs", f"expected a {kind} between two different DOFs (or a DOF and ground), "
+                                           f"found {pair!r}: " + ("it would act on ground (or fixed DOFs) only"
+                                                                  if ids[0] == n else "both ends are one DOF"))
+                continue
             if kind == "spring":
                 higher = {}
                 for key in ("k2", "k3"):

@@ -92,6 +92,7 @@ class StructuralOutputs:
                          f"unknown kind {kind!r}{did_you_mean(kind, kinds)} (known: {', '.join(kinds)})")
             return None
         bars, springs, beams, frames = [], [], [], []
+        refused: dict[str, list[str]] = {}       # one problem per kind of element, naming them all
         for nm in names:
             if nm in self.bar_names:
                 bars.append(self.bar_names.index(nm))
@@ -100,14 +101,16 @@ class StructuralOutputs:
             elif nm in self.frames.names and kind in ("force", "stress"):
                 frames.append(self.frames.names.index(nm))
             elif nm in self.beams.names or nm in self.frames.names:
-                problems.add(f"{path}.kind", f"beams report 'force' (N, M1, M2) and 'stress' (extreme fibres), "
-                                             f"not {kind!r}")
+                refused.setdefault("beams report 'force' (N, M1, M2) and 'stress' (extreme fibres)", []).append(nm)
             elif nm in self.spring_names and kind == "force":
                 springs.append(self.spring_names.index(nm))
             elif nm in self.spring_names:
-                problems.add(f"{path}.kind", f"springs report only 'force', not {kind!r}")
+                refused.setdefault("springs report only 'force'", []).append(nm)
             else:
                 problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, all_names)}")
+        for what, which in refused.items():
+            problems.add(f"{path}.kind", f"{what}, not {kind!r}: {', '.join(which[:5])}"
+                                         f"{f' and {len(which) - 5} more' if len(which) > 5 else ''}")
         if len(bars) + len(springs) + len(beams) + len(frames) != len(names):
             return None
         lacking = [self.bar_names[b] for b in bars if self.bar_I[b] < 0]

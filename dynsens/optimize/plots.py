@@ -22,7 +22,7 @@ from .problem import _fmt
 def plot_files(path: str | Path, outdir: str | Path) -> list[Path]:
     """The files :func:`plot_optimization` may write for the optimization file ``path``."""
     stem = Path(path).stem
-    return [Path(outdir) / f"{stem}_history.png", Path(outdir) / f"{stem}_optimum.png"]
+    return [Path(outdir) / f"{stem}_{kind}.png" for kind in ("history", "design", "constraints", "optimum")]
 
 
 def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,

@@ -123,7 +123,7 @@ def optimize_case(case: Case, output: str | Path, *, starts: int | None = None, 
     path = Path(output)
     maxiter = int(maxiter if maxiter is not None else spec.maxiter)
     ftol = float(ftol if ftol is not None else spec.ftol)
-    if maxiter < 1 or ftol <= 0:
+    if maxiter < 1 or not 0 < ftol < np.inf:
         raise OptimizationError(f"expected maxiter >= 1 and ftol > 0, found {maxiter} and {ftol:g}")
     outcomes: dict[int, StartOutcome] = {}
     jobs: list[StartJob] = []

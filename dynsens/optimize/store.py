@@ -265,7 +265,20 @@ def validate_resume_file(path: Path, m: int) -> None:
                     if x_last.shape != (m,) or not np.all(np.isfinite(x_last)):
                         raise damaged(f"the last design of start {k} is {x_last.tolist()}, expected {m} finite "
                                       "values")
+            _read_everything(f)
     except OptimizationError:
         raise
-    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, IndexError, RuntimeError) as exc:
         raise damaged(f"reading it failed ({type(exc).__name__}: {exc})") from None
+
+
+def _read_everything(f: h5py.File) -> None:
+    """Read every attribute and dataset of ``f``: garbage anywhere (a torn tail) shows here as an
+    error of the HDF5 library, not later while the resumed run writes into the file."""
+    def read(_: str, obj: Any) -> None:
+        for key in obj.attrs:
+            obj.attrs[key]
+        if isinstance(obj, h5py.Dataset):
+            obj[()]
+    read("", f)
+    f.visititems(read)

@@ -125,6 +125,11 @@ def _plot_pairs(table: StudyTable, path: Path) -> None:
     plt.close(fig)
 
 
+def study_plot_files(outdir: str | Path) -> list[Path]:
+    """The files :func:`plot_study` may write in ``outdir``."""
+    return [Path(outdir) / f"study_{kind}.png" for kind in ("responses", "sensitivity", "pairs")]
+
+
 def plot_study(table: StudyTable, outdir: str | Path) -> list[Path]:
     """``study_responses.png`` (every response over every variable; short lines show the local
     gradient at each design), ``study_sensitivity.png`` and, for two or more design

@@ -1,7 +1,10 @@
 """Designs of a study: ``lhs:N``, ``sobol:N``, ``grid:AxBx…`` or a CSV file, in the case's bounds."""
 from __future__ import annotations
 
+import codecs
 import csv
+import io
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +15,16 @@ from ..errors import DynsensError
 
 class StudyError(DynsensError, ValueError):
     """Bad study input: sample specification, CSV file, inconsistent ``--resume``."""
+
+
+#: most designs a study plans: each is a simulation, and all are held in memory and in the file
+MAX_DESIGNS = 10_000_000
+
+
+def _within_reason(spec: str, n: int) -> None:
+    if n > MAX_DESIGNS:
+        raise StudyError(f"--sample {spec}: expected at most {MAX_DESIGNS:,} designs (each is a "
+                         f"simulation, all held in memory), found {n:,}")
 
 
 def _finite_bounds(case: Case, spec: str) -> tuple[np.ndarray, np.ndarray]:
@@ -42,6 +55,7 @@ def _grid(case: Case, spec: str, body: str) -> np.ndarray:
     if len(counts) != m:
         raise StudyError(f"--sample {spec}: expected {m} counts (one per design variable: "
                          f"{', '.join(case.design_names)}) or one for all, found {len(counts)}")
+    _within_reason(spec, math.prod(counts))
     lo, up = _finite_bounds(case, spec)
     # a count of 1 keeps the variable at the case's value
     axes = [np.array([x0]) if n == 1 else np.linspace(a, b, n)
@@ -55,10 +69,18 @@ def read_designs_csv(case: Case, path: str | Path) -> np.ndarray:
     path = Path(path)
     names = case.design_names
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
+        data = path.read_bytes()
     except OSError as exc:
         raise StudyError(f"--sample {path}: cannot read the file ({exc.strerror})") from None
+    # UTF-8, or UTF-16 as spreadsheets save it (with a byte-order mark); other encodings refused
+    encoding = "utf-16" if data[:2] in (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE) else "utf-8-sig"
+    try:
+        text = data.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise StudyError(f"{path}: expected a UTF-8 text file (or UTF-16 with a byte-order mark), found "
+                         f"{data[exc.start:exc.start + 1]!r} at byte {exc.start}, not {exc.encoding}; "
+                         "save the file as UTF-8 CSV") from None
+    rows = list(csv.reader(io.StringIO(text, newline="")))
     rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
         raise StudyError(f"{path}: expected a header of design-variable names and one row per design, "
@@ -106,6 +128,7 @@ def sample_designs(case: Case, spec: str, seed: int | None) -> np.ndarray:
     if sep and kind in ("lhs", "sobol"):
         from scipy.stats import qmc
         n = _count(spec, body.strip())
+        _within_reason(spec, n)
         lo, up = _finite_bounds(case, spec)
         d = len(lo)
         if kind == "lhs":

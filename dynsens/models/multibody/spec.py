@@ -84,6 +84,10 @@ class Reader:
                                      for i, v in enumerate(inertia))
                 if len(inertia) == 3:
                     body.inertia += tuple(self.num(0.0, f"{bp}.inertia") for _ in range(3))
+                else:       # products may make the tensor indefinite: a body that cannot exist
+                    xx, yy, zz, xy, xz, yz = body.inertia
+                    self.table.require_positive_definite(((xx, xy, xz), (xy, yy, yz), (xz, yz, zz)),
+                                                         f"{bp}.inertia", "inertia tensor")
             else:
                 self.problems.add(f"{bp}.inertia", "expected [Ixx, Iyy, Izz] or [Ixx, Iyy, Izz, Ixy, "
                                                    f"Ixz, Iyz] about the COM in body axes, found {inertia!r}")
