@@ -172,8 +172,6 @@ def _set(raw: dict, fam: int, **kw) -> dict:
      ("not a numeric entry", "section.h")),
     (lambda r: _set(r, 2, assign={"section.X": "h"}), "design.families[2].assign.section.X",
      ("not a numeric entry", "section.b")),
-    (lambda r: _set(r, 2, assign={"area": "h"}), "design.families[2].assign.area",
-     ("unknown key of a beam",)),
     (lambda r: _set(r, 2, assign={"section.h": ["h"]}), "design.families[2].assign.section.h",
      ("expected an expression of the family name",)),
 ])
