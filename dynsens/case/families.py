@@ -19,7 +19,9 @@
 Expansion happens on the raw mapping before the model is built: each selected element's
 ``assign`` keys receive the expression with the family name replaced by the member's name, and
 the members join the design variables after the case's own ``variables`` (in element order).
-``assign`` may set only the numeric entries (expressions) of the selected element type, over a
+``assign`` may set only the numeric entries (expressions) of the selected element type, a beam's
+section dimensions and properties as dotted keys (``section.D``, ``section.h``, ``section.Iy``;
+those of the member's shape, 2D or 3D), over a
 placeholder that must itself be a number or an expression; a problem the model or the start
 design finds in an assigned entry is reported once, at the family's ``assign`` key, naming the
 members concerned (:func:`fold_assigned_problems`).
