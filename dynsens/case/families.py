@@ -19,10 +19,10 @@
 Expansion happens on the raw mapping before the model is built: each selected element's
 ``assign`` keys receive the expression with the family name replaced by the member's name, and
 the members join the design variables after the case's own ``variables`` (in element order).
-``assign`` may set only the numeric entries (expressions) of the selected element type, and
-those of its nested sections as ``section.KEY``: a beam's tube, box or rectangle dimensions and
-its section properties; a placeholder it replaces must
-itself be a number or an expression; a problem the model or the start
+``assign`` may set only the numeric entries (expressions) of the selected element type, a beam's
+section dimensions and properties as dotted keys (``section.D``, ``section.h``, ``section.Iy``;
+those of the member's shape, 2D or 3D), over a
+placeholder that must itself be a number or an expression; a problem the model or the start
 design finds in an assigned entry is reported once, at the family's ``assign`` key, naming the
 members concerned (:func:`fold_assigned_problems`).
 """
@@ -36,6 +36,8 @@ from ..case_keys import SECTIONS, allowed
 from ..errors import Problem, ProblemCollector
 from ..expressions import RESERVED_NAMES
 from ..models._keys import check_keys, did_you_mean
+from ..models.beams import SHAPES
+from ..models.beams3d import SHAPES3
 from .checks import reserved_message
 from .responses_spec import read_number
 
@@ -102,36 +104,36 @@ def fold_assigned_problems(pc: ProblemCollector, assigned: Assigned, start: int 
     pc.problems = out
 
 
-def numeric_entries(kind: Any) -> list[str] | None:
-    """The entries a family may assign in an element of type ``kind``: its numeric keys, and
-    ``SECTION.KEY`` for the numeric keys of its nested sections (a beam's ``section.D``); None for
-    an unknown type (reported where the type is read)."""
+def _numeric_keys(kind: Any) -> list[str] | None:
+    """The keys ``assign`` may set on an element of type ``kind``: its numeric entries
+    (``area``) and those of its sub-sections as dotted paths (``section.D``, ``section.Iy``);
+    None for an unknown type (reported by the model)."""
     section = SECTIONS.get(f"structural.{kind}")
     if section is None:
         return None
-    out = [k.name for k in section.keys if k.kind == "expr"]
+    out = []
     for k in section.keys:
-        if k.kind == "section" and isinstance(k.item, str) and k.item in SECTIONS:
+        if k.kind == "expr":
+            out.append(k.name)
+        elif k.kind == "section" and isinstance(k.item, str) and k.item in SECTIONS:
             out += [f"{k.name}.{sub.name}" for sub in SECTIONS[k.item].keys if sub.kind == "expr"]
     return out
 
 
 def _assignable(assign: Any, kind: Any, path: str, pc: ProblemCollector) -> dict[str, str]:
     """The ``assign`` entries as text, each checked once: a numeric entry (expression) of element
-    type ``kind`` (not its name, nodes or type; ``section.KEY`` inside its section) set to a
+    type ``kind`` (not its name, nodes or type), or of its section (``section.D``), set to a
     number or an expression."""
     if not isinstance(assign, dict) or not assign:
         pc.add(path, "expected a mapping element key -> expression of the family name")
         return {}
-    numeric = numeric_entries(kind)
+    numeric = _numeric_keys(kind)
     out = {}
     for key, expr in assign.items():
         if numeric is not None and key not in numeric:
-            head = str(key).split(".", 1)[0]
-            sections = {k.split(".", 1)[0] for k in numeric if "." in k}
-            what = "not a numeric entry" if head in allowed(f"structural.{kind}") and head not in sections \
-                else "unknown key"
-            pc.add(f"{path}.{key}", f"{what} of a {kind} element{did_you_mean(key, numeric)} "
+            head = str(key).split(".")[0]
+            what = "not a numeric entry" if head in allowed(f"structural.{kind}") else "unknown key"
+            pc.add(f"{path}.{key}", f"{what} of a {kind} element{did_you_mean(str(key), numeric)} "
                                     f"(assign sets one of: {', '.join(numeric)})")
         elif isinstance(expr, bool) or not isinstance(expr, (str, int, float)):
             pc.add(f"{path}.{key}", f"expected an expression of the family name, found {expr!r}")
@@ -140,16 +142,32 @@ def _assignable(assign: Any, kind: Any, path: str, pc: ProblemCollector) -> dict
     return out
 
 
-def _slot(el: dict, key: str, ep: str, family_path: str, pc: ProblemCollector) -> tuple[dict, str] | None:
-    """The mapping and key that ``key`` (``area``, or ``section.D``) names in element ``el``."""
+def _section_dimensions(kind: str, dim: Any, sec: dict) -> tuple[str, tuple[str, ...]] | None:
+    """The shape of a beam's section and the dimensions it takes (2D or 3D); None when the shape
+    is unknown (the model reports it)."""
+    if kind != "beam":
+        return None
+    shapes = SHAPES3 if dim == 3 else SHAPES
+    shape = sec.get("shape", "properties")
+    return (shape, shapes[shape]) if isinstance(shape, str) and shape in shapes else None
+
+
+def _target(el: dict, key: str, kind: str, dim: Any, ep: str) -> tuple[dict, str] | str:
+    """The mapping and key that ``assign``'s ``key`` sets on element ``el`` (the element itself,
+    or its section for ``section.D``), or why it cannot be set there (expected, found)."""
     if "." not in key:
         return el, key
     head, sub = key.split(".", 1)
-    inner = el.get(head)
-    if not isinstance(inner, dict):
-        pc.add(f"{ep}.{head}", f"expected a mapping in which {family_path}.assign sets {sub!r}, found {inner!r}")
-        return None
-    return inner, sub
+    sec = el.get(head)
+    if not isinstance(sec, dict):
+        return (f"expected {ep}.{head} to be a mapping with a shape whose dimension {sub} the family "
+                f"sizes, found {sec!r}")
+    dims = _section_dimensions(kind, dim, sec)
+    if dims is not None and sub not in dims[1]:
+        plane = "3D" if dim == 3 else "2D"
+        return (f"expected a dimension of the {dims[0]} section of a {plane} {kind} ({', '.join(dims[1])}) "
+                f"at {ep}.{head}, found {sub}")
+    return sec, sub
 
 
 def _numbers(spec: dict, keys: tuple[str, ...], path: str, pc: ProblemCollector) -> dict[str, float] | None:
@@ -197,6 +215,8 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
         else:
             check_keys(entry, f"{path}.members.{el_name}", _MEMBER_KEYS, pc)
     symbol = re.compile(rf"(?<![\w\]]){re.escape(name)}(?![\w\[])")
+    dim = model.get("dim", 2) if isinstance(model, dict) else 2
+    misfits: dict[str, list[tuple[str, str]]] = {}     # assign key -> (member, why) it cannot be set
     out = []
     for el_name, el in chosen:
         if not _MEMBER_NAME.match(el_name):
@@ -209,15 +229,16 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
         taken.add(member)
         ep = f"model.elements[{index[id(el)]}]"
         for key, text in assign.items():
-            slot = _slot(el, key, ep, path, pc)
-            if slot is None:
+            target = _target(el, key, kind, dim, ep)
+            if isinstance(target, str):
+                misfits.setdefault(key, []).append((member, target))
                 continue
-            target, sub = slot
-            old = target.get(sub)  # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
-            if sub in target and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
+            where_set, sub = target
+            old = where_set.get(sub)      # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
+            if sub in where_set and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
                 pc.add(f"{ep}.{key}", f"expected a number or an expression (a placeholder that "
                                       f"{path}.assign replaces), found {old!r}")
-            target[sub] = symbol.sub(member, text)
+            where_set[sub] = symbol.sub(member, text)
             assigned[f"{ep}.{key}"] = (f"{path}.assign.{key}", member)
         var = {"name": member, **shared}
         entry = overrides.get(el_name)
@@ -226,6 +247,11 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
             where = f"{path}.members.{el_name}"
             var.update(_numbers(entry, _MEMBER_KEYS, where, pc) or {})   # a problem: reported, shared kept
         out.append(_checked(var, where, pc))
+    for key, misses in misfits.items():       # one problem per assign key, not one per member
+        more = [m for m, _ in misses[1:]]
+        pc.add(f"{path}.assign.{key}", f"{misses[0][0]}: {misses[0][1]}"
+               + (f"; also for {len(more)} more member{'s' if len(more) > 1 else ''} "
+                  f"({', '.join(more[:5])}{', ...' if len(more) > 5 else ''})" if more else ""))
     return out
 
 

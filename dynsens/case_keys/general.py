@@ -59,8 +59,9 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _k("lower", "number", "lower bound shared by the members", default="-inf"),
         _k("upper", "number", "upper bound shared by the members", default="inf"),
         _k("scale", "number", "typical magnitude shared by the members", default="|value|, or 1"),
-        _req("assign", "map", "element key (a beam's section entries as section.KEY, e.g. section.D) -> "
-             "expression of the family name (NAME stands for NAME[element])",
+        _req("assign", "map", "numeric element key (area, E, ...; a beam's section dimension or property as "
+                                     "section.D, section.h, section.Iy, ...) -> expression of the family name "
+                                     "(NAME stands for NAME[element])",
              item="expr"),
         _k("members", "map", "element name -> its own start, bounds or scale", item="design.family.member"),
     )),
