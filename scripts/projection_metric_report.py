@@ -44,7 +44,7 @@ def reference_theta(t_end: float = T_END) -> float:
 
 def theta(q: np.ndarray) -> np.ndarray:
     """Pole angle θ (rad) from hanging down, unwrapped, from the pole's Euler parameters (rows of q)."""
-    return np.unwrap(2.0 * np.arctan2(q[:, 10], q[:, 7])) + 0.0
+    return np.unwrap(2.0 * np.arctan2(q[:, 13], q[:, 10]))
 
 
 def measure(res: Any, th_ref: float) -> dict[str, float]:
