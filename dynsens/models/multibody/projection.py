@@ -167,8 +167,9 @@ class Projection:
             t = self.t
             J = _jacobians(self.model, t, np.stack([self.projected.q, self.raw.q], axis=1), params)
             J0T = J.at(1).T
-            if self.settings.metric == "mass":
-                J0T = _metric(self.settings, self.raw.q[:, None], params).matrix(0, J.sparse is not None) @ J0T
+            W_inv = _metric(self.settings, self.raw.q[:, None], params)
+            if W_inv is not None:                  # M = J_Φ(q*) W⁻¹ J₀ᵀ in the mass metric
+                J0T = W_inv.matrix(0, J.sparse is not None) @ J0T
             self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J0T)), J)
         return self._newton[1]
 
