@@ -242,7 +242,7 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("beta", "number", "position-level coefficient (1/s)", default=0.0),
     )),
     "multibody.projection": Section("model.projection", "Projection of each accepted step's (q, q̇) onto "
-                                    "Φ = 0 and Φ̇ = 0 (closest point, plain 2-norm); the sensitivities are "
+                                    "Φ = 0 and Φ̇ = 0 (closest point in the chosen metric); the sensitivities are "
                                     "projected consistently.", (
         _k("enabled", "bool", "switch the projection on (writing the section switches it on)", default=True),
         _k("tol", "number", "bound on the last Newton correction, relative to 1 + ‖q‖", default=1e-13),
@@ -250,6 +250,9 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("mode", "enum", "output: the run continues from the solved (index-1) state and reports the "
                            "projected one; state: it continues from the projected state", default="output",
            values=("state", "output")),
+        _k("metric", "enum", "norm of the closest point: euclidean (plain 2-norm of q, q̇) or mass (the mass "
+                             "matrix's norm, keeps momentum when masses differ widely; BENCHMARKS.md)",
+           default="euclidean", values=("euclidean", "mass")),
     )),
     "multibody.quantity": Section("quantity (multibody)", "Exactly one of joint, body, marker, element, with `kind`.", (
         _k("joint", "name", "joint: reaction_force | reaction_force_norm | reaction_moment | "

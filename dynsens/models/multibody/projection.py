@@ -50,6 +50,7 @@ from . import compiled_linearization as clin
 from .assembly import jacobian_rows
 from .kernel_compiled import CompiledKin
 from .projection_factor import _Factored
+from .projection_metric import InverseMetric, inverse_metric
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
@@ -71,11 +72,14 @@ class ProjectionSettings:
     max_iterations : iterations before the run stops with a ModelError.
     mode : ``output`` (the run continues from the solved state; what it reports is projected)
         or ``state`` (the run continues from the projected state).
+    metric : ``euclidean`` (nearest state in the 2-norm) or ``mass`` (in the norm of the mass
+        matrix; :mod:`.projection_metric`).
     """
 
     tol: float = 1e-13
     max_iterations: int = 12
     mode: str = "output"
+    metric: str = "euclidean"
 
 
 @dataclass
@@ -162,7 +166,11 @@ class Projection:
         if self._newton is None or self._newton[0] is not params:
             t = self.t
             J = _jacobians(self.model, t, np.stack([self.projected.q, self.raw.q], axis=1), params)
-            self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J.at(1).T)), J)
+            J0T = J.at(1).T
+            W_inv = _metric(self.settings, self.raw.q[:, None], params)
+            if W_inv is not None:                  # M = J_Φ(q*) W⁻¹ J₀ᵀ in the mass metric
+                J0T = W_inv.matrix(0, J.sparse is not None) @ J0T
+            self._newton = (params, (*self.multipliers, _Factored(J.at(0) @ J0T)), J)
         return self._newton[1]
 
     def jacobians(self, params: Any) -> tuple[Any, Any]:
@@ -208,19 +216,25 @@ class _Jacobians:
         """J_Φ at configuration b."""
         return self.dense[b] if self.dense is not None else self.sparse[b]   # type: ignore[index]
 
-    def normal(self) -> "_Factored":
-        """J_b J_bᵀ of every configuration b, factorized."""
+    def normal(self, W_inv: InverseMetric | None = None) -> "_Factored":
+        """J_b W_b⁻¹ J_bᵀ of every configuration b (W = I without ``W_inv``), factorized."""
+        if W_inv is None:
+            if self.dense is not None:
+                return _Factored(self.dense @ self.dense.transpose(0, 2, 1))
+            return _Factored([J @ J.T for J in self.sparse])     # type: ignore[union-attr]
         if self.dense is not None:
-            return _Factored(self.dense @ self.dense.transpose(0, 2, 1))
-        return _Factored([J @ J.T for J in self.sparse])     # type: ignore[union-attr]
+            return _Factored(self.dense @ W_inv.blocks_dense() @ self.dense.transpose(0, 2, 1))
+        return _Factored([J @ W_inv.matrix(b, True) @ J.T for b, J in enumerate(self.sparse)])  # type: ignore[arg-type]
 
-    def transpose_times(self, nu: Array) -> Array:
-        """(n_q, k): column b is J_bᵀ ν_b for the multipliers nu (k or 1, n_eq, 1; one set of
-        multipliers serves every configuration)."""
+    def transpose_times(self, nu: Array, W_inv: InverseMetric | None = None) -> Array:
+        """(n_q, k): column b is W_b⁻¹ J_bᵀ ν_b (W = I without ``W_inv``) for the multipliers nu
+        (k or 1, n_eq, 1; one set of multipliers serves every configuration)."""
         if self.dense is not None:
-            return (self.dense.transpose(0, 2, 1) @ nu)[:, :, 0].T
-        last = nu.shape[0] - 1
-        return np.stack([J.T @ nu[min(b, last), :, 0] for b, J in enumerate(self.sparse)], axis=1)  # type: ignore[arg-type]
+            out = (self.dense.transpose(0, 2, 1) @ nu)[:, :, 0].T
+        else:
+            last = nu.shape[0] - 1
+            out = np.stack([J.T @ nu[min(b, last), :, 0] for b, J in enumerate(self.sparse)], axis=1)  # type: ignore[arg-type]
+        return out if W_inv is None else W_inv.times(out)
 
 
 def _jacobians(model: "MultibodyModel", t: float, Q: Array, params: Any) -> _Jacobians:
@@ -257,6 +271,11 @@ def level_rows(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: A
         cl.prod_eq, eq_w, norm_w, cl.norm_eq, cl.norm_body, model.traits.n_lam))
 
 
+def _metric(settings: "ProjectionSettings", Q: Array, params: Any) -> InverseMetric | None:
+    """W⁻¹ at the k solved configurations (columns of Q) for the mass metric; None (W = I) otherwise."""
+    return inverse_metric(Q, params) if settings.metric == "mass" else None
+
+
 def _levels(model: "MultibodyModel", t: float, Q: Array, QD: Array, params: Any) -> Array:
     """(Φ, Φ̇, Φ̈) (k, n_eq, 3) at the k states (columns of Q, QD (n_q, k)), q̈ = 0."""
     zeros = np.zeros(0)
@@ -279,14 +298,15 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
     Newton iterations with its exact matrix M = J_Φ(q*) J₀ᵀ — one for complex steps of that state
     (it gives the imaginary parts exactly), two for a real perturbation δ (converged to O(δ⁴))."""
     J0 = _jacobians(model, t, Q, params)                                 # k times (n_eq, n_q)
+    W_inv = _metric(settings, Q, params)
     if start is None:
-        A = J0.normal()
+        A = J0.normal(W_inv)
         nu = np.zeros((J0.k, J0.n_eq, 1), J0.dtype)
         kappa = np.zeros_like(nu)
     else:
         nu, kappa, A = start
     complex_parts = np.iscomplexobj(Q) or np.iscomplexobj(QD) or np.iscomplexobj(params.pv)
-    Qs, QDs = Q + J0.transpose_times(nu), QD - J0.transpose_times(kappa)
+    Qs, QDs = Q + J0.transpose_times(nu, W_inv), QD - J0.transpose_times(kappa, W_inv)
     for level in (0, 1):                       # positions, then velocities at the projected positions
         done = 0                               # iterations until the real parts converged
         for it in range(settings.max_iterations if start is None else 1 if complex_parts else 2):
@@ -294,11 +314,11 @@ def _project_columns(model: "MultibodyModel", settings: "ProjectionSettings", t:
             d = A.solve(res)
             if level == 0:
                 nu = nu - d
-                new = Q + J0.transpose_times(nu)
+                new = Q + J0.transpose_times(nu, W_inv)
                 step, Qs = new - Qs, new
             else:
                 kappa = kappa + d
-                new = QD - J0.transpose_times(kappa)
+                new = QD - J0.transpose_times(kappa, W_inv)
                 step, QDs = new - QDs, new
             if start is not None:
                 done = it + 1
@@ -367,9 +387,12 @@ def read_projection(spec: Any, path: str, problems: ProblemCollector) -> Project
     its = spec.get("max_iterations", ProjectionSettings.max_iterations)
     if isinstance(its, bool) or not isinstance(its, int) or its < 2:
         problems.add(f"{path}.max_iterations", f"expected an integer >= 2, found {its!r}")
+    metric = spec.get("metric", ProjectionSettings.metric)
+    if metric not in ("mass", "euclidean"):
+        problems.add(f"{path}.metric", f"expected mass or euclidean, found {metric!r}")
     if enabled is not True or len(problems.problems) > n0:
         return None
-    return ProjectionSettings(float(tol), int(its), str(mode))
+    return ProjectionSettings(float(tol), int(its), str(mode), str(metric))
 
 
 __all__ = ["Projection", "ProjectionMap", "ProjectionSettings", "project", "read_projection",

@@ -53,7 +53,11 @@ J_TIMES_W_Q = _weights([[0, 0, 0], [1, 0, 0], [0, 0, 0]], [0, 1, 0])
 
 
 def _pieces(proj: "Projection", params: Any) -> tuple[Any, Any, Any, Any, Array, Array] | None:
-    """(M factorized, J*, J₀, Φ̇_q, ν, κ) of the converged projection; None without compiled kinematics."""
+    """(M factorized, J*, J₀, Φ̇_q, ν, κ) of the converged projection; None without compiled kinematics
+    or with the mass metric (its W(q) adds terms these equations leave out: the projection's own
+    complex step serves it)."""
+    if proj.settings.metric != "euclidean":
+        return None
     q_star, qd_star = proj.projected.q[:, None], proj.projected.qd[:, None]
     dphi = level_rows(proj.model, proj.t, q_star, qd_star, params, *PHI_DOT_Q)
     if dphi is None:

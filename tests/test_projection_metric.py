@@ -1,0 +1,82 @@
+"""The projection in the metric of the mass matrix (``model.projection.metric: mass``,
+dynsens/models/multibody/projection_metric.py) on the light cart pole: cases/cart_pole.yaml with
+a 1e-6 kg cart and no spring (scripts/projection_metric_report.py), whose horizontal momentum
+P = M ẋ_cart + m ẋ_pole is a constant of the motion.
+
+* The mass-weighted projection moves no momentum between the cart and the pole: P stays to
+  round-off (measured 7e-17 kg m/s over 10 s at rtol 1e-8; the Euclidean projection drifts by
+  2e-6, BENCHMARKS.md).  θ(10) against the minimal-coordinate reference (DOP853 at rtol 1e-12)
+  at rtol 1e-8: measured 2.8e-3 rad (Euclidean 3.4e-3), bound 5e-3.  The 1e-3 of issue 38 is
+  not reached at rtol 1e-8: the remaining error is the time integration's, not the projection's.
+* Its derivative: direct and adjoint gradients of a short run (mode state, the projection fed
+  back) against complex step of the whole run (1e-8), and direct against adjoint (1e-11).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import dynsens
+import scripts_path  # noqa: F401  (puts scripts/ on the path)
+from helpers import complex_step_gradients, rel_err
+from projection_metric_report import CASE, measure, overrides, reference_theta
+
+
+def test_mass_metric_keeps_the_momentum_and_theta_of_the_light_cart_pole():
+    res = dynsens.run_case(dynsens.load_case(CASE, overrides("mass", 1e-8)), sensitivities=False)
+    assert res.status == "completed"
+    m = measure(res, reference_theta())
+    assert m["drift"] < 1e-12, m
+    assert m["theta_error"] < 5e-3, m
+
+
+def test_mass_metric_moves_the_light_cart_less_than_the_euclidean_projection():
+    """One projection of the same drifted state: in the mass metric the momentum is kept."""
+    from dynsens.models.multibody.projection import project
+    out = {}
+    for metric in ("euclidean", "mass"):
+        case = dynsens.load_case(CASE, overrides(metric, 1e-8))
+        model = case.model
+        params = model.parameters(case.x0)
+        q, qd, _ = model.initial_state(params)
+        from dynsens.models.base import StepState
+        z = np.zeros(0)
+        s = StepState(q + 1e-4 * np.sin(np.arange(q.size)), qd + 1e-3 * np.cos(np.arange(q.size)),
+                      np.zeros_like(q), z, z, z)
+        _, proj = project(model, model.projection, 0.0, s, params)
+        P = lambda st: 1e-6 * st.qd[0] + 0.05 * st.qd[7]        # noqa: E731
+        out[metric] = abs(P(proj.projected) - P(s))
+    assert out["mass"] < 1e-15 and out["euclidean"] > 1e-6, out
+
+
+SHORT = ["integrator.adaptive=null", "integrator.dt=2e-3", "integrator.t_end=0.1",
+         "model.projection.mode=state", "model.projection.metric=mass",
+         "design.variables[2].lower=1e-7", "design.variables[2].value=1e-3"]
+
+
+@pytest.fixture(scope="module")
+def short_gradients():
+    case = dynsens.load_case(CASE, SHORT)
+    grads = {}
+    for method in ("direct", "adjoint"):
+        c = dynsens.load_case(CASE, SHORT)
+        c.plan = replace(c.plan, method=method)
+        res = dynsens.run_case(c)
+        assert res.method == method
+        grads[method] = {k: r.gradient for k, r in res.responses.items()}
+    return grads, complex_step_gradients(case)
+
+
+def test_mass_metric_gradients_against_complex_step(short_gradients):
+    grads, cs = short_gradients
+    for method in ("direct", "adjoint"):
+        for name, ref in cs.items():
+            assert rel_err(grads[method][name], ref) < 1e-8, (method, name, grads[method][name], ref)
+
+
+def test_mass_metric_direct_equals_adjoint(short_gradients):
+    grads, _ = short_gradients
+    for name, g in grads["direct"].items():
+        assert rel_err(grads["adjoint"][name], g) < 1e-11, name
