@@ -69,6 +69,18 @@ def _flag(name: str, value: Any) -> bool | None:
     raise ValueError(f"{name}: expected True, False or None, found {value!r}")
 
 
+def _default_workers(workers: int | None) -> int | None:
+    """``workers`` as given; when left to its default in a plain script (``python script.py``,
+    whose ``__main__`` the ``spawn`` workers re-import, so an unguarded call would start
+    processes while importing), one worker.  Pass ``workers`` explicitly (under an
+    ``if __name__ == "__main__":`` guard) for parallel runs from a script."""
+    import sys
+    main = sys.modules.get("__main__")
+    plain_script = main is not None and getattr(main, "__spec__", None) is None \
+        and hasattr(main, "__file__")
+    return 1 if workers is None and plain_script else workers
+
+
 def as_case(case: CaseLike, overrides: Mapping[str, Any] | None = None) -> Case:
     """A validated :class:`Case` from a case, a YAML path or a mapping, with ``overrides`` applied.
 
@@ -255,8 +267,8 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
     try:
         res, verification = _optimize_verified(c, path, verify=verify, starts=starts, seed=seed, x0=x0,
-                                               maxiter=maxiter, ftol=ftol, workers=workers, scheduler=scheduler,
-                                               resume=resume, overwrite=overwrite)
+                                               maxiter=maxiter, ftol=ftol, workers=_default_workers(workers),
+                                               scheduler=scheduler, resume=resume, overwrite=overwrite)
         best = res.best_outcome
         hist = _read_history(path, best.index)
     finally:
@@ -296,4 +308,4 @@ def check_gradients(case: CaseLike, steps: Sequence[float] = (1e-3, 1e-4, 1e-5, 
     """
     c = as_case(case, overrides)
     return _check_gradients(c, list(steps), scheme, x=None if x is None else np.asarray(x, dtype=float),
-                            workers=workers)
+                            workers=_default_workers(workers))

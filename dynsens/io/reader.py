@@ -128,6 +128,8 @@ class Result:
             dim = STATE_DIMS[fld]
             if dim == "dof" and len(self.dof_labels) == v.shape[1]:
                 coords["dof"] = self.dof_labels
+            else:   # multipliers and pressures are numbered in the file: label them by index
+                coords.setdefault(dim, list(range(v.shape[1])))
             data[f"state_{fld}"] = (("time", dim), v, {})
         attrs = {k: (v if not isinstance(v, bytes) else v.decode()) for k, v in self.attrs.items()
                  if k in ("status", "message", "case_source", "dynsens_version", "created")}
