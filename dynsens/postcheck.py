@@ -45,6 +45,11 @@ class MemberCheck:
         i = int(np.nanargmax(table[kind]))
         return self.names[i], kind, float(table[kind][i])
 
+    def count_above(self, limit: float) -> int:
+        """How many members have a ratio of any kind above ``limit``."""
+        stacked = np.vstack([self.tension, self.compression, self.buckling])
+        return int(np.sum(np.nanmax(np.where(np.isfinite(stacked), stacked, -np.inf), axis=0) > limit))
+
     def passes(self, tol: float = 1e-3) -> bool:
         """Every ratio <= 1 + tol."""
         return self.largest <= 1.0 + tol

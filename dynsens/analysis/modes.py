@@ -144,10 +144,11 @@ def _design_derivatives(case: Subject, x: np.ndarray, t: float, q: np.ndarray, d
     """Per design variable j, the total derivatives of ``matrices(params, t, q)``: by complex step,
     or (``central``) by central differences of relative step ``FD_STEP``."""
     model = case.model
+    size = np.where(x != 0, np.abs(x), case.scale)    # the steps are relative to these
     out = []
     for j in range(x.size):
         if central:
-            h = FD_STEP * (abs(x[j]) if x[j] != 0 else case.scale[j])
+            h = FD_STEP * size[j]
             sides = []
             for sign in (1.0, -1.0):
                 xs = x.copy()
@@ -157,7 +158,7 @@ def _design_derivatives(case: Subject, x: np.ndarray, t: float, q: np.ndarray, d
                 sides.append(matrices(params, t, np.real(qs)))
             out.append(tuple((a - b) / (2 * h) for a, b in zip(*sides)))
             continue
-        h = CS_STEP * (abs(x[j]) if x[j] != 0 else case.scale[j])
+        h = CS_STEP * size[j]
         xc = x.astype(complex)
         xc[j] += 1j * h
         params = model.parameters(xc)

@@ -36,6 +36,16 @@ class ConstraintTerm:
     kind: str            # "upper" (g = (bound − r)/d), "lower" (g = (r − bound)/d) or "eq"
     bound: float         # in the response's unit
     divisor: float       # d > 0, in the response's unit
+    index: int = -1      # its entry in optimization.constraints (-1: files written before it was kept)
+
+    @property
+    def sign(self) -> float:
+        """∂g/∂r · d: −1 for an upper bound, +1 otherwise."""
+        return -1.0 if self.kind == "upper" else 1.0
+
+    def scaled(self, r: float) -> float:
+        """g of response value ``r`` (its unit): ≥ 0 holds (= 0 for an equality)."""
+        return self.sign * (r - self.bound) / self.divisor
 
     @property
     def label(self) -> str:
@@ -104,7 +114,7 @@ def build_problem(case: Case, ref_responses: Mapping[str, float]) -> ScaledProbl
     f0 = float(ref_responses[spec.objective])
     f_ref = abs(f0) if np.isfinite(f0) and f0 != 0 else 1.0
     terms: list[ConstraintTerm] = []
-    for c in spec.constraints:
+    for j, c in enumerate(spec.constraints):
         r0 = float(ref_responses[c.response])
 
         def divisor(b: float, r0: float = r0) -> float:
@@ -112,12 +122,12 @@ def build_problem(case: Case, ref_responses: Mapping[str, float]) -> ScaledProbl
                 return abs(float(b))
             return abs(r0) if np.isfinite(r0) and r0 != 0 else 1.0
         if c.lower is not None and c.upper is not None and c.lower == c.upper:
-            terms.append(ConstraintTerm(c.response, "eq", float(c.upper), divisor(c.upper)))
+            terms.append(ConstraintTerm(c.response, "eq", float(c.upper), divisor(c.upper), j))
             continue
         if c.upper is not None:
-            terms.append(ConstraintTerm(c.response, "upper", float(c.upper), divisor(c.upper)))
+            terms.append(ConstraintTerm(c.response, "upper", float(c.upper), divisor(c.upper), j))
         if c.lower is not None:
-            terms.append(ConstraintTerm(c.response, "lower", float(c.lower), divisor(c.lower)))
+            terms.append(ConstraintTerm(c.response, "lower", float(c.lower), divisor(c.lower), j))
     return ScaledProblem(case.design_names, case.lower, case.upper, case.scale, spec.objective, f_ref,
                          tuple(terms), tuple(case.response_names))
 
@@ -198,9 +208,8 @@ def scaled_evaluation(problem: ScaledProblem, x: np.ndarray, res: Any, message: 
     for i, c in enumerate(problem.constraints):
         r = float(np.real(rv[c.response].value))
         dr = np.real(rv[c.response].gradient) * dxdu
-        sign = -1.0 if c.kind == "upper" else 1.0
-        g[i] = sign * (r - c.bound) / c.divisor
-        grad_g[i] = sign * dr / c.divisor
+        g[i] = c.scaled(r)
+        grad_g[i] = c.sign * dr / c.divisor
     return Evaluation(x, u, f, f / problem.f_ref, g, grad_f, grad_g, _response_values(problem, res),
                       False, "", wall_time)
 

@@ -16,34 +16,20 @@ import numpy as np
 import yaml
 
 from ..case.load import Case, load_case_dict
-from .problem import ScaledProblem
+from .problem import OptimizationError, ScaledProblem
 from .runner import OptimizationResult, optimize_case
 from .verify import Verification, excesses, store_verification, verify_design
-
-
-def _term_keys(case: Case) -> list[tuple[int, str]]:
-    """(index in ``optimization.constraints``, ``upper`` | ``lower`` | ``eq``) of every term, in
-    the order :func:`~dynsens.optimize.problem.build_problem` makes them."""
-    keys: list[tuple[int, str]] = []
-    assert case.optimization is not None
-    for j, c in enumerate(case.optimization.constraints):
-        if c.lower is not None and c.upper is not None and c.lower == c.upper:
-            keys.append((j, "eq"))
-            continue
-        if c.upper is not None:
-            keys.append((j, "upper"))
-        if c.lower is not None:
-            keys.append((j, "lower"))
-    return keys
 
 
 def tightened_case(case: Case, problem: ScaledProblem, bounds: dict[int, float]) -> Case:
     """``case`` with the bounds of constraint terms ``bounds`` (term index → new bound) replaced."""
     raw = yaml.safe_load(case.text)
-    keys = _term_keys(case)
     for i, b in bounds.items():
-        j, kind = keys[i]
-        raw["optimization"]["constraints"][j][kind] = float(b)
+        term = problem.constraints[i]
+        if term.index < 0:
+            raise OptimizationError("the bounds cannot be tightened: the optimization file was written before "
+                                    "dynsens kept each constraint's entry; optimize without --resume")
+        raw["optimization"]["constraints"][term.index][term.kind] = float(b)
     return load_case_dict(raw, case.source)
 
 
@@ -86,8 +72,7 @@ def optimize_verified(case: Case, output: str | Path, *, verify: bool | None = N
             break
         for i, excess in excesses(v, problem0).items():
             term = problem0.constraints[i]
-            sign = -1.0 if term.kind == "upper" else 1.0
-            bounds[i] = bounds.get(i, term.bound) + sign * spec.safety * excess
+            bounds[i] = bounds.get(i, term.bound) + term.sign * spec.safety * excess
         tight = tightened_case(case, problem0, bounds)
         x_start = dict(zip(case.design_names, result.best_outcome.x))
         kwargs = {key: val for key, val in optimize_kwargs.items() if key not in ("starts", "x0", "resume", "seed")}

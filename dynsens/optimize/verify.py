@@ -41,7 +41,6 @@ from .problem import FEAS_TOL, OptimizationError, ScaledProblem, build_problem
 MEMBER_TOL = 1e-3         # member ratios up to 1 + MEMBER_TOL pass (as dynsens.postcheck)
 MAX_EXTENSIONS = 4        # the horizon grows to at most (1 + MAX_EXTENSIONS) windows
 FULL_TABLE = 20           # more constraints than this: the summary lists the failing and the tightest
-RUNS = ("case", "refined", "horizon", "tail")
 
 
 @dataclass
@@ -95,12 +94,6 @@ class Verification:
         return (all(c.status in ("ok", "late peak") for c in self.constraints)
                 and all(m.largest <= 1.0 + MEMBER_TOL for m in self.members.values())
                 and not any(r.failed for r in self.runs))
-
-    def worst_margin(self, run: str) -> float:
-        """Smallest scaled margin of any constraint in ``run`` (NaN: none)."""
-        vals = [c.margins.get(run, np.nan) for c in self.constraints]
-        vals = [v for v in vals if np.isfinite(v)]
-        return min(vals) if vals else float("nan")
 
 
 def _variant(case: Case, *, dt_factor: float = 1.0, t_end: float | None = None) -> Case:
@@ -157,8 +150,8 @@ def _run(case: Case, x: np.ndarray, name: str, members: bool) -> _Run:
 
 
 def _margin(term: Any, value: float) -> float:
-    sign = -1.0 if term.kind == "upper" else 1.0
-    g = sign * (value - term.bound) / term.divisor
+    """The optimizer's g; an equality's |g| counts against it."""
+    g = term.scaled(value)
     return -abs(g) if term.kind == "eq" else g
 
 
@@ -305,7 +298,7 @@ def format_verification(v: Verification) -> str:
     for run, m in v.members.items():
         member, kind, ratio = m.worst()
         lines.append(f"members ({head[run]}): largest ratio {ratio:.4f} ({member}, {kind}) over {m.steps} steps"
-                     + ("" if m.largest <= 1 + MEMBER_TOL else f"; {int(_count_over(m))} member(s) above 1"))
+                     + ("" if m.largest <= 1 + MEMBER_TOL else f"; {m.count_above(1 + MEMBER_TOL)} member(s) above 1"))
     lines += [f"warning: {w}" for w in v.warnings]
     late = [c.label for c in v.constraints if c.status == "late peak"]
     if late:
@@ -314,11 +307,6 @@ def format_verification(v: Verification) -> str:
                  "The design does NOT pass the verification: a constraint that holds only on the optimizer's "
                  "time grid and window is not a result (see the README, 'Verifying an optimum').")
     return "\n".join(lines)
-
-
-def _count_over(m: MemberCheck) -> float:
-    stacked = np.vstack([m.tension, m.compression, m.buckling])
-    return float(np.sum(np.nanmax(np.where(np.isfinite(stacked), stacked, -np.inf), axis=0) > 1 + MEMBER_TOL))
 
 
 def excesses(v: Verification, problem: ScaledProblem) -> dict[int, float]:
