@@ -164,8 +164,8 @@ GENERAL_SECTIONS: dict[str, Section] = {
     )),
     "optimization.verification": Section(
         "optimization.verification", "After the optimization, the optimum is run again at a refined step and "
-        "on a longer window; every constraint and every member is checked in those runs (see the README, "
-        "Verifying an optimum).", (
+        "on a longer window; every constraint and every member is checked in those runs (see "
+        "docs/optimization.md).", (
             _k("enabled", "bool", "run the verification after `dynsens optimize`", default=True),
             _k("refine", "integer", "the refined run's step is dt/refine (at least 2)", default=2),
             _k("horizon", "any", "auto (extend the window by its length until the constrained peaks settle), "
@@ -243,7 +243,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
                              _RESPONSE_COMMON, type_value="mass"),
     "response.frequency": Section("responses[i], type: frequency", "The lowest natural frequency (Hz) of a "
                                   "structural model at its initial state, or a smooth (KS) minimum of the lowest "
-                                  "`modes` (see the README, Natural modes and linear buckling).", (
+                                  "`modes` (see docs/optimization.md).", (
         *_RESPONSE_COMMON,
         _k("modes", "integer", "how many of the lowest modes the KS minimum takes (>= 1)", default=1),
         _k("rho", "number", "KS parameter, 1/Hz (required with modes > 1)"),

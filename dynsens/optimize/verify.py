@@ -305,7 +305,7 @@ def format_verification(v: Verification) -> str:
         lines.append("warning: the peak of " + ", ".join(late) + " lies in the last part of the window")
     lines.append("The design PASSES the verification." if v.passed else
                  "The design does NOT pass the verification: a constraint that holds only on the optimizer's "
-                 "time grid and window is not a result (see the README, 'Verifying an optimum').")
+                 "time grid and window is not a result (see docs/optimization.md).")
     return "\n".join(lines)
 
 
