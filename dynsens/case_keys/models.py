@@ -91,12 +91,14 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("displacement", "map", "DOF -> initial displacement", item="expr"),
         _k("velocity", "map", "DOF -> initial velocity", item="expr"),
     )),
-    "structural.damping": Section("model.damping", "D += α M + β K(q = 0).", (
+    "structural.damping": Section("model.damping", "Rayleigh damping α M + β K (see `corotated`).", (
         _k("rayleigh", "section", "Rayleigh coefficients", item="structural.rayleigh"),
     )),
     "structural.rayleigh": Section("model.damping.rayleigh", "Rayleigh coefficients.", (
         _k("alpha", "expr", "mass-proportional (1/s)", default=0.0),
         _k("beta", "expr", "stiffness-proportional (s)", default=0.0),
+        _k("corotated", "bool", "β K of bars and co-rotational beams on their deformation rates, in the "
+                                "turning element frame (false: on the total rates, β K(q = 0))", default=True),
     )),
     "structural.quantity": Section("quantity (structural)", "`{dof: NAME | [NAMES], kind}`, `{node: NAME, "
                                    "kind}` or `{element: NAME | [NAMES] | all, kind}`.", (

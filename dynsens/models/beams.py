@@ -240,26 +240,46 @@ class BeamSet:
         f[..., 5] = f[..., 5] + st["M2"]
         return f
 
-    def tangent(self, qe: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, values) of the exact element tangents ∂f/∂u (one state)."""
-        st = self.state(qe, params)
-        ell, r, z = st["ell"], st["r"], st["z"]
-        n_e = len(ell)
-        B = np.zeros((n_e, 3, 6), dtype=r.dtype)
-        B[:, 0] = r
-        B[:, 1] = -z / ell[:, None]
-        B[:, 2] = -z / ell[:, None]
-        B[:, 1, 2] += 1
-        B[:, 2, 5] += 1
+    def local_stiffness(self, params: dict[str, Any]) -> np.ndarray:
+        """D (..., n_e, 3, 3) = ∂(N, M₁, M₂)/∂(u_l, θ_1l, θ_2l), the constant local stiffness."""
         L, EI = params["beam_L"], params["beam_EI"]
-        Dm = np.zeros((n_e, 3, 3), dtype=B.dtype)
-        Dm[:, 0, 0] = params["beam_EA"] / L
-        Dm[:, 1, 1] = Dm[:, 2, 2] = 4 * EI / L
-        Dm[:, 1, 2] = Dm[:, 2, 1] = 2 * EI / L
-        K = np.einsum("eai,eab,ebj->eij", B, Dm, B)
-        K = K + (st["N"] / ell)[:, None, None] * z[:, :, None] * z[:, None, :]
-        rz = r[:, :, None] * z[:, None, :]
-        K = K + ((st["M1"] + st["M2"]) / ell ** 2)[:, None, None] * (rz + rz.transpose(0, 2, 1))
+        a, k, z = params["beam_EA"] / L, 2 * EI / L, 0 * L
+        return np.stack([a, z, z, z, 2 * k, k, z, k, 2 * k], axis=-1).reshape(L.shape + (3, 3))
+
+    def deformations(self, qe: np.ndarray, params: dict[str, Any], hessian: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(B, H, D) of the local deformations e = (u_l, θ_1l, θ_2l) at qe (..., n+1): B = ∂e/∂u
+        (..., n_e, 3, 6), with ``hessian`` H = ∂²e/∂u² (n_e, 3, 6, 6) (one state), D as
+        :meth:`local_stiffness`."""
+        st = self.state(qe, params)
+        return self._jacobian(st), self._hessian(st) if hessian else None, self.local_stiffness(params)
+
+    @staticmethod
+    def _jacobian(st: dict[str, np.ndarray]) -> np.ndarray:
+        """B = ∂(u_l, θ_1l, θ_2l)/∂u (..., n_e, 3, 6): rows r, e₃ − z/ℓ, e₆ − z/ℓ."""
+        zl = st["z"] / st["ell"][..., None]
+        B = np.stack([st["r"], -zl, -zl], axis=-2)
+        B[..., 1, 2] += 1
+        B[..., 2, 5] += 1
+        return B
+
+    @staticmethod
+    def _hessian(st: dict[str, np.ndarray]) -> np.ndarray:
+        """H = ∂²(u_l, θ_1l, θ_2l)/∂u² (..., n_e, 3, 6, 6): ∂²ℓ/∂u² = z zᵀ/ℓ and
+        ∂²θ_l/∂u² = −∂²α/∂u² = (r zᵀ + z rᵀ)/ℓ²."""
+        ell, r, z = st["ell"], st["r"], st["z"]
+        zz = z[..., :, None] * z[..., None, :] / ell[..., None, None]
+        rz = r[..., :, None] * z[..., None, :]
+        rz = (rz + np.swapaxes(rz, -1, -2)) / (ell * ell)[..., None, None]
+        return np.stack([zz, rz, rz], axis=-3)
+
+    def tangent(self, qe: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, values) of the exact element tangents K = Bᵀ D B + Σ f_m H_m (one state)."""
+        st = self.state(qe, params)
+        n_e = len(st["ell"])
+        B, H = self._jacobian(st), self._hessian(st)
+        K = np.einsum("eai,eab,ebj->eij", B, self.local_stiffness(params), B)
+        K = K + np.einsum("em,emij->eij", np.stack([st["N"], st["M1"], st["M2"]], axis=-1), H)
         return np.repeat(self.idx, 6, axis=1).ravel(), np.tile(self.idx, (1, 6)).ravel(), K.reshape(n_e, -1).ravel()
 
     def fibre_stress(self, qe: np.ndarray, params: dict[str, Any]) -> np.ndarray:

@@ -43,7 +43,7 @@ from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
 from .beams import HOLLOW
-from .beams3d_corot import element_forces, local_deformations, local_forces
+from .beams3d_corot import deformations, element_forces, local_deformations, local_forces
 from .parameters import ParameterTable
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),
@@ -216,11 +216,20 @@ class Beam3DSet:
         f[..., self.is_corot, :] = f_cr
         return f
 
-    def tangent(self, qe: np.ndarray, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def deformations(self, qe: np.ndarray, params: dict[str, Any], hessian: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(B, H, D) of the co-rotational beams' local deformations at qe (..., n+1) (see
+        :func:`.beams3d_corot.deformations`)."""
+        return deformations(qe[..., self.idx[self.is_corot]], self._corot(params), hessian)
+
+    def tangent(self, qe: np.ndarray, params: dict[str, Any], corotated: bool = True
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, cols, values) of the element stiffness matrices (∇²Π of the co-rotational
-        beams at state qe, one state)."""
+        beams at state qe, one state); without ``corotated`` the linear beams' only."""
         K = params["frame_K"]
-        if self.is_corot.any():
+        if not corotated:
+            K = np.where(self.is_corot[:, None, None], 0.0, K)
+        elif self.is_corot.any():
             _, K_cr = element_forces(qe[self.idx[self.is_corot]], self._corot(params), 2)
             K = K.astype(np.result_type(K, K_cr))
             K[self.is_corot] = K_cr

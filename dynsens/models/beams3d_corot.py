@@ -158,27 +158,51 @@ def energy_gradients(dl: list, L: Any, EA: Any, GJ: Any, EIy: Any, EIz: Any) -> 
             kt * (t2x - t1x), ky * (2 * t1y + 4 * t2y), kz * (2 * t1z + 4 * t2z)]
 
 
+def local_stiffness(prm: dict[str, Any], like: np.ndarray) -> np.ndarray:
+    """D (..., n_e, 7, 7) = ∂²Π/∂e², constant (the energy is quadratic in e); ``like`` (..., n_e)
+    gives, broadcast with the stiffnesses, its leading shape, and its dtype."""
+    shape = np.broadcast_shapes(like.shape, np.shape(prm["EA"]))
+    probe = [np.zeros(shape, like.dtype) for _ in range(7)]
+    D = np.zeros(shape + (7, 7), dtype=np.result_type(like, prm["EA"]))
+    for j in range(7):
+        probe[j] = probe[j] + 1.0
+        D[..., :, j] = np.stack(energy_gradients(probe, prm["L"], prm["EA"], prm["GJ"], prm["EIy"], prm["EIz"]),
+                                axis=-1)
+        probe[j] = probe[j] - 1.0
+    return D
+
+
+def _jets(Ue: np.ndarray, prm: dict[str, Any], order: int) -> list:
+    """The 7 local deformations as jets in the 12 unknowns Ue (..., n_e, 12): values and
+    gradients, and with ``order`` 2 Hessians."""
+    eye = np.broadcast_to(np.eye(12), Ue.shape + (12,))
+    zero = np.zeros(Ue.shape + (12,)) if order == 2 else None
+    U = [Jet2(Ue[..., i], eye[..., i, :], zero) for i in range(12)]
+    return local_deformations(U, prm["D0"], prm["L"], prm["R0"])
+
+
+def deformations(Ue: np.ndarray, prm: dict[str, Any], hessian: bool
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """(B, H, D) of the local deformations e: B = ∂e/∂u (..., n_e, 7, 12), with ``hessian``
+    H = ∂²e/∂u² (..., n_e, 7, 12, 12), D as :func:`local_stiffness`."""
+    dl = _jets(Ue, prm, 2 if hessian else 1)
+    B = np.stack([x.g for x in dl], axis=-2)
+    H = np.stack([x.H for x in dl], axis=-3) if hessian else None
+    return B, H, local_stiffness(prm, Ue[..., 0])
+
+
 def element_forces(Ue: np.ndarray, prm: dict[str, Any], order: int) -> tuple[np.ndarray, np.ndarray | None]:
     """Internal forces ∇Π (..., n_e, 12) and, with ``order`` 2, tangents ∇²Π (n_e, 12, 12) of
     the co-rotational elements at unknowns Ue (..., n_e, 12); prm holds their D0, L, R0 and
     stiffnesses (``frame_*`` entries restricted to them)."""
-    eye = np.broadcast_to(np.eye(12), Ue.shape + (12,))
-    zero = np.zeros(Ue.shape + (12,)) if order == 2 else None
-    U = [Jet2(Ue[..., i], eye[..., i, :], zero) for i in range(12)]
-    dl = local_deformations(U, prm["D0"], prm["L"], prm["R0"])
+    dl = _jets(Ue, prm, order)
     fl = energy_gradients([x.v for x in dl], prm["L"], prm["EA"], prm["GJ"], prm["EIy"], prm["EIz"])
     f = sum(fl[k][..., None] * dl[k].g for k in range(7))
     if order < 2:
         return f, None
     # ∇²Π = Σ_k f_k ∇²d_k + Bᵀ D B, B rows ∇d_k; D from the quadratic energy (constant)
     B = np.stack([x.g for x in dl], axis=-2)                       # (..., 7, 12)
-    probe = [np.zeros_like(Ue[..., 0]) for _ in range(7)]
-    D = np.zeros(Ue.shape[:-1] + (7, 7), dtype=np.result_type(Ue, prm["EA"]))
-    for j in range(7):
-        probe[j] = probe[j] + 1.0
-        D[..., :, j] = np.stack(energy_gradients(probe, prm["L"], prm["EA"], prm["GJ"], prm["EIy"], prm["EIz"]),
-                                axis=-1)
-        probe[j] = probe[j] - 1.0
+    D = local_stiffness(prm, Ue[..., 0])
     K = np.einsum("...ki,...kl,...lj->...ij", B, D, B) + sum(fl[k][..., None, None] * dl[k].H for k in range(7))
     return f, K
 

@@ -7,7 +7,9 @@ Residual (method.md §1) with z = q̈:
 * ``M`` is diagonal (point masses and lumped bar masses, ρAL/2 per node and direction);
 * springs between two DOFs (or a DOF and ground) carry f = k₁δ + k₂δ² + k₃δ³ with
   δ = u_a − u_b (cubic hardening for k₃ > 0, softening for k₃ < 0);
-* viscous dampers f = c δ̇, and Rayleigh damping D_R = α M + β K₀ (K₀: the stiffness at q = 0);
+* viscous dampers f = c δ̇, and Rayleigh damping α M + β K₀ (K₀: the stiffness at q = 0) whose
+  stiffness part acts, for bars and co-rotational beams, on the elements' deformation rates in
+  their turning frames (:mod:`.corotated_damping`);
 * bars (2D or 3D truss elements) are geometrically nonlinear: total Lagrangian with the
   Green–Lagrange strain ε = (ℓ² − L²)/(2L²), axial force N = E A ε, nodal forces
   ± N d/L (d the current bar vector); the tangent is (EA/L³) d dᵀ + (N/L) I per node pair.
@@ -27,6 +29,7 @@ from .base import Model, StepState, Traits
 from .parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
+from .corotated_damping import CorotatedDamping, DampedKind
 from .dampers import NonlinearDampers
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
@@ -72,7 +75,8 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
                  rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
                  beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None,
-                 followers: FollowerLoads | None = None, frames: Beam3DSet | None = None):
+                 followers: FollowerLoads | None = None, frames: Beam3DSet | None = None,
+                 rayleigh_corotated: bool = True):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
@@ -126,6 +130,14 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         self._frame_inertia_scatter = self._scatter(self.frames.idx[self.frames.is_consistent], np.ones(12),
                                                     per_element=False)
         self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
+        # Rayleigh's β K on the deformation rates of the elements that turn (K₀ keeps the others)
+        corot_frames = self.frames.idx[self.frames.is_corot]
+        kinds = [DampedKind(self.bar_dofs, self._bar_scatter, self._bar_deformations),
+                 DampedKind(self.beams.idx, self._beam_scatter, self.beams.deformations),
+                 DampedKind(corot_frames, self._scatter(corot_frames, np.ones(12), per_element=False),
+                            self.frames.deformations)]
+        self.corotated_damping = CorotatedDamping(kinds if rayleigh is not None and rayleigh_corotated else [],
+                                                  rayleigh[1] if rayleigh is not None else -1, n)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
         self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
         # the spring state of the last residual: Newton linearizes at the state it has just
@@ -190,7 +202,8 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if len(self.spring_names):
             out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
-            out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out)
+            # the co-rotated elements' β K acts on their deformation rates instead (residual)
+            out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out, corotated=not self.corotated_damping)
         if self.traits.has_damping:
             # viscous and Rayleigh damping depend on the design only: assemble once per design
             out["D"] = D = self._damping(out, pv.dtype)
@@ -295,7 +308,28 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             R = R + params["D"] @ s.qd
             if len(self.nl_dampers):
                 R = R + self._nl_damper_force(s.qd, params)
+            R = R + self._corotated_damping_force(s.q, s.qd, params)
         return R
+
+    def _corotated_damping_force(self, q: np.ndarray, qd: np.ndarray, params: dict[str, Any]) -> Any:
+        """Nodal forces (..., n) of β K on the elements' deformation rates (0 where there is none)."""
+        if not self.corotated_damping or not np.any(params["pv"][..., self.corotated_damping.beta_index]):
+            return 0.0
+        return self.corotated_damping.force(self._ext(q), self._ext(qd), params)
+
+    def _bar_deformations(self, qe: np.ndarray, params: dict[str, Any], hessian: bool = False
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(B, H, D) of the bars' Green–Lagrange strains ε at qe (..., n+1): B = ∂ε/∂u =
+        [−d, d]/L² (..., n_e, 1, 2·dim), H = [[I, −I], [−I, I]]/L² and D = EA·L (the energy
+        ½ EA L ε²), for :mod:`.corotated_damping`."""
+        bs = self._bar_state(qe[..., :self.n], params)
+        L2 = (params["L0"] ** 2)[..., None]
+        B = (np.concatenate([-bs["d"], bs["d"]], axis=-1) / L2)[..., None, :]
+        H = None
+        if hessian:
+            eye = np.eye(self.dim)
+            H = np.block([[eye, -eye], [-eye, eye]])[None, None] / L2[..., None, None]
+        return B, H, (params["EA"] * params["L0"])[..., None, None]
 
     def _nl_damper_force(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
         """Nodal forces (..., n) of the nonlinear viscous dampers (0 without any)."""
@@ -364,6 +398,8 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             R = R + np.stack([(D @ qd[:, 0, :].T).T for D in st["D"]], axis=1) + self._nl_damper_force(qd, st)
         elif self.traits.has_damping:
             R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
+        if self.traits.has_damping:
+            R = R + self._corotated_damping_force(q, qd, st)
         return R.transpose(0, 2, 1)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:

@@ -240,13 +240,16 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                 ip = f"{path}.initial.{key}.{d}"
                 di = dof(d, ip)
                 init_lists[j].append((di, table.add(v, ip, problems)))
-    rayleigh = None
+    rayleigh, corotated = None, True
     damping = spec.get("damping")
     if damping is not None and check_keys(damping, f"{path}.damping", allowed("structural.damping"), problems):
         ry = damping.get("rayleigh")
         if check_keys(ry, f"{path}.damping.rayleigh", allowed("structural.rayleigh"), problems):
             rayleigh = (table.add(ry.get("alpha", 0.0), f"{path}.damping.rayleigh.alpha", problems, nonnegative=True),
                         table.add(ry.get("beta", 0.0), f"{path}.damping.rayleigh.beta", problems, nonnegative=True))
+            corotated = ry.get("corotated", True)
+            if not isinstance(corotated, bool):
+                problems.add(f"{path}.damping.rayleigh.corotated", f"expected true or false, found {corotated!r}")
     la = spec.get("linear_algebra", "auto")
     if la not in ("auto", "dense", "sparse"):
         problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
@@ -260,6 +263,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         model = StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
                                 dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
                                 bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
+                                rayleigh_corotated=corotated is True,
                                 sparse=None if la == "auto" else la == "sparse",
                                 spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers,
                                 followers=followers, frames=frames)

@@ -59,6 +59,7 @@ class StructuralMatrices:
     _spring_state: Any
     _bar_state: Any
     _ext: Any
+    corotated_damping: Any
 
     def _mass_matrix(self, params: dict[str, Any], dtype: Any, q: np.ndarray | None = None) -> Any:
         """M(q): the diagonal (point, bar and lumped beam masses) plus the consistent beams'
@@ -77,8 +78,9 @@ class StructuralMatrices:
             rows, cols, vals = rows + [r], cols + [c], vals + [v]
         return self._assemble("mass", rows, cols, vals, np.result_type(dtype, *vals))
 
-    def _tangent(self, q: np.ndarray, params: dict[str, Any]) -> Any:
-        """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse)."""
+    def _tangent(self, q: np.ndarray, params: dict[str, Any], corotated: bool = True) -> Any:
+        """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse); without ``corotated`` that of the
+        springs and linear beams only (the part of Rayleigh's β K that does not turn)."""
         pv = params["pv"]
         rows, cols, vals = [], [], []
         if len(self.spring_names):
@@ -88,7 +90,7 @@ class StructuralMatrices:
             rows += [a, b, a, b]
             cols += [a, b, b, a]
             vals += [kt, kt, -kt, -kt]
-        if len(self.bar_names):
+        if len(self.bar_names) and corotated:
             bs = self._bar_state(q, params)
             d, N, L0, EA = bs["d"], bs["N"], params["L0"], params["EA"]
             k_node = (EA / L0 ** 3)[:, None, None] * d[:, :, None] * d[:, None, :] \
@@ -98,15 +100,15 @@ class StructuralMatrices:
             rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
             cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
             vals.append(ke.reshape(len(idx), -1).ravel())
-        if len(self.beams):
+        if len(self.beams) and corotated:
             r, c, v = self.beams.tangent(self._ext(q), params)
             rows.append(r)
             cols.append(c)
             vals.append(v)
         if len(self.frames):
-            r, c, v = self.frames.tangent(self._ext(q), params)
+            r, c, v = self.frames.tangent(self._ext(q), params, corotated)
             rows, cols, vals = rows + [r], cols + [c], vals + [v]
-        return self._assemble("tangent", rows, cols, vals, np.result_type(q, pv))
+        return self._assemble("tangent" if corotated else "tangent_linear", rows, cols, vals, np.result_type(q, pv))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
         rows, cols, vals = [], [], []
@@ -178,6 +180,12 @@ class StructuralMatrices:
             Ms.append(self._assemble("inertia_M", [rows], [cols], [m_v], dtype))
             Ks.append(self._assemble("inertia_K", [rows], [cols], [k_v], dtype))
             Ds.append(self._assemble("inertia_C", [rows], [cols], [c_v], dtype))
+        if self.corotated_damping and np.any(params["pv"][self.corotated_damping.beta_index]):
+            dtype = np.result_type(s.q, s.qd, params["pv"])
+            for j, (rows, cols, k_v, c_v) in enumerate(
+                    self.corotated_damping.jacobians(self._ext(s.q), self._ext(s.qd), params)):
+                Ks.append(self._assemble(f"corot_damping_K{j}", [rows], [cols], [k_v], dtype))
+                Ds.append(self._assemble(f"corot_damping_C{j}", [rows], [cols], [c_v], dtype))
         M, K = self._add("M", Ms), self._add("K", Ks)
         D = self._add("D", Ds) if Ds else None
         if not self.traits.sparse:
