@@ -15,6 +15,8 @@ import numpy as np
 
 from .records import RecordedQuantity
 
+MAX_LEGEND = 12     # curves in a panel named one by one; beyond, the largest (see _largest_named)
+
 
 @dataclass(frozen=True)
 class Marker:
@@ -25,6 +27,7 @@ class Marker:
     name: str
     value: float
     t: float | None = None
+    level: float | None = None      # where a level is drawn, if not at value (−|peak| of a negative peak)
 
 
 @dataclass
@@ -83,15 +86,18 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
                     ax.annotate(f"{ev} at {t:.4g} s" + (f" ({run.name})" if len(runs) > 1 else ""),
                                 (t, 1.0 + 0.08 * k), xycoords=("data", "axes fraction"), fontsize=7,
                                 ha="right", va="bottom", annotation_clip=False)
-        shown: dict[tuple[float | None, float], list[str]] = {}    # one label per point or level
+        # one label per point or level
+        shown: dict[tuple[float | None, float, float], list[str]] = {}
         for mk in markers:
-            if mk.quantity in names and np.isfinite(mk.value) and mk.name not in shown.get((mk.t, mk.value), []):
-                shown.setdefault((mk.t, mk.value), []).append(mk.name)
-        for (at, value), who in shown.items():
+            key = (mk.t, mk.value, mk.value if mk.level is None else mk.level)
+            if mk.quantity in names and np.isfinite(mk.value) and mk.name not in shown.get(key, []):
+                shown.setdefault(key, []).append(mk.name)
+        for (at, value, level), who in shown.items():
             text = f"{', '.join(who)} = {value:.5g} {unit}"
             if at is None:
-                ax.axhline(value, color="k", ls=":", lw=0.8)
-                ax.annotate(text, (0.01, value), xycoords=("axes fraction", "data"), fontsize=7, va="bottom")
+                ax.axhline(level, color="k", ls=":", lw=0.8)
+                ax.annotate(text, (0.01, level), xycoords=("axes fraction", "data"), fontsize=7,
+                            va="bottom" if level >= 0 else "top")
             else:
                 ax.plot([at], [value], "ko", ms=4)
                 ax.annotate(" " + text, (at, value), fontsize=7,
@@ -99,12 +105,10 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
         ax.set_ylabel(f"[{unit}]" if unit else "(case units)")
         ax.grid(True, alpha=0.3)
         handles, labels = ax.get_legend_handles_labels()
-        if len(handles) <= 12:
+        if len(handles) <= MAX_LEGEND:
             ax.legend(fontsize=7, loc="best")
-        else:    # e.g. the stresses of every bar: name the quantities, not each curve
-            ax.legend(handles[:1], [", ".join(dict.fromkeys(run.quantities[n].label for n in names
-                                                            if n in run.quantities)) +
-                                    f" ({len(handles)} curves)"], fontsize=7, loc="best")
+        else:    # e.g. the stresses of every bar: name the largest, grey the others
+            ax.legend(*_largest_named(handles, labels, plt), fontsize=7, loc="best")
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
@@ -115,12 +119,31 @@ def plot_runs(runs: Sequence[Run], path: str | Path, title: str, markers: Sequen
     return path
 
 
+def _largest_named(handles: list, labels: list[str], plt: Any, keep: int = 6) -> tuple[list, list[str]]:
+    """Legend of a crowded panel: the ``keep`` curves of largest peak |value| in colour with
+    their names, every other curve drawn light grey under one entry."""
+    peaks = [float(np.nanmax(np.abs(h.get_ydata()))) if len(h.get_ydata()) else 0.0 for h in handles]
+    order = np.argsort(peaks)[::-1]
+    top = [int(i) for i in order[:keep]]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, i in enumerate(top):                     # distinct colours for the named ones
+        handles[i].set_color(colours[k % len(colours)])
+    for i in order[keep:]:
+        handles[i].set_color("0.75")
+        handles[i].set_linewidth(0.8)
+        handles[i].set_zorder(1)
+    rest = plt.Line2D([], [], color="0.75", lw=0.8)
+    return ([handles[i] for i in top] + [rest],
+            [labels[i] for i in top] + [f"{len(handles) - keep} others (smaller peaks)"])
+
+
 def response_markers(case: Any, result: Any) -> list[Marker]:
     """Markers for the responses of ``case`` that read a recorded quantity of ``result``: values
     at a time, at an event or at the end as points; KS, max and min of the quantity itself (not of
     a ratio of it) as levels."""
     from .responses import ValueAt
     from .responses_sizing import Aggregate
+    from .records import reads_in_own_unit
     by_output: dict[int, list[str]] = {}
     for name, q in result.quantities.items():
         by_output.setdefault(q.output_id, []).append(name)
@@ -137,8 +160,22 @@ def response_markers(case: Any, result: Any) -> list[Marker]:
             for name in by_output.get(r.output_ids[0], []):
                 if t is not None:
                     out.append(Marker(name, r.name, value, float(t)))
-        elif isinstance(r, Aggregate) and all(np.all(np.abs(t.sides) == 1.0) for t in r.terms):
+        elif isinstance(r, Aggregate) and reads_in_own_unit(r):
             for oid in r.output_ids:
                 for name in by_output.get(oid, []):
-                    out.append(Marker(name, r.name, value))
+                    out.append(Marker(name, r.name, value,
+                                      level=_level(r, value, result.quantities[name].value)))
     return out
+
+
+def _level(r: Any, value: float, v: np.ndarray) -> float:
+    """Where the aggregate ``r`` (value ``value``) lies on the plotted quantity v: an absolute
+    maximum |v| at the sign of the peak it measures, a maximum of −v at −value."""
+    sides = sorted({float(s) for t in r.terms for s in np.ravel(t.sides)})
+    v = np.real(np.asarray(v))
+    if not v.size or len(sides) == 1:
+        return sides[0] * value
+    # the side whose sampled extreme is the aggregate's (KS lies a little above it)
+    extremes = {s: r.sense * np.max(r.sense * s * v) for s in sides}
+    side = min(extremes, key=lambda s: abs(extremes[s] - value))
+    return side * value

@@ -10,7 +10,7 @@ are on the run's own time grid (the step at which an event fires included).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -112,6 +112,16 @@ class Recorder:
         return out
 
 
+def reads_in_own_unit(response: Any) -> bool:
+    """Whether ``response``'s value is in the unit of the quantity it reads: a value at a time, or
+    a maximum, minimum or KS of the quantity itself (±1 sides), not of a ratio of it."""
+    from .responses import ValueAt
+    from .responses_sizing import Aggregate
+    if isinstance(response, ValueAt):
+        return True
+    return isinstance(response, Aggregate) and all(np.all(np.abs(t.sides) == 1.0) for t in response.terms)
+
+
 def quantities_read_by(responses: "ResponseSet") -> tuple[QuantitySpec, ...]:
     """What the responses of a case read over time (each output once, all its components, in
     the response's unit), for a case that names no ``output.quantities`` of its own.  Each is
@@ -132,6 +142,8 @@ def quantities_read_by(responses: "ResponseSet") -> tuple[QuantitySpec, ...]:
             while name in names:
                 name += "_"
             names.add(name)
+            # a response in the quantity's own unit names it; a ratio (σ/σ_lim) does not
+            unit = r.unit if r.unit and reads_in_own_unit(r) else out.unit
             specs.append(QuantitySpec(name, oid, tuple(range(len(out.labels))), tuple(out.labels),
-                                      r.unit or out.unit, f"{name} (read by {r.name})"))
+                                      unit, f"{name} (read by {r.name})"))
     return tuple(specs)

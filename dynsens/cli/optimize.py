@@ -121,7 +121,8 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
              maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
              workers: int | None, scheduler: str | None, resume: bool, verify: bool | None, rounds: int | None,
              plots: str | None) -> None:
-    """Minimize the case's objective subject to its constraints with SLSQP.
+    """Minimize the case's objective subject to its constraints (optimization.method:
+    SLSQP by default, MMA, CCSAQ or trust-constr).
 
     Objective, constraints and gradients come from one simulation with design sensitivities
     (direct or adjoint, as the case's sensitivity.method says) per design point.  Design

@@ -13,7 +13,6 @@ from ..io.series import read_series
 from ..plots import Run, plot_runs
 from ..records import RecordedQuantity
 from ..io.paths import atomic_path
-from .problem import _fmt
 
 
 # --------------------------------------------------------------------------------------
@@ -53,14 +52,16 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
                 continue
             h = opt[name]["history"]
             it = h["iteration"][()]
-            axes[0].plot(it, h["f"][()], "o-", ms=3, label=name.replace("_", " "))
-            axes[1].semilogy(it, np.maximum(h["max_violation"][()], 1e-16), "o-", ms=3)
-            axes[2].semilogy(it, np.maximum(h["kkt"][()], 1e-16), "o-", ms=3)
+            line = axes[0].plot(it, h["f"][()], "o-", ms=3, label=name.replace("_", " "))[0]
+            for ax, key in ((axes[1], "max_violation"), (axes[2], "kkt")):
+                _positive_on_log(ax, it, h[key][()], line.get_color())
         axes[0].set_ylabel(objective)
         axes[1].set_ylabel("max. violation (scaled)")
         axes[2].set_ylabel("KKT residual (scaled)")
         axes[2].set_xlabel("iteration")
         axes[0].legend(fontsize=8)
+        if any(t.get_label() == ZERO_LABEL for t in axes[1].get_lines()):
+            axes[1].legend(fontsize=7)
         for ax in axes:
             ax.grid(True, alpha=0.3)
         fig.suptitle(f"{path.name}: optimization history")
@@ -87,10 +88,11 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
             for j in order:
                 ax.plot(t, q[:, j], label=labels[j] if j < len(labels) else f"q[{j}]")
             ax.set_xlabel("t [s]")
-            ax.set_ylabel("q")
+            ax.set_ylabel("coordinates q (case units)")
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize=8, ncol=2)
-            ax.set_title(f"best design x = {_fmt(opt['optimum/x'][()])}")
+            ax.set_title(f"the {len(order)} largest coordinates at the optimum (no recorded quantities)\n"
+                         + _named_design(f, opt["optimum/x"][()]), fontsize=8)
             fig.tight_layout()
             p = outdir / f"{path.stem}_optimum.png"
             with atomic_path(p, overwrite) as tmp:
@@ -98,6 +100,30 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
             plt.close(fig)
             written.append(p)
     return written
+
+
+ZERO_LABEL = "zero (feasible / converged)"
+
+
+def _positive_on_log(ax: Any, it: np.ndarray, v: np.ndarray, colour: str) -> None:
+    """v over the iterations on a log axis: positive values as a line, exact zeros (a feasible
+    point, no violation) as hollow markers on the axis floor, not as a clamped number."""
+    v = np.asarray(v, dtype=float)
+    pos = v > 0
+    ax.semilogy(np.where(pos, it, np.nan), np.where(pos, v, np.nan), "o-", ms=3, color=colour)
+    zero = np.isfinite(v) & ~pos
+    if zero.any():
+        ax.plot(it[zero], np.full(int(zero.sum()), 0.02), "o", ms=4, mfc="none", color=colour,
+                transform=ax.get_xaxis_transform(), label=ZERO_LABEL, clip_on=False)
+
+
+def _named_design(f: h5py.File, x: np.ndarray, at_most: int = 6) -> str:
+    """'A1 = 12.3 mm², A2 = ...' of a design vector, with names and units from the file."""
+    names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["design/names"][()]]
+    units = json.loads(f["optimization"].attrs.get("design_units", "[]")) or [""] * len(names)
+    parts = [f"{n} = {v:.4g}" + (f" {u}" if u else "") for n, v, u in zip(names, x, units)]
+    more = f", … ({len(parts) - at_most} more)" if len(parts) > at_most else ""
+    return "best design: " + ", ".join(parts[:at_most]) + more
 
 
 def _stored_run(opt: h5py.Group, group: str, name: str) -> Run | None:
