@@ -18,8 +18,11 @@ and the sparse chain)
 from __future__ import annotations
 
 import argparse
+import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import yaml
 
@@ -34,6 +37,7 @@ from .simulation import run_case
 DEFAULT_CASES = ("pendulum_3d", "slider_crank", "four_bar", "hydraulic_lever", "tyrolean_weir",
                  "pendulum_projection")
 CASES_DIR = Path(__file__).resolve().parent.parent / "cases"
+HEARTBEAT = 15.0     # s between the warm-up's "still compiling" lines
 
 
 def warm_case(case: Case, steps: int = 150) -> float:
@@ -66,11 +70,36 @@ def warm_case(case: Case, steps: int = 150) -> float:
     return time.perf_counter() - t0
 
 
-def warm(paths: list[Path], steps: int = 150, echo: bool = True) -> float:
-    """:func:`warm_case` for each case file; returns the wall time (s)."""
+@contextmanager
+def heartbeat(what: str, every: float = HEARTBEAT, echo: bool = True) -> Iterator[None]:
+    """Print ``what`` now and the elapsed time every ``every`` seconds until the block ends: a
+    compilation of minutes shows that it is alive."""
+    if not echo:
+        yield
+        return
+    print(f"{what} ...", flush=True)
+    done = threading.Event()
     t0 = time.perf_counter()
-    for path in paths:
-        dt = warm_case(load_case(path), steps)
+
+    def tick() -> None:
+        while not done.wait(every):
+            print(f"  ... {time.perf_counter() - t0:.0f} s (compiling; each kernel is compiled once)", flush=True)
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+
+
+def warm(paths: list[Path], steps: int = 150, echo: bool = True) -> float:
+    """:func:`warm_case` for each case file, announcing each and its progress; returns the wall
+    time (s)."""
+    t0 = time.perf_counter()
+    for i, path in enumerate(paths, 1):
+        with heartbeat(f"warming {path.name} ({i}/{len(paths)})", echo=echo):
+            dt = warm_case(load_case(path), steps)
         if echo:
             print(f"warmed {path.name}: {dt:.1f} s", flush=True)
     return time.perf_counter() - t0
@@ -92,10 +121,13 @@ def main(argv: list[str] | None = None) -> None:
     if not paths:
         print("no case files found: pass the cases to warm")
         return
+    print(f"compiling dynsens' numba kernels into the on-disk cache, once: typically 2-5 min on 2 cores "
+          f"(up to 10 on a busy machine); {len(paths) + (0 if args.cases else 1)} cases", flush=True)
     total = warm(list(paths), args.steps)
     if not args.cases:      # the spring networks' step, on the shipped chain made sparse
         t0 = time.perf_counter()
-        warm_case(load_case(CASES_DIR / "duffing_chain.yaml", ["model.linear_algebra=sparse"]), args.steps)
+        with heartbeat("warming duffing_chain.yaml on the sparse path"):
+            warm_case(load_case(CASES_DIR / "duffing_chain.yaml", ["model.linear_algebra=sparse"]), args.steps)
         total += time.perf_counter() - t0
         print(f"warmed duffing_chain.yaml on the sparse path: {time.perf_counter() - t0:.1f} s", flush=True)
     print(f"numba cache warm ({total:.1f} s); later runs start at once", flush=True)

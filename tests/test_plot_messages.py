@@ -82,3 +82,4 @@ def test_the_optimum_fallback_title_names_the_design(tmp_path: Path) -> None:
         f.create_group("optimization").attrs["design_units"] = '["mm2", "mm2", "", "", "", "", ""]'
         text = _named_design(f, np.array([12.345, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]))
     assert text.startswith("best design: A1 = 12.35 mm2, A2 = 2 mm2, c = 3") and "(1 more)" in text
+
