@@ -48,8 +48,9 @@ def check_animation_path(out: str | Path, overwrite: bool = False) -> Path:
     if out.suffix.lower() not in FORMATS:
         raise AnimationError(f"--animate: expected a file ending in .gif or .mp4, found {out.name!r}")
     check_output_path(out, overwrite, option="--animate")
-    plt = _pyplot()
-    if out.suffix.lower() == ".mp4" and not plt.matplotlib.animation.writers.is_available("ffmpeg"):
+    _pyplot()
+    from matplotlib import animation
+    if out.suffix.lower() == ".mp4" and not animation.writers.is_available("ffmpeg"):
         raise AnimationError(f"--animate {out}: an .mp4 is written by ffmpeg, found no ffmpeg on the PATH "
                              "(install ffmpeg, or write a .gif)")
     return out
@@ -226,7 +227,8 @@ class Drawing:
             label = "stress ratio max(σ/σ_t, −σ/σ_c)" if name == "stress_ratio" else "axial stress"
             self.fig.colorbar(coll, ax=self.ax, shrink=0.8, label=label)
             return
-        styles = {"bodies": dict(colors="tab:blue", linewidths=3.0), "cylinders": dict(colors="tab:red", linewidths=5.0),
+        styles = {"bodies": dict(colors="tab:blue", linewidths=3.0),
+                  "cylinders": dict(colors="tab:red", linewidths=5.0),
                   "springs": dict(colors="tab:green", linewidths=1.5)}
         for p, part in enumerate(self.scene.parts):
             if part.name in styles and len(part.lines):

@@ -13,7 +13,8 @@ model's own outputs (the quantities a case can name) at every stored instant, an
   ``stress_ratio`` responses (the smallest of each, as the post-check reads them) and
   ``buckling_ratio`` = −N/P_E (bars with ``inertia``; NaN for the others);
 * a multibody model: parts ``bodies`` (each body's centre of mass joined to each of its
-  markers by a line, the ground's markers as points; cell data ``body``, the body index, -1 the ground), ``joints`` (the joint points, point data
+  markers by a line, the ground's markers as points; cell data ``body``, the body's index, -1
+  the ground), ``joints`` (the joint points, point data
   ``reaction_force`` and ``reaction_force_norm`` with the ``lam`` history), ``cylinders``
   (hydraulic cylinders as lines, cell data ``stroke``, and with the ``p`` history ``force``,
   ``pressure_1``, ``pressure_2``) and ``springs`` (``length``, ``force``).
