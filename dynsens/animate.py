@@ -151,16 +151,17 @@ class Drawing:
         lo, hi = every.min(axis=0), every.max(axis=0)
         size = float(np.max(hi - lo)) or 1.0
         self.flat = (hi[2] - lo[2]) <= 1e-9 * size
-        self.fig = plt.figure(figsize=(6.4, 4.8))
+        tall = not self.flat and (hi[2] - lo[2]) > 1.5 * max(hi[0] - lo[0], hi[1] - lo[1])
+        self.fig = plt.figure(figsize=(5.2, 6.4) if tall else (6.4, 4.8))
         self.ax = self.fig.add_subplot(111) if self.flat else self.fig.add_subplot(111, projection="3d")
         pad = 0.05 * size
         self._limits(lo - pad, hi + pad)
         self.artists: list[tuple[int, Any, str]] = []
-        self._setup()
+        self._setup(int(frames[0]))
         kind = f"displacements x {self.scale:g}" if self.structure and self.scale != 1 else ""
-        self.ax.set_title(f"{scene.case_name}{' (' + scene.label + ')' if scene.label else ''}"
+        self.fig.suptitle(f"{scene.case_name}{' (' + scene.label + ')' if scene.label else ''}"
                           f"{', ' + kind if kind else ''}", fontsize=10)
-        self.clock = self.fig.text(0.02, 0.95, "", fontsize=11)
+        self.clock = self.fig.text(0.03, 0.03, "", fontsize=11)
 
     # geometry -------------------------------------------------------------------------
     def _magnification(self) -> float:
@@ -184,12 +185,15 @@ class Drawing:
             ax.set_xlim(lo[0], hi[0])
             ax.set_ylim(lo[1], hi[1])
             ax.set_aspect("equal")
-        else:
-            mid, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2
-            ax.set_xlim(mid[0] - half, mid[0] + half)
-            ax.set_ylim(mid[1] - half, mid[1] + half)
-            ax.set_zlim(mid[2] - half, mid[2] + half)
-            ax.set_box_aspect((1, 1, 1))
+        else:      # true proportions (a tall tower fills the height), no axis thinner than 1/6
+            span = np.maximum(hi - lo, float(np.max(hi - lo)) / 6)
+            mid = (lo + hi) / 2
+            ax.set_xlim(mid[0] - span[0] / 2, mid[0] + span[0] / 2)
+            ax.set_ylim(mid[1] - span[1] / 2, mid[1] + span[1] / 2)
+            ax.set_zlim(mid[2] - span[2] / 2, mid[2] + span[2] / 2)
+            ax.set_box_aspect(tuple(span / span.max()), zoom=1.2)
+            for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+                axis.set_major_locator(self.plt.MaxNLocator(3))
             ax.set_zlabel("z")
         ax.set_xlabel("x")
         ax.set_ylabel("y")
@@ -199,19 +203,20 @@ class Drawing:
         xyz = self._positions(p, k)[self.scene.parts[p].lines]
         return xyz[..., :2] if self.flat else xyz
 
-    def _lines(self, **style: Any) -> Any:
+    def _lines(self, p: int, k: int, **style: Any) -> Any:
+        """A line collection of part p, drawn at instant k."""
         if self.flat:
             from matplotlib.collections import LineCollection
-            coll = LineCollection([], **style)
+            coll = LineCollection(list(self._segments(p, k)), **style)
             self.ax.add_collection(coll)
         else:
             from mpl_toolkits.mplot3d.art3d import Line3DCollection
-            coll = Line3DCollection([], **style)
-            self.ax.add_collection3d(coll)
+            coll = Line3DCollection(list(self._segments(p, k)), **style)
+            self.ax.add_collection3d(coll, autolim=False)
         return coll
 
     # artists --------------------------------------------------------------------------
-    def _setup(self) -> None:
+    def _setup(self, k: int) -> None:
         if self.structure:
             data = self.scene.parts[0].cell_data
             name = "stress_ratio" if "stress_ratio" in data else "stress"
@@ -222,7 +227,7 @@ class Drawing:
             else:
                 a = float(np.abs(v).max()) if v.size else 1.0
                 norm, cmap = Normalize(-a, a), "coolwarm"
-            coll = self._lines(cmap=cmap, norm=norm, linewidths=2.0)
+            coll = self._lines(0, k, cmap=cmap, norm=norm, linewidths=2.0)
             self.artists.append((0, coll, name))
             label = "stress ratio max(σ/σ_t, −σ/σ_c)" if name == "stress_ratio" else "axial stress"
             self.fig.colorbar(coll, ax=self.ax, shrink=0.8, label=label)
@@ -232,7 +237,7 @@ class Drawing:
                   "springs": dict(colors="tab:green", linewidths=1.5)}
         for p, part in enumerate(self.scene.parts):
             if part.name in styles and len(part.lines):
-                self.artists.append((p, self._lines(**styles[part.name]), "lines"))
+                self.artists.append((p, self._lines(p, k, **styles[part.name]), "lines"))
             if len(part.vertices):
                 marker = dict(marker="o", s=30, facecolors="white", edgecolors="black", zorder=3) \
                     if part.name == "joints" else dict(marker="^", s=40, color="black", zorder=3)

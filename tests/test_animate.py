@@ -81,6 +81,16 @@ def test_worst_instant_is_the_largest_stress(truss: Path, tmp_path: Path) -> Non
         assert im.format == "PNG" and im.size[0] > 100
 
 
+def test_a_3d_structure_is_drawn_in_3d(tmp_path: Path) -> None:
+    h5 = tmp_path / "tower.h5"
+    assert_ok(invoke("simulate", CASES / "tower_sizing.yaml", "-o", h5, "--no-sensitivities",
+                     "--set", "integrator.t_end=0.01", "--animate", tmp_path / "tower.gif"))
+    assert gif_frames(tmp_path / "tower.gif") == 6
+    scene = read_scene(h5)
+    with Image.open(render_frame(scene, worst_instant(scene), tmp_path / "tower.png")) as im:
+        assert im.format == "PNG"
+
+
 def test_bad_animation_requests_are_refused(truss: Path, tmp_path: Path, monkeypatch) -> None:
     from matplotlib import animation
     monkeypatch.setattr(animation.writers, "is_available", lambda name: False)

@@ -207,3 +207,8 @@ def test_a_file_without_the_displacement_history_is_refused(tmp_path: Path) -> N
     assert result.exit_code == 2 and "expected a dynsens result file" in result.output
     result = invoke("export", h5)
     assert result.exit_code == 2 and "--vtk" in result.output
+    springs = tmp_path / "sdof.h5"                            # a spring-mass model has nothing to draw
+    assert_ok(invoke("simulate", CASES / "sdof_step.yaml", "-o", springs, "--no-sensitivities",
+                     "--set", "output.history=[q]"))
+    result = invoke("export", springs, "--vtk", tmp_path / "vtk")
+    assert result.exit_code == 2 and "expected bars or beams" in result.output

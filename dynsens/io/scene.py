@@ -176,11 +176,14 @@ def _members(model: Any, case: Any, raw: dict, state: dict[str, np.ndarray], par
         X[i, :model.dim] = pv[np.asarray(model.node_coords[nm])]
     member_names = list(model.bar_names) + list(model.beams.names) + list(model.frames.names)
     ends: dict[str, tuple[int, int]] = {}
-    for el in ((raw.get("model") or {}).get("elements") or []):
+    for k, el in enumerate((raw.get("model") or {}).get("elements") or []):
         nodes = el.get("nodes") if isinstance(el, dict) else None
-        if isinstance(nodes, list) and len(nodes) == 2:
-            ends[str(el.get("name", ""))] = (names.index(nodes[0]), names.index(nodes[1]))
+        if isinstance(nodes, list) and len(nodes) == 2:     # (an unnamed element's name as the builder gives it)
+            ends[str(el.get("name", f"{el.get('type')}{k}"))] = (names.index(nodes[0]), names.index(nodes[1]))
     member_names = [m for m in member_names if m in ends]
+    if not member_names:
+        raise SceneError(f"{case.source}: expected bars or beams between nodes to draw, found none "
+                         "(springs, dampers and masses on degrees of freedom are not drawn)")
     lines = np.array([ends[m] for m in member_names], dtype=int).reshape(-1, 2)
     states = _states(state, n)
     index = {d: i for i, d in enumerate(model.dof_names)}
