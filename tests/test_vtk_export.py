@@ -168,6 +168,17 @@ def test_optimization_file_exports_start_and_optimum(tmp_path: Path) -> None:
         assert np.abs(u).max() == pytest.approx(np.abs(q[-1]).max(), rel=1e-12)   # ... each its own run
 
 
+def test_every_nth_instant_and_the_last(tmp_path: Path, truss) -> None:
+    h5, _ = truss
+    assert_ok(invoke("export", h5, "--vtk", tmp_path, "--vtk-every", "7"))
+    with h5py.File(h5, "r") as f:
+        time = f["time"][()]
+    t, meshes = frames(tmp_path / "truss.pvd", 0)
+    assert len(time) == 31 and np.array_equal(t, time[[0, 7, 14, 21, 28, 30]])
+    result = invoke("export", h5, "--vtk", tmp_path / "x", "--vtk-every", "0")
+    assert result.exit_code == 2 and "--vtk-every" in result.output
+
+
 def test_missing_meshio_names_the_extra(monkeypatch, tmp_path: Path, truss) -> None:
     h5, _ = truss
     monkeypatch.setitem(sys.modules, "meshio", None)         # import meshio raises ImportError

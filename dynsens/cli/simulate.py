@@ -111,7 +111,8 @@ def _aggregate_notes(extra: dict) -> list[str]:
 @view_options
 @verbosity_options
 def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
-             no_sensitivities: bool, plots: str | None, vtk: str | None, animation: str | None) -> None:
+             no_sensitivities: bool, plots: str | None, vtk: str | None, vtk_every: int,
+             animation: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
     check_output_path(output, overwrite)     # before the run, not after it
     if plots:
@@ -151,4 +152,4 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "
                    "(nothing in the model or responses depends on it at this design)")
     click.echo(f"written: {output}")
-    write_views(output, vtk, animation, overwrite)
+    write_views(output, vtk, animation, overwrite, vtk_every)

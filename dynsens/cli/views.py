@@ -15,6 +15,8 @@ view_options = compose(
     click.option("--vtk", "vtk", type=click.Path(file_okay=False), default=None, metavar="DIR",
                  help="Write a ParaView time series (DIR/<name>.pvd and its VTU files) of the run "
                       "(pip install 'dynsens[vtk]')."),
+    click.option("--vtk-every", "vtk_every", type=click.IntRange(min=1), default=1, show_default=True,
+                 metavar="N", help="With --vtk: write every N-th stored instant (and the last)."),
     click.option("--animate", "animation", type=click.Path(dir_okay=False), default=None, metavar="FILE",
                  help="Write an animation of the run, FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg); "
                       "at most 200 frames."))
@@ -34,11 +36,12 @@ def check_views(result_file: str | Path, labels: list[str], vtk: str | None, ani
         check_animation_path(animation, overwrite)
 
 
-def write_views(result_file: str | Path, vtk: str | None, animation: str | None, overwrite: bool) -> None:
+def write_views(result_file: str | Path, vtk: str | None, animation: str | None, overwrite: bool,
+                vtk_every: int = 1) -> None:
     """Write the requested views of ``result_file`` and say where they are."""
     if vtk:
         from ..io.vtk import export_vtk
-        for p in export_vtk(result_file, vtk, overwrite):
+        for p in export_vtk(result_file, vtk, overwrite, vtk_every):
             click.echo(f"ParaView: {p}")
     if animation:
         from ..animate import animate
@@ -50,7 +53,7 @@ def write_views(result_file: str | Path, vtk: str | None, animation: str | None,
 @view_options
 @overwrite_option
 @verbosity_options
-def export(result_file: str, vtk: str | None, animation: str | None, overwrite: bool) -> None:
+def export(result_file: str, vtk: str | None, vtk_every: int, animation: str | None, overwrite: bool) -> None:
     """Export RESULT_FILE (of simulate, or of optimize: its start and optimum) for ParaView
     (--vtk DIR) or as an animation (--animate FILE.gif|.mp4)."""
     from ..errors import DynsensError
@@ -58,4 +61,4 @@ def export(result_file: str, vtk: str | None, animation: str | None, overwrite: 
     if not vtk and not animation:
         raise DynsensError("export: expected --vtk DIR and/or --animate FILE, found neither")
     check_views(result_file, list(stored_runs(result_file)), vtk, animation, overwrite)
-    write_views(result_file, vtk, animation, overwrite)
+    write_views(result_file, vtk, animation, overwrite, vtk_every)

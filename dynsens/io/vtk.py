@@ -5,8 +5,9 @@ simulation, ``start`` and ``optimum`` for an optimization):
 
 * ``DIR/<stem>.pvd``: the collection ParaView opens (File > Open), one ``DataSet`` per instant
   and part, with its time in seconds;
-* ``DIR/<stem>/<stem>_<part>_<k>.vtu``: one unstructured grid per instant and part (see
-  :mod:`dynsens.io.scene` for the parts, points, cells and fields).
+* ``DIR/<stem>/<stem>_<part>_<k>.vtu``: one unstructured grid per stored instant ``k`` (every
+  one, or every ``every``-th and the last) and part (see :mod:`dynsens.io.scene` for the
+  parts, points, cells and fields).
 
 The files of a run are written into a temporary folder next to ``DIR/<stem>`` and renamed into
 place when all are written; the ``.pvd`` comes last, so an interrupted export never leaves a
@@ -54,24 +55,29 @@ def vtk_targets(path: str | Path, folder: str | Path, labels: list[str]) -> list
     return out
 
 
-def export_vtk(path: str | Path, folder: str | Path, overwrite: bool = False) -> list[Path]:
-    """Write every run of result file ``path`` as a ParaView time series into ``folder``; returns
-    the ``.pvd`` files.  Raises OutputExistsError before writing anything when an output exists
-    and not ``overwrite``."""
+def export_vtk(path: str | Path, folder: str | Path, overwrite: bool = False, every: int = 1) -> list[Path]:
+    """Write every run of result file ``path`` as a ParaView time series into ``folder``: every
+    ``every``-th stored instant, the last always; returns the ``.pvd`` files.  Raises
+    OutputExistsError before writing anything when an output exists and not ``overwrite``."""
     meshio = need_meshio()
     runs = stored_runs(path)
     check_output_folder(folder, vtk_targets(path, folder, list(runs)), overwrite, option="--vtk")
     written = []
     for label, group in runs.items():
         scene = read_scene(path, group, label)
-        written.append(write_scene(scene, Path(folder), run_stem(path, label), overwrite, meshio))
+        written.append(write_scene(scene, Path(folder), run_stem(path, label), overwrite, meshio, every))
     return written
 
 
-def write_scene(scene: Scene, folder: Path, stem: str, overwrite: bool = False, meshio: Any = None) -> Path:
-    """``folder/<stem>.pvd`` and ``folder/<stem>/*.vtu`` of one scene (atomically); returns the
-    ``.pvd``."""
+def write_scene(scene: Scene, folder: Path, stem: str, overwrite: bool = False, meshio: Any = None,
+                every: int = 1) -> Path:
+    """``folder/<stem>.pvd`` and ``folder/<stem>/*.vtu`` of one scene (atomically), every
+    ``every``-th instant and the last; returns the ``.pvd``."""
     meshio = meshio or need_meshio()
+    if not (isinstance(every, int) and every >= 1):
+        raise ValueError(f"every: expected an integer >= 1, found {every!r}")
+    n = len(scene.time)
+    instants = sorted(set(range(0, n, every)) | ({n - 1} if n else set()))
     pvd, data = folder / f"{stem}.pvd", folder / stem
     if not overwrite and (pvd.exists() or data.exists()):
         raise OutputExistsError(f"{pvd if pvd.exists() else data} exists: pass --overwrite to replace it")
@@ -79,8 +85,9 @@ def write_scene(scene: Scene, folder: Path, stem: str, overwrite: bool = False, 
     tmp = Path(tempfile.mkdtemp(prefix=f".{stem}.", suffix=".tmp", dir=folder))
     entries = []
     try:
-        width = len(str(max(len(scene.time) - 1, 0)))
-        for k, t in enumerate(scene.time):
+        width = len(str(max(n - 1, 0)))
+        for k in instants:
+            t = scene.time[k]
             for j, part in enumerate(scene.parts):
                 name = f"{stem}_{part.name}_{k:0{width}d}.vtu"
                 meshio.write(tmp / name, _mesh(meshio, part, k), file_format="vtu")
