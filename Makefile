@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test lint test-min example reproduce-table1 figures report bench bench-peers cases clean
+.PHONY: setup test lint test-min example reproduce-table1 figures views report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -76,6 +76,10 @@ figures: $(STAMP)
 	cp results/convergence/duffing_chain_tip_end_work_precision.png results/convergence/tyrolean_weir_f_work_precision.png docs/
 	$(VENV)/bin/dynsens optimize cases/tyrolean_weir.yaml -o results/weir_opt.h5 --overwrite --plots results/weir_plots
 	cp results/weir_plots/weir_opt_history.png docs/weir_opt_history.png
+
+# the weir's animation and the tower's stress-ratio frame in the README (docs/viewing.md)
+views: $(STAMP)
+	$(PY) scripts/make_view_figures.py
 
 # work-precision study of the shipped cases -> results/convergence/ (tables and plots)
 report: $(STAMP)

@@ -15,6 +15,7 @@ from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli
 from .options import case_argument, overwrite_option, set_option, verbosity_options
+from .views import DRAWN_HISTORIES, check_views, view_options, write_views
 
 log = logging.getLogger("dynsens.cli")
 
@@ -107,19 +108,24 @@ def _aggregate_notes(extra: dict) -> list[str]:
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write a PNG of the recorded quantities (output.quantities) with units, events and "
                    "the responses that read them to DIR.")
+@view_options
 @verbosity_options
 def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
-             no_sensitivities: bool, plots: str | None) -> None:
+             no_sensitivities: bool, plots: str | None, vtk: str | None, vtk_every: int,
+             animation: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
     check_output_path(output, overwrite)     # before the run, not after it
     if plots:
         check_output_folder(plots, [Path(plots) / f"{Path(output).stem}.png"], overwrite, option="--plots")
+    check_views(output, [""], vtk, animation, overwrite)
     case = load_case(case_file, overrides)
+    # a drawing reads the state histories: store them too (the case's own are kept)
+    history = tuple(dict.fromkeys(tuple(case.plan.history) + DRAWN_HISTORIES)) if vtk or animation else None
     log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",
              case.name, case.plan.n_steps, case.plan.dt, len(case.design), len(case.response_names),
              len(case.quantities))
     with Progress(case.plan.n_steps, f"simulating {case.name}") as bar:
-        result = run_case(case, sensitivities=False if no_sensitivities else None,
+        result = run_case(case, sensitivities=False if no_sensitivities else None, history=history,
                           progress=lambda i, n: bar.update(i, f"step {i} of {n}"))
     write_result(output, result, case, overwrite=overwrite)
     click.echo(format_summary(result, case.design_names))
@@ -146,3 +152,4 @@ def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "
                    "(nothing in the model or responses depends on it at this design)")
     click.echo(f"written: {output}")
+    write_views(output, vtk, animation, overwrite, vtk_every)

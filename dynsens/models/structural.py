@@ -91,6 +91,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         self.c = dp_par.get("c", np.zeros(0, int))
         self.dim = dim
         self.node_names = list(node_coords)
+        self.node_coords = node_coords     # name -> parameter indices of its coordinates (drawing)
         self.bar_dofs, bar_par = bars.freeze(2 * dim)
         self.bar_names = bars.names
         self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))

@@ -50,8 +50,9 @@ Output file (OPT.h5, appended after every iteration so an interruption loses not
 * ``/optimization/summary/*``: one row per start (``start``, ``x``, ``f``,
   ``max_violation``, ``success``, ``feasible``, ``nit``, ``n_sim``, ``message``), attribute
   ``best``;
-* ``/optimization/optimum/{time, state/<field>, responses}``: the best design's time
-  histories (for plots).
+* ``/optimization/optimum/{x, time, state/<field>, responses}``: the best design's time
+  histories (for plots and ``dynsens export``); ``/optimization/initial``: the same for the
+  start design x0.
 
 ``--resume`` restarts SLSQP at the last recorded iterate of every unfinished start with the
 iterations left; SLSQP's quasi-Newton Hessian approximation is not stored and is rebuilt

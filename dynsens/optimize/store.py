@@ -187,14 +187,13 @@ def _store_run(path: Path, case: Case, x: np.ndarray, group: str) -> bool:
 
 
 def _store_optimum(path: Path, case: Case, x: np.ndarray) -> None:
-    """The best design's run in ``/optimization/optimum``; with recorded quantities, the start
-    design's run in ``/optimization/initial`` as well (for the start-vs-optimum plots)."""
+    """The best design's run in ``/optimization/optimum`` and the start design's in
+    ``/optimization/initial`` (for the start-vs-optimum plots and ``dynsens export``)."""
     _store_run(path, case, x, "optimization/optimum")
-    if case.quantities:
-        with h5py.File(path, "r") as f:
-            x0 = f["design/x0"][()] if "design/x0" in f else None
-        if x0 is not None:
-            _store_run(path, case, x0, "optimization/initial")
+    with h5py.File(path, "r") as f:
+        x0 = f["design/x0"][()] if "design/x0" in f else None
+    if x0 is not None:
+        _store_run(path, case, x0, "optimization/initial")
 
 
 def read_history(path: str | Path, start: int = 0) -> dict[str, np.ndarray]:
