@@ -47,7 +47,7 @@ NO_EVENTS = {
 SHORT = {"duffing_chain": ["integrator.t_end=0.3"], "four_bar": ["integrator.t_end=0.3"],
          "slider_crank": ["integrator.t_end=0.3"], "sdof_step": ["integrator.t_end=0.5"],
          "truss_impact": [], "truss_lightweight": [], "pendulum_projection": ["integrator.t_end=1"],
-         "n_four_bar": ["integrator.t_end=0.8"], **NO_EVENTS}
+         "n_four_bar": ["integrator.t_end=0.8"], "ten_bar_truss": [], **NO_EVENTS}
 SCHEMES = {"newmark": [], "hht": ["integrator.scheme=hht", "integrator.alpha=0.1"],
            "generalized_alpha": ["integrator.scheme=generalized_alpha", "integrator.rho_inf=0.6"]}
 
