@@ -256,3 +256,11 @@ def test_cited_test_files_exist() -> None:
         cited |= {(path.name, f) for f in re.findall(r"\b(test_\w+\.py)\b", path.read_text(encoding="utf-8"))}
     missing = sorted((where, f) for where, f in cited if not (REPO / "tests" / f).exists())
     assert not missing, missing
+
+
+def test_make_targets_in_the_documents_exist() -> None:
+    targets = set(re.findall(r"^([\w-]+):", (REPO / "Makefile").read_text(encoding="utf-8"), re.M))
+    named = {(d.name, t) for d in COMMAND_DOCS for t in re.findall(r"`make ([\w-]+)`|^make ([\w-]+)",
+                                                                   d.read_text(encoding="utf-8"), re.M)}
+    missing = sorted((d, t) for d, pair in named for t in pair if t and t not in targets)
+    assert len(named) >= 5 and not missing, missing
