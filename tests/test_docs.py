@@ -172,7 +172,7 @@ def test_slow_markers_stand_right_above_a_fence() -> None:
     for doc in COMMAND_DOCS:
         lines = doc.read_text(encoding="utf-8").splitlines()
         for i, line in enumerate(lines):
-            if "<!-- slow" in line:
+            if line.strip().startswith("<!-- slow"):
                 assert SLOW.match(line.strip()) and i + 1 < len(lines) and lines[i + 1].startswith("```"), \
                     f"{doc.name}:{i + 1}: a slow marker must be the line right above a block's fence"
 
