@@ -8,8 +8,10 @@ from ..convergence import METHODS, observed_order, report_files, work_precision,
 from ..io.paths import check_output_folder
 from ..progress import Progress
 from .main import cli
-from .options import (case_argument, overwrite_option, parse_float_list, scheduler_option, set_option,
-                      verbosity_options, workers_option)
+from .options import (DEFAULT_OUTPUT_FOLDER, case_argument, overwrite_option, parse_float_list, scheduler_option,
+                      set_option, verbosity_options, workers_option)
+
+DEFAULT_FOLDER = f"{DEFAULT_OUTPUT_FOLDER}/convergence"
 
 
 @cli.command("convergence")
@@ -18,8 +20,9 @@ from .options import (case_argument, overwrite_option, parse_float_list, schedul
               help="Comma-separated time steps (default: the case's Δt × 4, 2, 1, 1/2, 1/4).")
 @click.option("--methods", default=",".join(METHODS), show_default=True,
               help=f"Comma-separated subset of {', '.join(METHODS)}.")
-@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), required=True,
-              help="Folder for the tables and plots.")
+@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False), default=DEFAULT_FOLDER,
+              show_default=True,
+              help="Folder for the tables and plots (their names start with the case's name).")
 @workers_option("1: the wall times are part of the study")
 @scheduler_option
 @overwrite_option

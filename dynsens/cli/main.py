@@ -55,7 +55,8 @@ def cli(verbose: int, quiet: bool) -> None:
 
 def main() -> None:
     """Console-script entry point."""
-    from . import check_gradients, convergence, info, modes, simulate, study, verify, views  # noqa: F401  (register)
+    from . import (check_gradients, convergence, examples, info, modes, simulate, study,  # noqa: F401  (register)
+                   verify, views)
     try:
         from . import optimize  # noqa: F401
     except ImportError:  # pragma: no cover

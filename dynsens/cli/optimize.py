@@ -16,8 +16,8 @@ from ..optimize.verify import Verification, format_verification
 from ..optimize.summary import decision_summary
 from ..progress import Progress
 from .main import cli
-from .options import (FiniteFloat, case_argument, overwrite_option, scheduler_option, seed_option, set_option,
-                      verbosity_options)
+from .options import (FiniteFloat, case_argument, default_output, overwrite_option, scheduler_option, seed_option,
+                      set_option, verbosity_options)
 
 
 def _parse_x0(ctx: Any, param: Any, values: tuple[str, ...]) -> dict[str, float]:
@@ -89,8 +89,9 @@ def format_verdict(o: StartOutcome) -> str:
 
 @cli.command()
 @case_argument
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
-              help="HDF5 file for the optimization history (appended after every iteration).")
+@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
+              help="HDF5 file for the optimization history (appended after every iteration) "
+                   "[default: results/<case name>_opt.h5].")
 @overwrite_option
 @set_option
 @click.option("-x", "--x0", "x0", multiple=True, metavar="NAME=VALUE", callback=_parse_x0,
@@ -117,7 +118,7 @@ def format_verdict(o: StartOutcome) -> str:
               help="Write PNG plots to DIR: history (objective, violation, KKT), design variables and "
                    "constraints against their bounds in units, recorded quantities at start and optimum.")
 @verbosity_options
-def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
+def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
              maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
              workers: int | None, scheduler: str | None, resume: bool, verify: bool | None, rounds: int | None,
              plots: str | None) -> None:
@@ -137,14 +138,21 @@ def optimize(case_file: str, output: str, overwrite: bool, overrides: tuple[str,
     from ..io.paths import check_output_path
     if resume and overwrite:
         raise OptimizationError("--resume continues OUTPUT and --overwrite replaces it: give one of them")
-    if not resume and Path(output).exists() and not overwrite:
-        raise OutputExistsError(f"{output} exists: pass --overwrite to replace it, or --resume to continue it")
-    check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
+
+    def check_output(output: str) -> None:
+        if not resume and Path(output).exists() and not overwrite:
+            raise OutputExistsError(f"{output} exists: pass --overwrite to replace it, or --resume to continue it")
+        check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
+    if output is not None:
+        check_output(output)                        # before the case is read
+    case = load_case(case_file, overrides)
+    if output is None:
+        output = default_output(case, "_opt.h5")
+        check_output(output)
     if plots:
         from ..io.paths import check_output_folder
         from ..optimize.plots import plot_files
         check_output_folder(plots, plot_files(output, plots), overwrite or resume, option="--plots")
-    case = load_case(case_file, overrides)
     if case.optimization is None:
         raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "
                                 "and constraints (see the README)")

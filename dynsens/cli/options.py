@@ -4,9 +4,12 @@ from __future__ import annotations
 import logging
 import math
 import sys
+from pathlib import Path
 from typing import Any, Callable
 
 import click
+
+from ..io.paths import safe_stem
 
 case_argument = click.argument("case_file", type=click.Path(dir_okay=False, path_type=str))
 set_option = click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
@@ -16,6 +19,16 @@ overwrite_option = click.option("--overwrite", is_flag=True, help="Replace an ex
 scheduler_option = click.option("--scheduler", default=None, metavar="ADDRESS",
                                  help="Run the simulations on this Dask distributed scheduler, e.g. "
                                       "tcp://host:8786 (pip install 'dynsens[dask]'; see the README).")
+
+
+DEFAULT_OUTPUT_FOLDER = "results"
+
+
+def default_output(case: Any, suffix: str) -> str:
+    """The output path when ``-o`` is not given: ``results/<case name><suffix>`` relative to the
+    current working directory (the case's ``name:``, which falls back to its file's stem; kept to
+    letters, digits and ``. _ -``, so a name such as ``../x`` stays inside ``results/``)."""
+    return str(Path(DEFAULT_OUTPUT_FOLDER) / f"{safe_stem(case.name)}{suffix}")
 
 
 def workers_option(default: str) -> Callable:

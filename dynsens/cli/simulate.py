@@ -14,7 +14,7 @@ from ..progress import Progress
 from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli
-from .options import case_argument, overwrite_option, set_option, verbosity_options
+from .options import case_argument, default_output, overwrite_option, set_option, verbosity_options
 from .views import DRAWN_HISTORIES, check_views, view_options, write_views
 
 log = logging.getLogger("dynsens.cli")
@@ -100,8 +100,8 @@ def _aggregate_notes(extra: dict) -> list[str]:
 
 @cli.command()
 @case_argument
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
-              help="HDF5 result file to write.")
+@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
+              help="HDF5 result file to write [default: results/<case name>.h5].")
 @overwrite_option
 @set_option
 @click.option("--no-sensitivities", is_flag=True, help="Primal run only.")
@@ -110,15 +110,19 @@ def _aggregate_notes(extra: dict) -> list[str]:
                    "the responses that read them to DIR.")
 @view_options
 @verbosity_options
-def simulate(case_file: str, output: str, overwrite: bool, overrides: tuple[str, ...],
+def simulate(case_file: str, output: str | None, overwrite: bool, overrides: tuple[str, ...],
              no_sensitivities: bool, plots: str | None, vtk: str | None, vtk_every: int,
              animation: str | None) -> None:
     """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
-    check_output_path(output, overwrite)     # before the run, not after it
+    if output is not None:
+        check_output_path(output, overwrite)     # before the case is read and run
+    case = load_case(case_file, overrides)
+    if output is None:
+        output = default_output(case, ".h5")
+        check_output_path(output, overwrite)     # before the run, not after it
     if plots:
         check_output_folder(plots, [Path(plots) / f"{Path(output).stem}.png"], overwrite, option="--plots")
     check_views(output, [""], vtk, animation, overwrite)
-    case = load_case(case_file, overrides)
     # a drawing reads the state histories: store them too (the case's own are kept)
     history = tuple(dict.fromkeys(tuple(case.plan.history) + DRAWN_HISTORIES)) if vtk or animation else None
     log.info("case %s: %d steps of %g s, %d design variables, %d responses, %d recorded quantities",

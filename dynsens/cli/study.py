@@ -12,13 +12,15 @@ from ..io.paths import check_output_folder
 from ..study import format_summary, plot_study, read_study, run_study
 from ..study.plots import study_plot_files
 from .main import cli
-from .options import case_argument, overwrite_option, scheduler_option, seed_option, set_option, workers_option
+from .options import (case_argument, default_output, overwrite_option, scheduler_option, seed_option, set_option,
+                      workers_option)
 
 
 @cli.command()
 @case_argument
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
-              help="HDF5 file of the study (a row appended as each design finishes).")
+@click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
+              help="HDF5 file of the study (a row appended as each design finishes) "
+                   "[default: results/<case name>_study.h5].")
 @click.option("--sample", default=None, metavar="SPEC",
               help="lhs:N (Latin hypercube), sobol:N (N = 2^k), grid:AxBx... (points per variable) in the "
                    "case's bounds, or a CSV file with a header of design-variable names. Required unless --resume.")
@@ -31,7 +33,7 @@ from .options import case_argument, overwrite_option, scheduler_option, seed_opt
 @set_option
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write study_responses.png, study_sensitivity.png and study_pairs.png to DIR.")
-def study(case_file: str, output: str, sample: str | None, gradients: bool, seed: int | None,
+def study(case_file: str, output: str | None, sample: str | None, gradients: bool, seed: int | None,
           workers: int | None, scheduler: str | None, resume: bool, overwrite: bool,
           overrides: tuple[str, ...], plots: str | None) -> None:
     """Evaluate CASE_FILE at every design of --sample; failed designs are recorded, not fatal.
@@ -41,6 +43,8 @@ def study(case_file: str, output: str, sample: str | None, gradients: bool, seed
     """
     case = load_case(case_file, overrides)
     names = case.design_names
+    if output is None:
+        output = default_output(case, "_study.h5")
     if plots:       # before the run, not after it
         check_output_folder(plots, study_plot_files(plots), overwrite or resume, option="--plots")
 
