@@ -87,3 +87,15 @@ def test_what_the_methods_refuse(monkeypatch) -> None:
     monkeypatch.setattr(builtins, "__import__", no_nlopt)
     with pytest.raises(OptimizationError, match=r"pip install 'dynsens\[mma\]'"):
         dynsens.optimize(pair("MMA"), verify=False)
+
+
+@pytest.mark.parametrize("method", ["SLSQP", "MMA", "trust-constr"])
+def test_each_method_reaches_the_optimum_from_a_start_on_the_bounds(method: str) -> None:
+    """A start on the upper bounds: trust-constr (an interior-point method) stopped there after
+    one iteration and called the start its optimum; it now starts just inside the bounds."""
+    raw = pair(method)
+    for v in raw["design"]["variables"]:
+        v["value"] = v["upper"]
+    res = dynsens.optimize(raw, verify=False)
+    assert res.success and res.feasible, res.message
+    np.testing.assert_allclose(res.x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)

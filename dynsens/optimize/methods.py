@@ -90,6 +90,9 @@ def _slsqp(evaluator: Evaluator, u0: np.ndarray, maxiter: int, ftol: float,
                         int(res.nit))
 
 
+INTERIOR = 1e-3     # trust-constr's start: this share of each variable's range inside its bounds
+
+
 def _trust_constr(evaluator: Evaluator, u0: np.ndarray, maxiter: int, ftol: float,
                   on_iteration: Callable[[np.ndarray], None]) -> MethodResult:
     from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
@@ -107,6 +110,10 @@ def _trust_constr(evaluator: Evaluator, u0: np.ndarray, maxiter: int, ftol: floa
         on_iteration(np.asarray(u, dtype=float))
         return False
 
+    # an interior-point method: a start on a bound (barrier infinite) ends at once with "xtol"
+    # and the start reported as the optimum; start a little inside
+    width = np.where(np.isfinite(up - lo), up - lo, 1.0)
+    u0 = np.clip(u0, lo + INTERIOR * width, up - INTERIOR * width)
     # scipy counts the first call (at u0) as an iteration: maxiter + 1 calls of the callback at most
     res = minimize(evaluator.fun, u0, jac=evaluator.jac, hess=BFGS(), method="trust-constr",
                    bounds=Bounds(lo, up, keep_feasible=True), constraints=cons, callback=callback,
