@@ -118,6 +118,7 @@ def _chain(n: int, steps: int = 10, dt: float = 2.0e-3) -> dict:
 def _without_springs(raw: dict) -> dict:
     bare = copy.deepcopy(raw)
     bare["model"]["forces"] = [f for f in bare["model"]["forces"] if f["type"] != "rotational_spring_damper"]
+    bare["responses"] = [r for r in bare["responses"] if "element" not in r["quantity"]]
     return bare
 
 
@@ -142,7 +143,8 @@ def _dense(A):
     return A.toarray() if hasattr(A, "toarray") else np.asarray(A)
 
 
-@pytest.mark.parametrize("build", [_pair, lambda: _chain(4)], ids=["spatial pair", "planar chain"])
+@pytest.mark.filterwarnings("ignore:.*used by no element")      # (the model without the springs)
+@pytest.mark.parametrize("build", [_pair, lambda: _chain(3)], ids=["spatial pair", "planar chain"])
 @pytest.mark.parametrize("linear_algebra", ["dense", "sparse"])
 def test_kernel_force_jacobians_and_design_partials_equal_the_element(build, linear_algebra) -> None:
     raw = build()
