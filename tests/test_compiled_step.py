@@ -28,8 +28,8 @@ from dynsens.solver.newton import NewtonSettings, StepSolver
 CASES = Path(__file__).resolve().parent.parent / "cases"
 # the shipped mechanisms the compiled step serves (real runs), and those it leaves to Python
 SERVED = ["cart_pole", "hydraulic_lever", "pendulum_3d", "pendulum_projection", "point_pendulum",
-          "rheonomic", "slider_crank", "tyrolean_weir"]
-NOT_SERVED = {"four_bar": "a Python force element (torque)", "torsional_pair": "Python force elements",
+          "rheonomic", "slider_crank", "torsional_pair", "tyrolean_weir"]
+NOT_SERVED = {"four_bar": "a Python force element (torque)",
               "bricard": "n_z = 69, where the Python path tries a band",
               "n_four_bar": "n_z = 97, where the Python path tries a band"}
 

@@ -46,7 +46,7 @@ def test_generalized_force_is_the_torque_times_the_angle_gradient():
     at random (not normalised) states."""
     case = dynsens.load_case(CASES / "torsional_pair.yaml")
     m = case.model
-    el = next(f for f in m.other_forces if f.name == "coupling")
+    el = next(f for f in m.rotational if f.name == "coupling")
     prm = m.parameters(case.x0)
     rng = np.random.default_rng(3)
     n = m.traits.n_q
@@ -56,7 +56,7 @@ def test_generalized_force_is_the_torque_times_the_angle_gradient():
             q[7 * b + 3] += 1.0
         qd = rng.normal(size=n)
         ctx = Ctx(q[:, None], qd[:, None], np.zeros((n, 1)), prm, 0.0)
-        th, thd, T, _, _ = el.state(ctx)
+        th, thd, T = el.state(ctx)
         Q = np.zeros((n, 1))
         el.add(ctx, Q)
         h = 1e-30

@@ -15,7 +15,7 @@ bodies) with point tensors ``Ts4[j]`` and ``C_i = Ts·L_i`` (L_0, L_1, L_2 = p, 
 ``ABV[s, p, level, :]`` of the products ``x_p = a_p·b_p`` as sparse combinations
 (``side_ptr``, ``side_prim``, ``side_coef``: CSR rows ``s·n_prod + p``) of the primitives'
 levels.  The force laws are the elements' own plain-arithmetic functions (``spring_law``,
-``cylinder_law``), compiled here; the time functions (pump flow, point-force amplitudes,
+``cylinder_law``, ``rotational_law``), compiled here; the time functions (pump flow, point-force amplitudes,
 constraint coefficients) stay in Python and enter as arrays.
 
 The numpy path is kept as the reference and ``tests/test_compiled_kernel.py`` checks that both
@@ -31,6 +31,7 @@ import numpy as np
 from ...solver._jit import HAVE_NUMBA, KERNELS, enabled, inline, jit  # noqa: F401
 from .forces import spring_law
 from .hydraulics import cylinder_law
+from .rotational import rotational_law
 from .rotations import T_G
 
 Array = np.ndarray
@@ -278,6 +279,7 @@ def residual(Lp: Array, Lr: Array, C: Array, F: Array, pb: Array, is_point: Arra
 
 _spring = jit(spring_law)
 _cylinder = jit(cylinder_law)
+_rotational = jit(rotational_law)
 SPRING, CYLINDER = 0, 1          # AxialElement.law_kind
 
 
@@ -287,7 +289,8 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
                         prod_eq: Array, cf: Array, shift: Array, norm_eq: Array, norm_body: Array,
                         ax_kind: Array, ax_pidx: Array, ax_c: Array, ax_ext: Array, f_ext: Array,
                         mass: Array, J: Array, gravity: Array, lam: Array, p: Array, pd: Array,
-                        scale: float, alpha: float, beta: float, TG: Array) -> tuple:
+                        scale: float, alpha: float, beta: float, TG: Array, rot_prod: Array,
+                        rot_c: Array) -> tuple:
     """Constraint levels, force-element laws, primitive forces and F_R for B evaluations (the
     kinematics' batch), one call.
 
@@ -295,12 +298,14 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
     and shifts of the equations; axial element i acts through product n_cp + i with the law
     ax_kind[i] (SPRING, CYLINDER), constants ax_c (·, n_ax, n_c), time input ax_ext (·, n_ax)
     and states from p[ax_pidx[i]]; f_ext (·, n_t, 3): applied point forces on the primitives
-    (negative: they enter R1 with −Q_ext).  A shorter leading axis repeats cyclically (as in
-    :func:`kinematics`).
+    (negative: they enter R1 with −Q_ext); rotational spring-damper i acts through products
+    rot_prod[i] (x = u1·u2) and rot_prod[i] + 1 (y = v1·u2) with constants rot_c (·, n_rot, 3)
+    = (k, c, θ_0).  A shorter leading axis repeats cyclically (as in :func:`kinematics`).
 
     Returns F_R (B, n_z), Φ (B, n_eq, 3), weights W (B, n_prod), primitive forces F (B, n_t, 3),
     and the laws: AX (B, n_ax, 5) = (L, L̇, P, ∂P/∂L, ∂P/∂L̇), ∂P/∂p (B, n_ax, n_p),
-    h, ∂h/∂L, ∂h/∂L̇ (B, n_p) and ∂h/∂p (B, n_p, n_p).
+    h, ∂h/∂L, ∂h/∂L̇ (B, n_p), ∂h/∂p (B, n_p, n_p) and the rotational laws RT (B, n_rot, 13)
+    (:func:`.rotational.rotational_law`'s entries).
     """
     B, n_prod, n_t = Lp.shape[0], ABV.shape[2], pb.shape[0]
     n_cp = prod_eq.shape[0]
@@ -314,6 +319,8 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
     HL = np.zeros((B, n_p), Lp.dtype)
     HLd = np.zeros((B, n_p), Lp.dtype)
     Hp = np.zeros((B, n_p, n_p), Lp.dtype)
+    n_rot = rot_prod.shape[0]
+    RT = np.empty((B, n_rot, 13), Lp.dtype)
     for b in range(B):
         cfb, shb = cf[b % cf.shape[0]], shift[b % shift.shape[0]]
         lm, pb_ = lam[b % lam.shape[0]], p[b % p.shape[0]]
@@ -353,11 +360,19 @@ def forces_and_residual(Lp: Array, Lr: Array, C: Array, ABV: Array, X: Array, N:
                 Hp[b, j + 1, j + 1] = h2_p2
             AX[b, i, 0], AX[b, i, 1], AX[b, i, 2], AX[b, i, 3], AX[b, i, 4] = L, Ld, P, P_L, P_Ld
             W[b, n_cp + i] = -0.5 * P / L
+        rc = rot_c[b % rot_c.shape[0]]
+        for i in range(n_rot):                          # rotational: x = u1·u2, y = v1·u2
+            px = rot_prod[i]
+            law = _rotational(X[b, px, 0], X[b, px + 1, 0], X[b, px, 1], X[b, px + 1, 1], rc[i, 0], rc[i, 1],
+                              rc[i, 2])
+            for k in range(13):
+                RT[b, i, k] = law[k]
+            W[b, px], W[b, px + 1] = law[3], law[4]
         _prim_forces_one(W[b], ABV[b], side_ptr, side_prim, side_coef, F[b])
         F[b] += f_ext[b % f_ext.shape[0]]
     R = residual(Lp, Lr, C, F, pb, is_point, mass, J, gravity, lam, norm_eq, norm_body, Phi,
                  scale, alpha, beta, pd, H, TG)
-    return R, Phi, W, F, AX, Pp, H, HL, HLd, Hp
+    return R, Phi, W, F, AX, Pp, H, HL, HLd, Hp, RT
 
 
 TG = np.ascontiguousarray(T_G, dtype=float)

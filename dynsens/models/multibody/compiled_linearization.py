@@ -14,6 +14,9 @@ from typing import Any
 import numpy as np
 
 from .compiled import _G, _mm, _mv, inline, jit
+from .rotational import weight_rows
+
+rotational_weight_rows = inline(weight_rows)
 
 Array = np.ndarray
 
@@ -229,13 +232,14 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                   prod_eq: Array, cf: Array, eq_w: Array, norm_w: Array, norm_eq: Array,
                   norm_body: Array, scale: float, w: Array, f: Array, lam: Array, mass: Array,
                   J: Array, TG: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array,
-                  p_owner: Array, h_L: Array, h_Ld: Array, h_p: Array
-                  ) -> tuple[Array, Array, Array, Array]:
+                  p_owner: Array, h_L: Array, h_Ld: Array, h_p: Array, rot_prod: Array,
+                  rot_law: Array) -> tuple[Array, Array, Array, Array]:
     """Exact ∂F_R/∂(z, q, q̇, p): (R_z (n_z, n_z), R_q (n_z, n_q), R_qd (n_z, n_q), R_p (n_z, n_p)).
 
     Axial elements i act through product ax_prod[i] with ax_law[i] = (L, L̇, P, P_L, P_L̇),
     ax_Pp[i, :] = ∂P/∂p; pressure row r belongs to element p_owner[r] with ∂h_r/∂L = h_L[r],
-    ∂h_r/∂L̇ = h_Ld[r] and ∂h/∂p = h_p (n_p, n_p).
+    ∂h_r/∂L̇ = h_Ld[r] and ∂h/∂p = h_p (n_p, n_p).  Rotational spring-damper i acts through
+    products rot_prod[i], rot_prod[i] + 1 with its law rot_law[i] (:func:`.rotational.rotational_law`).
     """
     n_b = Lp.shape[1]
     n_q = 7 * n_b
@@ -317,6 +321,17 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
             for n in range(n_q):
                 R3_q[r, n] -= h_L[r] * dL[i, n] + h_Ld[r] * dLd[i, n]
                 R3_qd[r, n] -= h_Ld[r] * dL[i, n]
+    # --- rotational spring-dampers: weights w_x, w_y of x = u1·u2, y = v1·u2 (their second
+    # derivatives are in the geometric stiffness above)
+    for i in range(rot_prod.shape[0]):
+        px = rot_prod[i]
+        jx, jy = G[px, 0], G[px + 1, 0]
+        rx, ry, rxd, ryd = rotational_weight_rows(rot_law[i], jx, jy, G[px, 1], G[px + 1, 1])
+        for u in range(n_q):
+            if jx[u] != 0.0 or jy[u] != 0.0:
+                for v in range(n_q):
+                    R1_q[u, v] += jx[u] * rx[v] + jy[u] * ry[v]
+                    R1_qd[u, v] += jx[u] * rxd[v] + jy[u] * ryd[v]
     # --- assemble
     R_z = np.zeros((n_z, n_z), Lp.dtype)
     R_q = np.zeros((n_z, n_q), Lp.dtype)

@@ -11,7 +11,8 @@ The step operations are overloaded here for it:
 * S is factored and solved by LAPACK gesv (getrf, then getrs: the calls, and so the numbers, of
   the Python path's :class:`~dynsens.solver.linalg.Factor`), with the same tests of regularity.
 
-It serves a mechanism whose every force element has a compiled law (no Python force elements),
+It serves a mechanism whose every force element has a compiled law (spring-dampers, cylinders,
+rotational spring-dampers; no Python force elements),
 in real arithmetic, with a dense iteration matrix; other runs take the same iteration in Python.
 numba caches it on disk: the types of its arguments, not the model, select the overloads.
 """
@@ -75,6 +76,8 @@ class StepData(NamedTuple):
     ax_prod: Array
     p_owner: Array
     TG: Array
+    rot_prod: Array
+    rot_c: Array
 
 
 def _is_step_data(ops: Any) -> bool:
@@ -126,13 +129,13 @@ def _register() -> None:
             q, qd, qdd, lam, p, pd = s
             Lp, Lr, C, PV, ABV, X, N = kinematics(ops, s)
             w = ops.weights
-            R, Phi, W, F, AX, Pp, H, HL, HLd, Hp = cc.forces_and_residual(
+            R, Phi, W, F, AX, Pp, H, HL, HLd, Hp, RT = cc.forces_and_residual(
                 Lp, Lr, C, ABV, X, N, ops.pb, ops.is_point, ops.side_ptr, ops.side_prim, ops.side_coef,
                 ops.prod_eq, ops.cf, ops.shift, ops.norm_eq, ops.norm_body, ops.ax_kind, ops.ax_pidx,
                 ops.ax_c, ops.ext, ops.f_ext, ops.mass, ops.J, ops.gravity, np.ascontiguousarray(lam).reshape(1, -1),
                 np.ascontiguousarray(p).reshape(1, -1), np.ascontiguousarray(pd).reshape(1, -1), w[0], w[1],
-                w[2], ops.TG)
-            return R[0], (Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp)
+                w[2], ops.TG, ops.rot_prod, ops.rot_c)
+            return R[0], (Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp, RT)
         return impl
 
     @overload(core.step_no_factor)
@@ -152,7 +155,7 @@ def _register() -> None:
 
         def impl(ops, s, evaluation, rhs):  # type: ignore[no-untyped-def]
             lam = s[3]
-            Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp = evaluation
+            Lp, C, ABV, W, F, AX, Pp, HL, HLd, Hp, RT = evaluation
             n_q, n_cp = ops.sizes[0], ops.sizes[3]
             G = clin.product_rows(C[0], ABV[0], ops.pb, ops.is_point, ops.side_ptr, ops.side_prim,
                                   ops.side_coef, n_q)
@@ -160,7 +163,8 @@ def _register() -> None:
                 Lp[0], C[0], ABV[0], G, ops.pb, ops.is_point, ops.Ts4[0], ops.side_ptr, ops.side_prim,
                 ops.side_coef, n_cp, ops.prod_eq, ops.cf[0], ops.eq_row_weights, ops.norm_row_weights,
                 ops.norm_eq, ops.norm_body, ops.weights[0], W[0], F[0], np.ascontiguousarray(lam), ops.mass[0],
-                ops.J[0], ops.TG, ops.ax_prod, AX[0], Pp[0], ops.p_owner, HL[0], HLd[0], Hp[0])
+                ops.J[0], ops.TG, ops.ax_prod, AX[0], Pp[0], ops.p_owner, HL[0], HLd[0], Hp[0], ops.rot_prod,
+                RT[0])
             c = ops.coeffs
             S = clin.iteration_matrix(R_z, R_q, R_qd, R_p, c[0], c[1], c[2])
             n = S.shape[0]
@@ -209,8 +213,8 @@ def _register() -> None:
 def _sources_stamp() -> str:
     """The cache key of the compiled iteration: the sources it inlines (the overloads here, the
     kernels and force laws)."""
-    from . import forces, hydraulics
-    return sources_stamp((cc, clin, forces, hydraulics, sys.modules[__name__]))
+    from . import forces, hydraulics, rotational
+    return sources_stamp((cc, clin, forces, hydraulics, rotational, sys.modules[__name__]))
 
 
 # the compiled iteration (the overloads registered first)
@@ -243,7 +247,7 @@ def step_factory(model: "MultibodyModel", newton: bool, refactor: bool) -> Any:
             np.array([tr.n_q, tr.n_lam, tr.n_p, lay.n_cp]), blocks, cl.pb, cl.is_point, ck.Ts4, cl.side_ptr,
             cl.side_prim, cl.side_coef, ck.cAB, cl.norm_body, cl.norm_eq, cl.prod_eq, cl.ax_kind, cl.ax_pidx,
             ck.ax_c, ck.mass, ck.J, g, np.array([model.scale, model.alpha, model.beta], float),
-            model.eq_row_weights, model.norm_row_weights, cl.ax_prod, cl.p_owner, cc.TG))
+            model.eq_row_weights, model.norm_row_weights, cl.ax_prod, cl.p_owner, cc.TG, cl.rot_prod, ck.rot_c))
         kept.clear()        # one design at a time (a run's)
         kept[id(params)] = (params, fields)
         return fields

@@ -11,7 +11,8 @@ this module evaluates all of them at once for a state, with few numpy calls:
 * *sides*: every vector term (a point separation, a constant...) is a fixed linear
   combination ``M`` of primitives plus a design-dependent constant;
 * *products* ``x = a·b`` of two sides, with ẋ, ẍ and the rows ∂x/∂q, ∂ẋ/∂q, ∂ẍ/∂q (the
-  constraint equations' terms first, then one ``d·d`` per axial force element).
+  constraint equations' terms first, then one ``d·d`` per axial force element, then two per
+  rotational spring-damper, ``u_1·u_2`` and ``v_1·u_2`` (:mod:`.rotational`)).
 
 Arrays carry a leading batch axis B: states (B or 1) and parameter sets (B or 1)
 broadcast, so perturbed designs (design partials, output gradients) take one call.
@@ -58,9 +59,11 @@ class Layout:
     eqs : the model's equations (:class:`DotEq` and :class:`NormEq`), in λ order.
     axial : the axial force elements (springs, cylinders; each with a point separation ``d``).
     points : points at which point forces act.
+    rotational : the rotational spring-dampers (:class:`.rotational.RotationalSpringDamper`).
     """
 
-    def __init__(self, n_bodies: int, eqs: list[Equation], axial: list[Any], points: list[Point]):
+    def __init__(self, n_bodies: int, eqs: list[Equation], axial: list[Any], points: list[Point],
+                 rotational: list[Any] | None = None):
         self.n_b, self.n_q, self.n_eq = n_bodies, 7 * n_bodies, len(eqs)
         self.prims: list[Term] = []
         self._pid: dict[tuple[Any, ...], int] = {}
@@ -95,6 +98,11 @@ class Layout:
                             f"and {cc.CYLINDER} (cylinder), None selects the numpy kernel")
         for el in axial:
             sides += [self._side(el.d), self._side(el.d)]
+        self.rotational = rotational or []
+        # rotational spring-damper i: products rot_prod[i] (x = u1·u2) and rot_prod[i] + 1 (y = v1·u2)
+        self.rot_prod = self.n_cp + len(axial) + 2 * np.arange(len(self.rotational), dtype=np.int64)
+        for el in self.rotational:
+            sides += [self._side(el.u1), self._side(el.u2), self._side(el.v1), self._side(el.u2)]
         point_sides = [self._side(P)[0] for P in points]
         self.point_prim = [next(iter(m)) if m else -1 for m in point_sides]
         n_t, n_p = len(self.prims), len(sides) // 2
@@ -195,7 +203,8 @@ class Layout:
                 np.argmax(self.S, axis=0).astype(np.int64) if self.n_cp else np.zeros(0, np.int64),
                 np.array([-1 if el.law_kind is None else el.law_kind for el in self.axial], np.int64),
                 np.array([el.p_index for el in self.axial], np.int64),
-                np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner)
+                np.arange(self.n_cp, self.n_cp + len(self.axial), dtype=np.int64), p_owner,
+                self.rot_prod)
         return self._compiled
 
 
@@ -212,6 +221,7 @@ class KParams:
     pv: Array              # (B, n_pv)
     ec: list[Array]        # per axial element: its constants (B, n_c)
     prms: list[MBParams]
+    rc: Array              # (B, n_rot, 3) the rotational spring-dampers' k, c, θ_0
 
     @property
     def B(self) -> int:
@@ -232,7 +242,7 @@ def kernel_params(lay: Layout, prm: MBParams) -> KParams:
     kp = KParams(Ts4.reshape(1, lay.n_t, 12, 4), Ts4[None], c[0][None], c[1][None],
                  np.array([b.mass for b in bs], dt)[None], np.array([b.inertia for b in bs], dt)[None],
                  np.asarray(prm.pv)[None], [np.asarray(el.constants(prm))[None] for el in lay.axial],
-                 [prm])
+                 [prm], np.array([el.constants(prm.pv) for el in lay.rotational], dt).reshape(1, -1, 3))
     prm.ts["__kernel__"] = kp  # type: ignore[assignment]
     return kp
 
@@ -243,7 +253,7 @@ def stack_kernel_params(kps: list[KParams]) -> KParams:
         return np.concatenate([getattr(k, name) for k in kps])
     ec = [np.concatenate([k.ec[i] for k in kps]) for i in range(len(kps[0].ec))]
     return KParams(cat("Ts"), cat("Ts4"), cat("cA"), cat("cB"), cat("mass"), cat("J"), cat("pv"),
-                   ec, [p for k in kps for p in k.prms])
+                   ec, [p for k in kps for p in k.prms], cat("rc"))
 
 
 class Kin:
@@ -345,3 +355,4 @@ class CompiledArrays:
     ax_pidx: Array       # (n_ax,) position of its first state in p
     ax_prod: Array       # (n_ax,) its product d·d
     p_owner: Array       # (n_p,) the element each state belongs to
+    rot_prod: Array      # (n_rot,) the product u1·u2 of each rotational spring-damper (v1·u2: the next)

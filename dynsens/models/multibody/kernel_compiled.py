@@ -110,6 +110,7 @@ class CompiledParams:
     mass: Array          # (B, n_b)
     J: Array             # (B, n_b, 3, 3)
     ax_c: Array          # (B, n_ax, n_c) the axial elements' constants, zero-padded
+    rot_c: Array         # (B, n_rot, 3) the rotational spring-dampers' k, c, θ_0
 
 
 def compiled_params(kp: KParams, dtype: Any) -> CompiledParams:
@@ -123,7 +124,8 @@ def compiled_params(kp: KParams, dtype: Any) -> CompiledParams:
             ax_c[:, i, :c.shape[-1]] = c
         hit = cache[np.dtype(dtype).char] = CompiledParams(
             np.ascontiguousarray(kp.Ts4, dtype), np.ascontiguousarray(np.stack([kp.cA, kp.cB], axis=1), dtype),
-            np.ascontiguousarray(kp.mass, dtype), np.ascontiguousarray(kp.J, dtype), ax_c)
+            np.ascontiguousarray(kp.mass, dtype), np.ascontiguousarray(kp.J, dtype), ax_c,
+            np.ascontiguousarray(kp.rc, dtype))
     return hit
 
 

@@ -38,6 +38,7 @@ from .joints import Equation, Joint, NormEq
 from .kernel import KParams, Kin, Layout, kernel_params, stack_kernel_params
 from .kernel_compiled import CompiledKin, KinCache, _use_compiled
 from .residual import Evaluation, other_forces_q, time_inputs_steps
+from .rotational import RotationalSpringDamper
 from .rotations import from_axis_angle, rmatmul
 from .sparse import SparseStructure, sparse_linearization, use_sparse
 
@@ -97,9 +98,10 @@ class MultibodyModel(Model):
         self.gravity = grav[0] if grav else None
         self.point_forces = [f for f in forces if isinstance(f, PointForce) and f.frame == "global"]
         axial: list[Any] = [f for f in forces if isinstance(f, SpringDamper)] + list(cylinders)
-        self.other_forces = [f for f in forces if not isinstance(f, (Gravity, SpringDamper))
+        self.rotational = [f for f in forces if isinstance(f, RotationalSpringDamper)]
+        self.other_forces = [f for f in forces if not isinstance(f, (Gravity, SpringDamper, RotationalSpringDamper))
                              and f not in self.point_forces]
-        self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces])
+        self.layout = Layout(len(bodies), self.eqs, axial, [f.point for f in self.point_forces], self.rotational)
         # the storage of the linearization (:mod:`.sparse`): chosen by size unless the case says
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p,
                              sparse=use_sparse(self.traits.n_z, self.other_forces, sparse))
@@ -322,15 +324,12 @@ class MultibodyModel(Model):
             from .redundancy import check_dependency
             check_dependency(self, t, s, params)
         check_drift(self, t, s, params)
-        for el in self.other_forces:
-            check = getattr(el, "check", None)      # rotational spring-dampers: the angle's range
-            if check is not None:
-                check(t, Ctx(np.asarray(s.q)[:, None], np.asarray(s.qd)[:, None], np.zeros((s.q.shape[0], 1)),
-                             params, t))
-        if not self.cylinders:
+        if not (self.cylinders or self.rotational):
             return
         kin = self.kinematics(s, params)
         lay = self.layout
+        for rot, px in zip(self.rotational, lay.rot_prod):      # the measured angle's range
+            rot.check_angle(t, float(np.arctan2(np.real(kin.X[0, px + 1, 0]), np.real(kin.X[0, px, 0]))))
         for cyl in self.cylinders:
             i = lay.axial.index(cyl)
             c = kin.kp.ec[i][0]

@@ -276,7 +276,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             problems.add(f"{path}.kind", f"unknown spring quantity {kind!r}{did_you_mean(kind, SPRING_KINDS)}")
             return None
         return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
-    rots = {f.name: f for f in model.other_forces if hasattr(f, "free_angle")}
+    rots = {f.name: f for f in model.rotational}
     if name in rots:
         rot: Any = rots[name]                 # a RotationalSpringDamper (its state(): angle, rate, torque)
         kinds = ("angle", "angle_rate", "torque")

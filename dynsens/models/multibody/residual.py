@@ -5,7 +5,9 @@ R3 = ṗ − h.  Every constraint row is a sum of products ``c_k(t) x_k`` (:mod:
 Euler-parameter normalisation; axial force elements (springs, cylinders) act through the
 product ``x = d·d`` of their point separation, ``L = √x``, ``L̇ = ẋ/(2L)``, so that
 ``Q_ext = J_dᵀ d P/L = ½ P/L ∂x/∂q`` with the push force P(L, L̇, p, t) of the element's
-``law``.  J_Φᵀλ, the axial forces and point forces are all *primitive forces* f
+``law``; rotational spring-dampers act through their products x = u1·u2, y = v1·u2 with the
+weights of :func:`.rotational.rotational_law`.  J_Φᵀλ, the force elements and point forces are all
+*primitive forces* f
 (:meth:`.kernel.Kin.prim_forces`), whose second derivatives give the geometric stiffness.
 
 Inertia (per body, Euler parameters): R1_r = m r̈,
@@ -28,6 +30,7 @@ from . import compiled as cc
 from . import compiled_linearization as clin
 from .kernel import Kin
 from .kernel_compiled import CompiledKin
+from .rotational import rotational_law, weight_rows
 from .rotations import T_G, rmatmul
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -181,6 +184,14 @@ class Evaluation:
             law = el.law(L, Ld, p[..., j:j + el.n_pressures], t, kp.pv, kp.ec[i])
             self.laws.append((L, Ld, law))
             w[:, lay.n_cp + i] = -0.5 * law[0] / L
+        X = kin.X
+        self.rot_laws = []
+        for i, px in enumerate(lay.rot_prod):
+            rc = kp.rc[:, i]
+            rot = rotational_law(X[:, px, 0], X[:, px + 1, 0], X[:, px, 1], X[:, px + 1, 1], rc[:, 0], rc[:, 1],
+                                 rc[:, 2])
+            self.rot_laws.append(rot)
+            w[:, px], w[:, px + 1] = rot[3], rot[4]
         self.w = w
         f = kin.prim_forces(w)
         for pf, j in zip(model.point_forces, lay.point_prim):
@@ -199,14 +210,14 @@ class Evaluation:
         else:
             cf, shift = m.coefficients(t, kp)
             ext, f_ext, g = time_inputs(m, kp, t, dt)
-        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp) = \
+        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp, self._rot) = \
             cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                 cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
                 np.ascontiguousarray(self.lam, dt), np.ascontiguousarray(self.p, dt),
                 np.ascontiguousarray(self.pd, dt), float(m.scale), float(m.alpha),
-                float(m.beta), cc.TG)
+                float(m.beta), cc.TG, cl.rot_prod, ck.rot_c)
         if m.other_forces and self._given_inputs is None:
             # (a block of steps at different times: Model.residual_batch_steps adds them per step)
             R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
@@ -296,6 +307,11 @@ class Evaluation:
                 R3_qd[j + r] -= h_Ld[r][0] * dL
                 for k in range(len(h_p[r])):
                     R3_p[j + r, j + k] -= h_p[r][k][0]
+        for px, law in zip(lay.rot_prod, self.rot_laws):
+            jx, jy = Jx[px], Jx[px + 1]
+            rx, ry, rxd, ryd = weight_rows([v[0] for v in law], jx, jy, Dx[px], Dx[px + 1])
+            R1_q += np.outer(jx, rx) + np.outer(jy, ry)
+            R1_qd += np.outer(jx, rxd) + np.outer(jy, ryd)
         if m.other_forces:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
             R1_q -= Kq
@@ -323,7 +339,7 @@ class Evaluation:
             cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], kin.dtype), m.eq_row_weights,
             m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0],
             np.asarray(self.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG, cl.ax_prod, self._ax[0], self._Pp[0],
-            cl.p_owner, self._hL[0], self._hLd[0], self._hp[0])
+            cl.p_owner, self._hL[0], self._hLd[0], self._hp[0], cl.rot_prod, self._rot[0])
         if m.other_forces:
             Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
             R_q[:tr.n_q] -= Kq

@@ -5,8 +5,9 @@ on one body; an equation is a sum of products.  So every block of ∂F_R/∂(z, 
 few bodies:
 
 * R1 (the equations of motion): 7×7 *body blocks* (b, b') for every body and for every pair of
-  bodies that share a product (a joint's two bodies, an axial element's two bodies): inertia,
-  geometric stiffness Σ w_p ∂²x_p/∂q², the axial elements' stiffness and damping;
+  bodies that share a product (a joint's two bodies, an axial element's or a rotational
+  spring-damper's two bodies): inertia, geometric stiffness Σ w_p ∂²x_p/∂q², the force
+  elements' stiffness and damping;
 * R2 (the constraint rows): each equation's row on the 7 columns of each of its bodies (J_Φ,
   ∂R2/∂q, ∂R2/∂q̇); J_Φᵀ in the λ columns of R1;
 * R3 (first-order states) and R1_p: the owner element's bodies and the states.
@@ -56,7 +57,7 @@ def use_sparse(n_z: int, other_forces: list[Any], requested: bool | None) -> boo
 
 def element_bodies(el: Any) -> list[int] | None:
     """The moving bodies a force element evaluated outside the kernel acts on (torques,
-    body-frame point forces, rotational spring-dampers): its ``body`` and the bodies of its
+    body-frame point forces): its ``body`` and the bodies of its
     points and directions; None when it names no body at all (its Jacobian's place is unknown)."""
     bodies: list[int] = []
     named = False
@@ -87,7 +88,7 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
                         prod_eq: Array, eq_slot: Array, n_eq_slots: int, cf: Array, eq_w: Array,
                         norm_w: Array, norm_eq: Array, norm_body: Array, w: Array, f: Array, lam: Array,
                         mass: Array, J: Array, TG: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array,
-                        p_owner: Array, h_L: Array, h_Ld: Array
+                        p_owner: Array, h_L: Array, h_Ld: Array, rot_prod: Array, rot_law: Array
                         ) -> tuple[Array, Array, Array, Array, Array, Array, Array]:
     """The values of the exact ∂F_R/∂(z, q, q̇, p) in compact form (see :class:`SparseStructure`):
 
@@ -179,6 +180,21 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
             if jx[u] != 0.0:
                 for k in range(n_p):
                     R1p[i, u, k] += -0.5 * ax_Pp[i, k] / L * jx[u]
+    # --- rotational spring-dampers on the bodies of their products (both products have the same;
+    # SparseStructure checks it)
+    for i in range(rot_prod.shape[0]):
+        px = rot_prod[i]
+        jx, jy = G[px, 0], G[px + 1, 0]
+        rx, ry, rxd, ryd = clin.rotational_weight_rows(rot_law[i], jx, jy, G[px, 1], G[px + 1, 1])
+        for su in range(prod_nb[px]):
+            for sv in range(prod_nb[px]):
+                kb = prod_blk[px, su, sv]
+                for u in range(7):
+                    ju, yu = jx[7 * su + u], jy[7 * su + u]
+                    if ju != 0.0 or yu != 0.0:
+                        for v in range(7):
+                            Bq[kb, u, v] += ju * rx[7 * sv + v] + yu * ry[7 * sv + v]
+                            Bqd[kb, u, v] += ju * rxd[7 * sv + v] + yu * ryd[7 * sv + v]
     R3q = np.zeros((n_p, 7 * PB), dt)
     R3qd = np.zeros((n_p, 7 * PB), dt)
     for r in range(n_p):
@@ -242,6 +258,8 @@ class SparseStructure:
                         bodies.append(b)
                     side_slot[e] = bodies.index(b)
             prod_bodies.append(bodies)
+        for px in lay.rot_prod:     # a rotational spring-damper's two products: the same body slots
+            assert prod_bodies[px] == prod_bodies[px + 1], "rotational products on different bodies"
         PB = max([1] + [len(b) for b in prod_bodies])
         # body blocks: every body's own block, then every pair sharing a product
         blk: dict[tuple[int, int], int] = {(b, b): b for b in range(n_b)}
@@ -401,9 +419,9 @@ def sparse_linearization(model: Any, ev: Any) -> BlockSparseLinearization:
         cl.side_coef, *st.args, np.ascontiguousarray(ev.cf[0], kin.dtype), model.eq_row_weights,
         model.norm_row_weights, cl.norm_eq, cl.norm_body, ev.w[0], ev.f[0],
         np.asarray(ev.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG, cl.ax_prod, ev._ax[0], ev._Pp[0],
-        cl.p_owner, ev._hL[0], ev._hLd[0])
+        cl.p_owner, ev._hL[0], ev._hLd[0], cl.rot_prod, ev._rot[0])
     assert lay.n_cp == st.args[5]
-    if model.other_forces:            # torques, body-frame forces, rotational spring-dampers
+    if model.other_forces:            # torques, body-frame forces
         from .residual import other_forces_jacobians
         Kq, Kqd = other_forces_jacobians(model, ev.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
         rows, cols = st.block_positions
