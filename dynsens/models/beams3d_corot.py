@@ -188,7 +188,8 @@ def deformations(Ue: np.ndarray, prm: dict[str, Any], hessian: bool
     dl = _jets(Ue, prm, 2 if hessian else 1)
     B = np.stack([x.g for x in dl], axis=-2)
     H = np.stack([x.H for x in dl], axis=-3) if hessian else None
-    return B, H, local_stiffness(prm, Ue[..., 0])
+    # D of the parameters' shape (..., n_e), not broadcast against the states
+    return B, H, local_stiffness(prm, np.zeros(np.shape(prm["EA"]), dtype=Ue.dtype))
 
 
 def element_forces(Ue: np.ndarray, prm: dict[str, Any], order: int) -> tuple[np.ndarray, np.ndarray | None]:

@@ -32,11 +32,22 @@ Deformations = Callable[[Array, dict[str, Any], bool], tuple[Array, Array | None
 def damping_forces(B: Array, D: Array, ud: Array, beta: Any) -> Array:
     """f_d = β Bᵀ D B u̇ (..., n_e, k) for element velocities ud (..., n_e, k); beta broadcasts
     against (..., n_e)."""
-    # products and sums along the last axis, not einsum: the same bits for one state and for a
-    # batch of states (the batched residuals of the partials must equal the single ones)
-    rate = np.sum(B * ud[..., None, :], axis=-1)
-    s = np.asarray(beta)[..., None] * np.sum(D * rate[..., None, :], axis=-1)
-    return np.sum(np.swapaxes(B, -1, -2) * s[..., None, :], axis=-1)
+    # sums written out term by term, not einsum or np.sum, and β D formed before it meets the
+    # states: numpy's reductions change their order with the array's shape, and the batched
+    # residuals of the design partials must have the bits of the single ones
+    bD = np.asarray(beta)[..., None, None] * D
+    m, k = B.shape[-2], B.shape[-1]
+    rate = [_dot([B[..., a, j] for j in range(k)], [ud[..., j] for j in range(k)]) for a in range(m)]
+    s = [_dot([bD[..., a, b] for b in range(m)], rate) for a in range(m)]
+    return np.stack([_dot([B[..., a, j] for a in range(m)], s) for j in range(k)], axis=-1)
+
+
+def _dot(x: list, y: list) -> Any:
+    """Σ x_i y_i, left to right (elementwise arrays)."""
+    total = x[0] * y[0]
+    for a, b in zip(x[1:], y[1:]):
+        total = total + a * b
+    return total
 
 
 def damping_jacobians(B: Array, H: Array, D: Array, ud: Array, beta: Any) -> tuple[Array, Array]:
