@@ -59,6 +59,7 @@ class Redundancy:
     dropped: list[int]
     rank: int
     n_eq: int
+    dependent: list[int]     # the equations of the dependent set(s): the support of null(J_Φᵀ)
 
 
 class InconsistentRedundancy(Exception):
@@ -207,7 +208,16 @@ def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
             f"are linearly dependent there (constraint Jacobian rank {rank} < {n_eq}) but not at "
             "poses next to it, so they are not redundant joints; give an initial pose away from "
             "the singular one (e.g. another held angle)")
-    return Redundancy(dropped, rank, n_eq)
+    return Redundancy(dropped, rank, n_eq, dependent_equations(J, rank))
+
+
+def dependent_equations(J: Array, rank: int) -> list[int]:
+    """Rows of J (n_eq, n_q) that take part in a linear dependency: those on which some vector of
+    the left null space (J_Φᵀ n = 0; the last n_eq − rank left singular vectors) is non-zero.
+    Their multipliers are not unique; every other row's multiplier is."""
+    U = np.linalg.svd(J)[0]
+    weight = np.linalg.norm(U[:, rank:], axis=1)
+    return [int(i) for i in np.flatnonzero(weight > SPAN_TOL)]
 
 
 def _persists(model: "MultibodyModel", params: Any, q: Array, kept: list[int], dropped: list[int]) -> bool:
