@@ -16,9 +16,11 @@ What is done (README "Redundant joints"):
    normalisations first, then the joints' equations in the order the joints are listed —
    and each one whose Jacobian row lies in the span of the rows already kept is dropped
    (relative distance ≤ 1e-6).  The model is built on the kept, independent set; its
-   multipliers and reactions are those of the kept equations, i.e. the dropped equations
-   carry zero multiplier (one particular split of a statically indeterminate reaction; the
-   resultant constraint force on every body, J_Φᵀλ, is the same for every split).
+   multipliers are those of the kept equations, i.e. the dropped equations carry zero
+   multiplier — one split of a statically indeterminate reaction, which follows the joints'
+   order.  The joints of the dependent set (:func:`dependent_equations`) therefore report
+   their reactions from the minimum-norm split over all their equations instead, which does
+   not (:mod:`.reaction_split`).
 4. Inconsistent redundancy (dependent rows and Φ ≠ 0 at the least-squares pose) is refused,
    naming the smallest set of joints whose equations are dependent.
 5. A dependency that holds at the initial pose only — the dropped rows leave the kept rows'
