@@ -7,7 +7,9 @@ Spec forms (``quantity:`` in a case):
   spherical, planar_pin and prismatic joints this is the norm of the multipliers of the
   joint's position-level equations, weir_model §3.4), ``reaction_moment`` (3, global, about
   the joint point on body_2), ``reaction_force_joint_frame`` (3, along u, v, w of the joint
-  frame fixed in body_1), ``multipliers`` (the joint's λ);
+  frame fixed in body_1), ``multipliers`` (the joint's λ); for a joint of a dependent set of
+  redundant equations all of these come from the minimum-norm multipliers over all its
+  equations, the left-out ones included (:mod:`.reaction_split`);
 * ``{body: B, kind: position | velocity | acceleration | angle_z | angular_velocity |
   angular_velocity_z}`` (angle_z = direction of the body x-axis in the x–y plane, rad);
 * ``{marker: body.marker, kind: position | velocity}``;
