@@ -148,9 +148,12 @@ def simulate(case_file: str, output: str | None, overwrite: bool, overrides: tup
                    f"{mon['constraint_position'].max():.3g}")
     dropped = redundant_equations(case.model)
     if dropped:
-        click.echo(f"redundant joint equations left out of Phi: {', '.join(dropped)} (the loop's other joints carry "
-                   "their reactions; the split of a statically indeterminate reaction follows the joints' order in "
-                   "the file, the resultant force on each body does not)")
+        click.echo(f"redundant joint equations left out of Phi: {', '.join(dropped)} (which ones follows the joints' "
+                   "order in the file; the motion does not depend on it)")
+        dependent = ", ".join(getattr(case.model, "dependent_joints", []))
+        click.echo(f"reactions of the dependent joints {dependent}: the minimum-norm "
+                   "multipliers over all their equations, the same for any order of the joints (README, "
+                   "\"Redundant joints\")")
     zero = zero_gradient_columns(result, case.design_names)
     if zero:
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "

@@ -98,6 +98,7 @@ def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = Fal
         dropped = redundant_equations(case.model)
         if dropped:
             f.attrs["redundant_equations"] = json.dumps(dropped)
+            f.attrs["dependent_joints"] = json.dumps(list(getattr(case.model, "dependent_joints", [])))
         if getattr(result, "method", ""):
             st.attrs["derivative_method"] = result.method
             st.attrs["derivative_method_reason"] = result.method_reason

@@ -100,12 +100,18 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     # the joints keep only their independent equations; the model is rebuilt on them
     dropped = [(model.eq_owner[i], model.eqs[i]) for i in red.dropped]
     gone = {id(eq) for _, eq in dropped}
+    dependent = {model.eq_owner[i].split(".", 1)[0] for i in red.dependent
+                 if not model.eq_owner[i].endswith(".normalization")}
     for jt in joints:
+        # all of the joint's equations, in its own order: its reactions are taken over all of
+        # them (:mod:`.reaction_split`), whichever were left out
+        jt.all_equations = tuple(zip(jt.labels, jt.eqs))
         keep = [k for k, eq in enumerate(jt.eqs) if id(eq) not in gone]
         jt.eqs = [jt.eqs[k] for k in keep]
         jt.labels = tuple(jt.labels[k] for k in keep)
     model = make()
     model.redundant = [(*owner.split(".", 1), eq) for owner, eq in dropped]  # type: ignore[misc]
+    model.dependent_joints = [jt.name for jt in joints if jt.name in dependent]
     return model
 
 

@@ -214,6 +214,8 @@ class Joint:
     eqs : its scalar equations; ``rows`` their positions in Φ / λ (set by the model).
     point_2 : the joint point on body 2 (reaction moments are taken about it).
     frame_1 : (u_i, v_i, w_i) directions of the joint frame fixed in body 1.
+    all_equations : (label, equation) of all its equations, set when redundant equations were
+        left out of Φ (``eqs`` and ``labels`` keep the independent ones).
     """
 
     name: str
@@ -227,6 +229,8 @@ class Joint:
     force_rows: tuple[int, ...] = ()
     labels: tuple[str, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
+    # (label, equation) of all its equations when some of a redundant set were left out of Φ
+    all_equations: tuple[tuple[str, Equation], ...] = ()
 
 
 def make_joint(name: str, kind: str, b1: int, b2: int, keys: dict[str, str]) -> Joint:

@@ -315,6 +315,7 @@ class MultibodyModel(Model):
 
     # ------------------------------------------------------------------ diagnostics
     redundant: list[tuple[str, str, Equation]] = []   # (joint, label, equation) left out of Φ
+    dependent_joints: list[str] = []      # joints with equations in a dependent set (:mod:`.reaction_split`)
 
     def check_state(self, t: float, s: StepState, params: MBParams) -> None:
         """Raise ModelError after a step when ‖Φ‖ exceeds the drift limit (:mod:`.drift`), when a

@@ -7,7 +7,9 @@ Spec forms (``quantity:`` in a case):
   spherical, planar_pin and prismatic joints this is the norm of the multipliers of the
   joint's position-level equations, weir_model §3.4), ``reaction_moment`` (3, global, about
   the joint point on body_2), ``reaction_force_joint_frame`` (3, along u, v, w of the joint
-  frame fixed in body_1), ``multipliers`` (the joint's λ);
+  frame fixed in body_1), ``multipliers`` (the joint's λ); for a joint of a dependent set of
+  redundant equations all of these come from the minimum-norm multipliers over all its
+  equations, the left-out ones included (:mod:`.reaction_split`);
 * ``{body: B, kind: position | velocity | acceleration | angle_z | angular_velocity |
   angular_velocity_z}`` (angle_z = direction of the body x-axis in the x–y plane, rad);
 * ``{marker: body.marker, kind: position | velocity}``;
@@ -33,6 +35,7 @@ from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
 from ..base import Output, StepState
 from .bodies import GROUND, Ctx, Point, angular_velocity
+from .reaction_split import MinimumNormSplit, split_is_timed, split_of
 from .rotations import E_mul, atan2_cs, cross
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -101,6 +104,18 @@ def reaction_is_timed(model: "MultibodyModel", jt: Any) -> bool:
     return any(i in prods for i, _ in lay.coefs)
 
 
+def _split_reaction(model: "MultibodyModel", split: MinimumNormSplit, jt: Any
+                    ) -> Callable[[float, StepState, Any], Any]:
+    """f (3,) (or (B, 3)): force of joint jt of a dependent set on body_2 (body_1 when body_2 is
+    the ground), −(∂Φ_J/∂r)ᵀλ_J over all its equations with the minimum-norm multipliers
+    (:mod:`.reaction_split`; batched)."""
+    sign, b = (-1.0, jt.body_2) if jt.body_2 != GROUND else (1.0, jt.body_1)
+
+    def fn(t: float, s: StepState, prm: Any) -> Any:
+        return _out(sign * split.joint(jt, t, s.q, s.lam, prm)[1][:, 7 * b:7 * b + 3], s.q.ndim == 2)
+    return fn
+
+
 def _axial(model: "MultibodyModel", el: Any, kind: str) -> Callable[[float, StepState, Any], Any]:
     """A spring's or cylinder's quantity (1,) (or (B, 1)) from the kernel (batched)."""
     lay = model.layout
@@ -129,12 +144,17 @@ def _axial(model: "MultibodyModel", el: Any, kind: str) -> Callable[[float, Step
 
 def _joint_load(model: "MultibodyModel", jt: Any, t: float, s: StepState, params: Any
                 ) -> tuple[Any, Any, Ctx]:
-    """(f, n) force (3,) on body_2 and moment (3,) about its joint point; global frame."""
+    """(f, n) force (3,) on body_2 and moment (3,) about its joint point; global frame.  A joint
+    of a dependent set exerts the force of its minimum-norm multipliers (:mod:`.reaction_split`)."""
     ctx = _ctx(s, params, t)
-    dt = np.result_type(s.q, s.lam, params.pv, float)
-    out = np.zeros((model.traits.n_q, 1), dt)
-    for r, eq in zip(jt.rows, jt.eqs):
-        eq.apply(ctx, s.lam[r:r + 1].reshape(1, 1), out)
+    split = split_of(model)
+    if split is not None and jt.name in split.positions:
+        out = split.joint(jt, t, s.q, s.lam, params)[1][0][:, None]
+    else:
+        dt = np.result_type(s.q, s.lam, params.pv, float)
+        out = np.zeros((model.traits.n_q, 1), dt)
+        for r, eq in zip(jt.rows, jt.eqs):
+            eq.apply(ctx, s.lam[r:r + 1].reshape(1, 1), out)
     sign, b = (-1.0, jt.body_2) if jt.body_2 != GROUND else (1.0, jt.body_1)
     a = 7 * b
     f = sign * out[a:a + 3, 0]
@@ -178,6 +198,14 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
             problems.add(f"{path}.kind", f"unknown joint quantity {kind!r}{did_you_mean(kind, JOINT_KINDS)} "
                                          f"(known: {', '.join(JOINT_KINDS)})")
             return None
+        # a joint of a dependent set: its minimum-norm multipliers over all its equations
+        split = split_of(model)
+        if split is not None and name not in split.positions:
+            split = None
+        if kind == "multipliers" and split is not None:
+            return Output(lambda t, s, prm, _s=split: _out(_s.joint(jt, t, s.q, s.lam, prm)[0], s.q.ndim == 2),
+                          tuple(f"{name}.{lab}" for lab in split.labels[name]),
+                          batched=True, autonomous=not split_is_timed(model))
         if kind == "multipliers":
             rows = np.array(jt.rows)
             return Output(lambda t, s, prm: s.lam[rows], tuple(f"{name}.{lab}" for lab in jt.labels),
@@ -190,13 +218,14 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
                   "reaction_moment": ("Mx", "My", "Mz"), "reaction_force_joint_frame": ("Fu", "Fv", "Fw")}
         labs = tuple(f"{name}.{c}" for c in labels[kind])
         if kind in ("reaction_force", "reaction_force_norm"):
-            force = _reaction(model, jt)
+            force = _reaction(model, jt) if split is None else _split_reaction(model, split, jt)
+            timed = reaction_is_timed(model, jt) if split is None else split_is_timed(model)
 
             def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
                 f = force(t, s, prm)
                 return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
             # t enters only through time-dependent coefficients of the joint's own products
-            return Output(rfn, labs, batched=True, autonomous=not reaction_is_timed(model, jt))
+            return Output(rfn, labs, batched=True, autonomous=not timed)
 
         def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
             f, n, ctx = _joint_load(model, _jt, t, s, prm)

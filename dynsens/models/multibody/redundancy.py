@@ -16,9 +16,11 @@ What is done (README "Redundant joints"):
    normalisations first, then the joints' equations in the order the joints are listed —
    and each one whose Jacobian row lies in the span of the rows already kept is dropped
    (relative distance ≤ 1e-6).  The model is built on the kept, independent set; its
-   multipliers and reactions are those of the kept equations, i.e. the dropped equations
-   carry zero multiplier (one particular split of a statically indeterminate reaction; the
-   resultant constraint force on every body, J_Φᵀλ, is the same for every split).
+   multipliers are those of the kept equations, i.e. the dropped equations carry zero
+   multiplier — one split of a statically indeterminate reaction, which follows the joints'
+   order.  The joints of the dependent set (:func:`dependent_equations`) therefore report
+   their reactions from the minimum-norm split over all their equations instead, which does
+   not (:mod:`.reaction_split`).
 4. Inconsistent redundancy (dependent rows and Φ ≠ 0 at the least-squares pose) is refused,
    naming the smallest set of joints whose equations are dependent.
 5. A dependency that holds at the initial pose only — the dropped rows leave the kept rows'
@@ -59,6 +61,7 @@ class Redundancy:
     dropped: list[int]
     rank: int
     n_eq: int
+    dependent: list[int]     # the equations of the dependent set(s): the support of null(J_Φᵀ)
 
 
 class InconsistentRedundancy(Exception):
@@ -207,7 +210,16 @@ def analyse(model: "MultibodyModel", x: Array) -> Redundancy | None:
             f"are linearly dependent there (constraint Jacobian rank {rank} < {n_eq}) but not at "
             "poses next to it, so they are not redundant joints; give an initial pose away from "
             "the singular one (e.g. another held angle)")
-    return Redundancy(dropped, rank, n_eq)
+    return Redundancy(dropped, rank, n_eq, dependent_equations(J, rank))
+
+
+def dependent_equations(J: Array, rank: int) -> list[int]:
+    """Rows of J (n_eq, n_q) that take part in a linear dependency: those on which some vector of
+    the left null space (J_Φᵀ n = 0; the last n_eq − rank left singular vectors) is non-zero.
+    Their multipliers are not unique; every other row's multiplier is."""
+    U = np.linalg.svd(J)[0]
+    weight = np.linalg.norm(U[:, rank:], axis=1)
+    return [int(i) for i in np.flatnonzero(weight > SPAN_TOL)]
 
 
 def _persists(model: "MultibodyModel", params: Any, q: Array, kept: list[int], dropped: list[int]) -> bool:
