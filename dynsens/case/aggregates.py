@@ -13,6 +13,7 @@ from ..case_keys import AGGREGATE_TYPES, allowed
 from ..errors import ProblemCollector
 from ..expressions import ExpressionError, compile_expression
 from ..models._keys import check_keys
+from ..models.parameters import finite_float, number_text
 from ..models.base import Output
 from ..responses import Response
 from ..responses_sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
@@ -181,10 +182,11 @@ def _positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
             value = compile_expression(value, set()).evaluate({})
         except ExpressionError:
             value = None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        pc.add(path, f"expected a positive number or a constant expression, found {found!r}")
+    v = None if isinstance(value, bool) or not isinstance(value, (int, float)) else finite_float(value)
+    if v is None or v <= 0:
+        pc.add(path, f"expected a positive number or a constant expression, found {number_text(found)}")
         return None
-    return float(value)
+    return v
 
 
 def _components(spec: Any, outs: list[Output], several: bool, path: str,
