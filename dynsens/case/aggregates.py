@@ -43,7 +43,8 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
         return None
     # (a single 'quantity' is reported as quantities[0], as the loader always has)
     oids = [output_id(q, f"{path}.quantities[{k}]") for k, q in enumerate(qs)]
-    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" else None
+    # (a missing rho is reported by check_keys above)
+    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" and "rho" in r else None
     side = r.get("side", "upper")
     if side not in ("upper", "lower"):
         pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
@@ -52,7 +53,7 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
         pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
     limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
     ids = [o for o in oids if o is not None]
-    if len(ids) != len(oids) or limit is None or len(pc.problems) > n0:
+    if len(ids) != len(oids) or limit is None or (kind == "ks" and rho is None) or len(pc.problems) > n0:
         return None
     comps = _components(r.get("components"), [outputs[o] for o in ids], "quantities" in r,
                         f"{path}.components", pc)
