@@ -20,7 +20,7 @@ The property: zero tracebacks and zero non-finite successes (and no other exit s
 The counts per class are printed in the terminal summary (``conftest.py``).
 
 Bounded for CI: a fixed seed (``FUZZ_CLI_SEED``, default 20261128) and a fixed number of
-examples (``FUZZ_CLI_EXAMPLES``, default 120), each under a 60 s alarm; a longer local campaign
+examples (``FUZZ_CLI_EXAMPLES``, default 100), each under a 60 s alarm; a longer local campaign
 raises the count, e.g. ``FUZZ_CLI_EXAMPLES=2000 FUZZ_CLI_SEED=7 pytest tests/test_cli_fuzz.py``.
 Counts and times measured are in BENCHMARKS.md ("Command-line fuzz").
 """
@@ -53,7 +53,7 @@ from dynsens.cli.main import cli
 
 REPO = Path(__file__).resolve().parents[1]
 SEED = int(os.environ.get("FUZZ_CLI_SEED", "20261128"))
-EXAMPLES = int(os.environ.get("FUZZ_CLI_EXAMPLES", "120"))
+EXAMPLES = int(os.environ.get("FUZZ_CLI_EXAMPLES", "100"))
 EXAMPLE_SECONDS = 60
 STEPS = 4          # time steps per run: the cases are shortened to this many in the file
 MAX_STEPS = 200    # a mutation that makes more steps than this is undone
@@ -69,6 +69,8 @@ BASES: dict[str, tuple[str, dict[str, Any]]] = {
     "four_bar": ("four_bar", {}),
     "slider_crank": ("slider_crank", {}),
     "truss_lightweight": ("truss_lightweight", {}),
+    "pendulum_3d": ("pendulum_3d", {}),
+    "tyrolean_weir": ("tyrolean_weir", {}),
 }
 COMMANDS = ("simulate", "check-gradients", "optimize", "study")
 # what a command's exit status 1 means when it is not an error: a verdict printed in its output
@@ -475,3 +477,47 @@ def test_a_ks_response_without_rho_is_refused(tmp_path: Path) -> None:
     out = tmp_path / "out"
     out.mkdir()
     _refused_cleanly(_command_args("simulate", case_file, out, [], []), out, "responses[1].rho", "missing required key")
+
+
+@pytest.mark.parametrize("value", [10 ** 30, 10 ** 400], ids=["1e30", "1e400"])
+def test_a_stabilization_beyond_int64_is_a_clean_outcome(tmp_path: Path, value: int) -> None:
+    """model.stabilization.alpha = 10^30 or 10^400 (ints that np.isfinite cannot take) was a TypeError.
+    10^30 is a finite number, accepted (this run then stops cleanly: its matrix is singular);
+    10^400 holds no float and is refused at its key."""
+    out = tmp_path / "out"
+    out.mkdir()
+    args = _command_args("simulate", REPO / "cases" / "tyrolean_weir.yaml", out, [],
+                         [f"model.stabilization.alpha={value}", "integrator.t_end=0.004"])
+    if value > 1e308:
+        _refused_cleanly(args, out, "model.stabilization.alpha", "expected a finite number >= 0")
+    else:
+        kind, detail = classify("simulate", CliRunner().invoke(cli, args), out)
+        assert kind in ("success", "refused"), f"{kind}: {detail}"
+
+
+def test_an_empty_dof_list_in_a_quantity_is_refused(tmp_path: Path) -> None:
+    """quantity: {dof: []} loaded and then failed in the run with an IndexError."""
+    out = tmp_path / "out"
+    out.mkdir()
+    args = _command_args("simulate", REPO / "cases" / "sdof_step.yaml", out, [],
+                         ["responses[1].quantity.dof=[]", "integrator.t_end=0.004"])
+    _refused_cleanly(args, out, "responses[1].quantities[0].dof", "non-empty list of dof names, found []")
+
+
+def test_check_gradients_reports_missing_responses_without_nan(tmp_path: Path) -> None:
+    """A response missing in a short run (an event not reached) was printed and written as
+    [nan, nan]; the JSON report held NaN, which is not JSON.  Now 'missing' and null."""
+    raw = _load_base("pendulum_3d")
+    case_file = tmp_path / "case.yaml"
+    case_file.write_text(yaml.safe_dump(raw, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    out.mkdir()
+    result = CliRunner().invoke(cli, _command_args("check-gradients", case_file, out, ["--steps", "1e-4"], []))
+    kind, detail = classify("check-gradients", result, out)
+    assert kind == "success", f"{kind}: {detail}"
+    assert "| missing |" in result.stdout and "is missing:" in result.stdout
+
+    def no_constants(c: str) -> None:
+        raise AssertionError(f"{c} in the JSON report")
+    data = json.loads((out / "grad.json").read_text(encoding="utf-8"), parse_constant=no_constants)
+    assert data["missing"] and all(data["values"][n] is None for n in data["missing"])
