@@ -268,12 +268,18 @@ NONFINITE_TEXT = re.compile(r"(?<![\w.])[-+]?(nan|inf(?:inity)?)(?![\w])", re.IG
 
 
 def _failed_rows(obj: Any) -> Any:
-    """The boolean ``failed`` column beside a table's column (a study's rows, an optimization's
-    evaluations), or None: the NaN in a failed row marks the failure."""
+    """The rows of a table (a study's rows, an optimization's evaluations) whose NaN is a marker,
+    or None: failed designs (their boolean ``failed`` column is set) and, in a study, designs
+    with a missing response (their ``message`` says which: "NAME missing (why)")."""
     flag = obj.parent.get("failed")
-    if isinstance(flag, h5py.Dataset) and flag.dtype.kind == "b" and flag.shape[:1] == obj.shape[:1]:
-        return np.asarray(flag[()], dtype=bool)
-    return None
+    if not (isinstance(flag, h5py.Dataset) and flag.dtype.kind == "b" and flag.shape[:1] == obj.shape[:1]):
+        return None
+    marked = np.asarray(flag[()], dtype=bool)
+    message = obj.parent.get("message")
+    if isinstance(message, h5py.Dataset) and message.shape[:1] == obj.shape[:1]:
+        texts = [m.decode() if isinstance(m, bytes) else str(m) for m in message[()]]
+        marked |= np.array([" missing (" in t for t in texts], dtype=bool)
+    return marked
 
 
 def _no_bound(name: str, data: Any) -> bool:
@@ -291,8 +297,8 @@ def nonfinite_datasets(path: Path) -> list[str]:
     """Datasets and attributes of an HDF5 file with a NaN or inf where a finite number belongs.
 
     NaN is the file's marker in two places, allowed there: the rows of failed designs (a study's
-    rows, an optimization's evaluations: their ``failed`` flag is set) and a response marked
-    ``missing``."""
+    rows, an optimization's evaluations: their ``failed`` flag is set) or of designs with a missing
+    response (the row's message names it), and a response marked ``missing``."""
     bad: list[str] = []
     with h5py.File(path, "r") as f:
         def visit(name: str, obj: Any) -> None:
