@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test lint test-min example reproduce-table1 figures views report bench bench-peers cases clean
+.PHONY: setup test test-fast lint test-min example reproduce-table1 figures views report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,15 @@ setup: $(STAMP)
 # its module fixtures (shared runs) are made once
 test: $(STAMP)
 	$(PY) -m pytest -q -n auto --dist loadfile
+
+# a few minutes while you work: the suite without the tests listed in tests/slow_tests.txt, checked to
+# exercise every module of dynsens (each process records the modules whose functions ran,
+# tests/module_coverage.py; scripts/check_module_coverage.py fails on one that none did)
+FAST_RECORDS := .pytest_cache/module-coverage
+test-fast: $(STAMP)
+	rm -rf $(FAST_RECORDS)
+	DYNSENS_MODULE_COVERAGE=$(FAST_RECORDS) $(PY) -m pytest -q -n auto --dist loadfile -m "not slow"
+	$(PY) scripts/check_module_coverage.py $(FAST_RECORDS)
 
 # ruff and mypy with the configuration in pyproject.toml (CI runs this)
 LINT_STAMP := $(VENV)/.lint-installed

@@ -215,6 +215,9 @@ def to_markdown(rep: GradientReport) -> str:
              "| wall time [s] | " + f"{rep.sa_wall_time:.3f}" + "".join(
                  f" | {c.wall_time:.3f}" for c in rep.columns) + " |"]
     for n in rep.responses:
+        if n in rep.missing:         # no value, no gradient: said below, not printed as NaN
+            lines.append(f"| ∇{n} | missing" + " | –" * len(rep.columns) + " |")
+            continue
         lines.append(f"| ∇{n} | {_vec(rep.semi_analytical[n])}" + "".join(
             f" | {_vec(c.gradients[n])}" for c in rep.columns) + " |")
         lines.append(f"| rel. diff. ∇{n} | – " + "".join(
@@ -236,14 +239,21 @@ def to_markdown(rep: GradientReport) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _null_if_missing(values: dict[str, Any], missing: dict[str, str]) -> dict[str, Any]:
+    """``values`` with None (JSON null) for the missing responses (their NaN is no JSON)."""
+    return {n: None if n in missing else v for n, v in values.items()}
+
+
 def to_json(rep: GradientReport) -> dict[str, Any]:
-    """Plain JSON-serializable form of the report."""
+    """Plain JSON-serializable form of the report (a missing response's entries are null)."""
+    miss = rep.missing
     return {
         "case": rep.case_name, "design_names": list(rep.design_names), "x": rep.x.tolist(),
-        "values": rep.values, "semi_analytical": {n: v.tolist() for n, v in rep.semi_analytical.items()},
+        "values": _null_if_missing(rep.values, miss),
+        "semi_analytical": _null_if_missing({n: v.tolist() for n, v in rep.semi_analytical.items()}, miss),
         "semi_analytical_wall_time_s": rep.sa_wall_time, "primal_wall_time_s": rep.primal_wall_time,
         "columns": [{"step": c.step, "scheme": c.scheme, "wall_time_s": c.wall_time,
-                     "gradients": {n: v.tolist() for n, v in c.gradients.items()},
-                     "rel_diff": c.rel_diff} for c in rep.columns],
+                     "gradients": _null_if_missing({n: v.tolist() for n, v in c.gradients.items()}, miss),
+                     "rel_diff": _null_if_missing(c.rel_diff, miss)} for c in rep.columns],
         "missing": rep.missing, "fixed_time": list(rep.fixed_time), "replayed_adaptive_steps": rep.replayed,
     }

@@ -13,6 +13,7 @@ from ..case_keys import AGGREGATE_TYPES, allowed
 from ..errors import ProblemCollector
 from ..expressions import ExpressionError, compile_expression
 from ..models._keys import check_keys
+from ..models.parameters import finite_float, number_text
 from ..models.base import Output
 from ..responses import Response
 from ..responses_sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
@@ -42,7 +43,8 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
         return None
     # (a single 'quantity' is reported as quantities[0], as the loader always has)
     oids = [output_id(q, f"{path}.quantities[{k}]") for k, q in enumerate(qs)]
-    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" else None
+    # (a missing rho is reported by check_keys above)
+    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" and "rho" in r else None
     side = r.get("side", "upper")
     if side not in ("upper", "lower"):
         pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
@@ -51,7 +53,7 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
         pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
     limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
     ids = [o for o in oids if o is not None]
-    if len(ids) != len(oids) or limit is None or len(pc.problems) > n0:
+    if len(ids) != len(oids) or limit is None or (kind == "ks" and rho is None) or len(pc.problems) > n0:
         return None
     comps = _components(r.get("components"), [outputs[o] for o in ids], "quantities" in r,
                         f"{path}.components", pc)
@@ -181,10 +183,11 @@ def _positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
             value = compile_expression(value, set()).evaluate({})
         except ExpressionError:
             value = None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        pc.add(path, f"expected a positive number or a constant expression, found {found!r}")
+    v = None if isinstance(value, bool) or not isinstance(value, (int, float)) else finite_float(value)
+    if v is None or v <= 0:
+        pc.add(path, f"expected a positive number or a constant expression, found {number_text(found)}")
         return None
-    return float(value)
+    return v
 
 
 def _components(spec: Any, outs: list[Output], several: bool, path: str,

@@ -13,6 +13,7 @@ from ..errors import ProblemCollector
 from ..expressions import RESERVED_NAMES, ExpressionError, compile_expression
 from ..march import RunPlan
 from ..models._keys import check_keys, did_you_mean
+from ..models.parameters import finite_float, number_text
 from ..models.base import Model, Output
 from ..responses import EventSpec, EventTime, ExpressionIntegral, Response, TimeIntegral, ValueAt
 from ..responses_final import Combination, StructuralMass
@@ -37,10 +38,10 @@ def read_number(value: Any, path: str, pc: ProblemCollector, *, positive: bool =
         found = "nothing" if value is None else f"{type(value).__name__} {value!r}"
         pc.add(path, f"expected a number, found {found}")
         return None
-    v = float(value)
-    if not np.isfinite(v) or (positive and v <= 0) or (nonnegative and v < 0):
+    v = finite_float(value)
+    if v is None or (positive and v <= 0) or (nonnegative and v < 0):
         what = "positive " if positive else "non-negative " if nonnegative else ""
-        pc.add(path, f"expected a {what}finite number, found {value!r}")
+        pc.add(path, f"expected a {what}finite number, found {number_text(value)}")
         return None
     return v
 

@@ -2,6 +2,7 @@
 together for one design (complex-safe), with the indices the model builders keep."""
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -10,6 +11,23 @@ from ..errors import ProblemCollector
 from ..expressions import Expression, ExpressionError, compile_expression
 
 Array = np.ndarray
+
+
+def finite_float(value: int | float) -> float | None:
+    """A YAML number as a finite float; None for NaN, ±inf and an integer beyond the float range
+    (YAML reads ``1000...0`` of 400 digits as an exact Python int, which ``float`` cannot hold)."""
+    try:
+        v = float(value)
+    except OverflowError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+def number_text(value: Any) -> str:
+    """``repr(value)`` for a message, an integer of more than 20 digits shortened to its size."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10 ** 20:
+        return f"an integer of {len(str(abs(value)))} digits ({'-' if value < 0 else ''}{str(abs(value))[:6]}...)"
+    return repr(value)
 
 
 class ParameterTable:
@@ -54,9 +72,9 @@ class ParameterTable:
             problems.add(path, f"expected a number or an expression, found {value!r}")
             return -1
         if isinstance(value, (int, float)):
-            v = float(value)
-            if not np.isfinite(v):
-                problems.add(path, f"expected a finite number, found {value!r}")
+            v = finite_float(value)
+            if v is None:
+                problems.add(path, f"expected a finite number, found {number_text(value)}")
                 return -1
             if positive and v <= 0:
                 problems.add(path, f"must be > 0, found {value!r}")

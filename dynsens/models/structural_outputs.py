@@ -56,6 +56,9 @@ class StructuralOutputs:
             spec = {"dof": free, "kind": kind}
         if "dof" in spec:
             names = spec["dof"] if isinstance(spec["dof"], list) else [spec["dof"]]
+            if not names:
+                problems.add(f"{path}.dof", "expected a dof name or a non-empty list of dof names, found []")
+                return None
             field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
             if kind not in field_of:
                 problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "

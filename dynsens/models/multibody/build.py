@@ -13,7 +13,7 @@ import numpy as np
 from ...errors import ModelError, ProblemCollector
 from ...case_keys import allowed
 from .._keys import check_keys, did_you_mean
-from ..parameters import ParameterTable
+from ..parameters import ParameterTable, finite_float, number_text
 from ..registry import register
 from .bodies import GROUND, Const, Diff, Direction, Point
 from .forces import ForceElement, Gravity, SpringDamper
@@ -226,14 +226,15 @@ def setting(spec: dict, key: str, default: Any, path: str, problems: ProblemColl
     v = spec.get(key, default)
     if v is default:
         return v
-    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and bool(np.isfinite(v))
-    if ok and rule:                  # nan passes no comparison: refused above
-        ok = v > 0 if rule == "> 0" else v >= 0
+    x = finite_float(v) if not isinstance(v, bool) and isinstance(v, (int, float)) else None
+    ok = x is not None
+    if x is not None and rule:
+        ok = x > 0 if rule == "> 0" else x >= 0
     if not ok:
         problems.add(f"{path}.{key}", f"expected a finite number{' ' + rule if rule else ''}"
-                                      f"{' ' + unit if unit else ''}, found {v!r}")
+                                      f"{' ' + unit if unit else ''}, found {number_text(v)}")
         return default
-    return float(v)
+    return x
 
 
 def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
