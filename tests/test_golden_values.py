@@ -2,24 +2,26 @@
 its first steps are bit-identical to the values stored in tests/golden_values.json
 (scripts/golden_values.py): a restructuring of the code shows that no number moved.  A change
 that is meant to move numbers rewrites the file (``python scripts/golden_values.py --write``)
-and says why in its commit and, for users, in CHANGELOG.md."""
+and says why in its commit and, for users, in CHANGELOG.md.
+
+The comparison runs in a process of its own: within the test suite's long-lived workers one
+case's gradients (cart_pole, direct) once differed in the last bits after other tests had run
+there, a dependence on process state that this test is not about (noted for the caches of issue
+32); in a fresh process the runs are reproducible bit for bit.
+"""
 from __future__ import annotations
 
-import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
-import pytest
-
-import scripts_path  # noqa: F401  (puts scripts/ on the path)
-from golden_values import CASES, GOLDEN, case_values, methods
+ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("path", sorted(CASES.glob("*.yaml")), ids=lambda p: p.stem)
-def test_shipped_case_values_are_bit_identical_to_the_stored_ones(path) -> None:
-    stored = json.loads(GOLDEN.read_text(encoding="utf-8"))
-    for method in methods(path):
-        key = f"{path.stem}/{method}"
-        assert key in stored, f"{key} has no stored values: run scripts/golden_values.py --write"
-        now = case_values(path, method)
-        for field in ("status", "method", "steps", "counters", "final_q"):
-            assert now[field] == stored[key][field], f"{key}: {field}"
-        assert now["responses"] == stored[key]["responses"], f"{key}: responses"
+def test_shipped_case_values_are_bit_identical_to_the_stored_ones() -> None:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    run = subprocess.run([sys.executable, str(ROOT / "scripts" / "golden_values.py")], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=1200)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "bit-identical" in run.stdout
