@@ -13,9 +13,6 @@ Contract: β K acts on the element's deformation rates in its co-rotated frame
 """
 from __future__ import annotations
 
-import copy
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -23,7 +20,7 @@ import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.models.base import StepState, as_dense
 from dynsens.models.beams import section_properties
-from helpers import complex_step_gradients
+from helpers import assert_gradients_match_complex_step_and_adjoint, complex_step_jacobians
 from test_beams import E, L, RHO, TUBE, cantilever, static_solution, tip
 
 G = 81000.0                                      # MPa
@@ -137,13 +134,8 @@ def test_jacobians_equal_the_complex_step_of_the_residual_at_a_large_rotation_st
     q, qd = q + size * rng.normal(size=len(q)), qd + size * rng.normal(size=len(q))   # deformed, straining
     qdd = rng.normal(size=len(q))
     lin = model.linearize(0.0, StepState(q, qd, qdd, EMPTY, EMPTY, EMPTY), params)
-    h, n = 1e-30, len(q)
-    for block, which in ((lin.R_q, 0), (lin.R_qd, 1)):
-        cs = np.zeros((n, n))
-        for j in range(n):
-            st = [q.astype(complex), qd.astype(complex), qdd.astype(complex)]
-            st[which][j] += 1j * h
-            cs[:, j] = np.imag(model.residual(0.0, StepState(*st, EMPTY, EMPTY, EMPTY), params)) / h
+    cs_q, cs_qd, _ = complex_step_jacobians(model, 0.0, q, qd, qdd, params)
+    for block, cs in ((lin.R_q, cs_q), (lin.R_qd, cs_qd)):
         np.testing.assert_allclose(as_dense(block), cs, rtol=1e-10, atol=1e-11 * np.abs(cs).max())
 
 
@@ -194,16 +186,7 @@ def test_gradients_through_it_equal_the_complex_step_and_adjoint_equals_direct()
     res = dynsens.run_case(case)
     assert res.status == "completed"
     assert float(np.real(res.responses["tip_y"].value)) > 0.1 * L      # a large rotation
-    cs = complex_step_gradients(case)
-    for name, rv in res.responses.items():
-        np.testing.assert_allclose(np.real(rv.gradient), cs[name], rtol=1e-8,
-                                   atol=1e-10 * np.abs(cs[name]).max(), err_msg=name)
-    c = copy.copy(case)
-    c.plan = replace(case.plan, method="adjoint")
-    adjoint = dynsens.run_case(c)
-    for name, rv in res.responses.items():
-        np.testing.assert_allclose(adjoint.responses[name].gradient, rv.gradient, rtol=1e-10,
-                                   atol=1e-12 * np.abs(rv.gradient).max(), err_msg=name)
+    assert_gradients_match_complex_step_and_adjoint(case, res)
 
 
 def test_a_corotated_flag_that_is_not_a_boolean_is_one_problem_at_its_key() -> None:
