@@ -55,6 +55,29 @@ def complex_step_jacobians(model, t, q, qd, qdd, params, h=1e-30):
     return out
 
 
+def key_paths(node, prefix=()):
+    """Every key path into a case mapping (dict keys and list indices), parents before children."""
+    out = [prefix] if prefix else []
+    if isinstance(node, dict):
+        for k, v in node.items():
+            out += key_paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            out += key_paths(v, prefix + (i,))
+    return out
+
+
+def pendulum_with_coaxial_hinges(raw):
+    """pendulum_3d's mapping ``raw`` with a second hinge coaxial with its pivot (a dependent pair)
+    and a second pendulum on a spherical joint of its own (independent), changed in place."""
+    raw["model"]["bodies"]["bob2"] = {"mass": 1.0, "inertia": [1e-3, 1e-3, 1e-3], "position": [0, -1, 0]}
+    raw["model"]["joints"] += [
+        {"name": "hinge2", "type": "revolute", "body_1": "ground", "body_2": "bob", "point": [0, 0, 1],
+         "axis": [0, 0, 1]},
+        {"name": "other", "type": "spherical", "body_1": "ground", "body_2": "bob2", "point": [0, 0, 0]}]
+    return raw
+
+
 def rel_err(a, b):
     """‖a − b‖ / ‖b‖."""
     return float(np.linalg.norm(np.asarray(a) - np.asarray(b)) / np.linalg.norm(b))

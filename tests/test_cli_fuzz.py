@@ -50,6 +50,7 @@ import dynsens.cli.optimize  # noqa: F401  (registers the command)
 import dynsens.cli.simulate  # noqa: F401  (registers the command)
 import dynsens.cli.study  # noqa: F401  (registers the command)
 from dynsens.cli.main import cli
+from helpers import key_paths
 
 REPO = Path(__file__).resolve().parents[1]
 SEED = int(os.environ.get("FUZZ_CLI_SEED", "20261128"))
@@ -99,18 +100,6 @@ def _load_base(name: str) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------- mutations of a case mapping
-def _paths(node: Any, prefix: tuple = ()) -> list[tuple]:
-    """Every key path into ``node`` (dict keys and list indices), parents before children."""
-    out = [prefix] if prefix else []
-    if isinstance(node, dict):
-        for k, v in node.items():
-            out += _paths(v, prefix + (k,))
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            out += _paths(v, prefix + (i,))
-    return out
-
-
 def _get(raw: Any, path: tuple) -> Any:
     for k in path:
         raw = raw[k]
@@ -192,7 +181,7 @@ def _too_long(raw: dict[str, Any]) -> bool:
 
 def _mutate_once(rng: np.random.Generator, raw: dict[str, Any], notes: list[str], overrides: list[str]) -> None:
     """One mutation of ``raw`` in place (see :func:`mutate`)."""
-    paths = [p for p in _paths(raw) if p]
+    paths = [p for p in key_paths(raw) if p]
     numeric = [p for p in paths if _is_number(_get(raw, p))]
     # half of the mutations change a number (a case that still loads, a run that meets it);
     # the others change the case's shape

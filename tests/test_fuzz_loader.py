@@ -31,6 +31,7 @@ from hypothesis import strategies as st  # noqa: E402
 from dynsens.case.load import load_case, load_case_text  # noqa: E402
 from dynsens.errors import DynsensError  # noqa: E402
 from dynsens.simulation import run_case  # noqa: E402
+from helpers import key_paths  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 # the fast cases (structural and multibody), so that a loaded case can also be run briefly
@@ -55,17 +56,6 @@ LEAVES = st.one_of(NUMBERS, st.sampled_from(HOSTILE), st.text(max_size=20), st.b
                    st.lists(NUMBERS, max_size=4), st.dictionaries(st.text(max_size=5), NUMBERS, max_size=2))
 
 
-def _paths(node: Any, prefix: tuple = ()) -> list[tuple]:
-    out = [prefix] if prefix else []
-    if isinstance(node, dict):
-        for k, v in node.items():
-            out += _paths(v, prefix + (k,))
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            out += _paths(v, prefix + (i,))
-    return out
-
-
 def _parent(raw: Any, path: tuple) -> Any:
     node = raw
     for k in path[:-1]:
@@ -78,7 +68,7 @@ def mutated_case(draw: Any) -> tuple[str, Any]:
     name = draw(st.sampled_from(CASE_NAMES))
     raw = copy.deepcopy(RAWS[name])
     for _ in range(draw(st.integers(1, 3))):
-        paths = _paths(raw)
+        paths = key_paths(raw)
         if not paths:
             break
         path = paths[draw(st.integers(0, len(paths) - 1))]

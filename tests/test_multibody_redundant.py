@@ -12,7 +12,7 @@ from bricard_reference import Bricard
 from conftest import CASES
 from dynsens.errors import CaseError, ModelError
 from dynsens.models.base import StepState
-from helpers import complex_step_gradients, rel_err
+from helpers import complex_step_gradients, pendulum_with_coaxial_hinges, rel_err
 
 
 def _raw(name):
@@ -82,12 +82,7 @@ def test_smallest_dependent_set_leaves_out_independent_joints():
     hinges are named."""
     from dynsens.models.multibody.assembly import jacobian_rows
     from dynsens.models.multibody.redundancy import smallest_dependent_joints
-    raw = _raw("pendulum_3d")
-    raw["model"]["bodies"]["bob2"] = {"mass": 1.0, "inertia": [1e-3, 1e-3, 1e-3], "position": [0, -1, 0]}
-    raw["model"]["joints"] += [
-        {"name": "hinge2", "type": "revolute", "body_1": "ground", "body_2": "bob", "point": [0, 0, 1],
-         "axis": [0, 0, 1]},
-        {"name": "other", "type": "spherical", "body_1": "ground", "body_2": "bob2", "point": [0, 0, 0]}]
+    raw = pendulum_with_coaxial_hinges(_raw("pendulum_3d"))
     case = dynsens.load_case_dict(raw)
     m = case.model
     assert {j for j, _, _ in m.redundant} == {"hinge2"}

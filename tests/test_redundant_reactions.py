@@ -25,7 +25,7 @@ from conftest import CASES
 from dynsens.models.base import StepState
 from dynsens.models.multibody.assembly import jacobian_rows
 from dynsens.models.multibody.reaction_split import split_of
-from helpers import rel_err
+from helpers import pendulum_with_coaxial_hinges, rel_err
 
 ORDERS = {"file": [0, 1, 2, 3, 4, 5], "reversed": [5, 4, 3, 2, 1, 0],
           "permutation": [3, 0, 5, 1, 4, 2]}            # numpy default_rng(0).permutation(6) is another
@@ -176,12 +176,7 @@ def test_joints_outside_the_dependent_set_keep_their_reactions():
     """A pendulum held by two coaxial hinges and a second pendulum on its own spherical joint:
     only the hinges are dependent; the other joint's reaction is the model's own multiplier
     (unique), evaluated by the ordinary path."""
-    raw = yaml.safe_load((CASES / "pendulum_3d.yaml").read_text())
-    raw["model"]["bodies"]["bob2"] = {"mass": 1.0, "inertia": [1e-3, 1e-3, 1e-3], "position": [0, -1, 0]}
-    raw["model"]["joints"] += [
-        {"name": "hinge2", "type": "revolute", "body_1": "ground", "body_2": "bob", "point": [0, 0, 1],
-         "axis": [0, 0, 1]},
-        {"name": "other", "type": "spherical", "body_1": "ground", "body_2": "bob2", "point": [0, 0, 0]}]
+    raw = pendulum_with_coaxial_hinges(yaml.safe_load((CASES / "pendulum_3d.yaml").read_text()))
     case = dynsens.load_case_dict(raw)
     m = case.model
     assert m.dependent_joints == ["pivot", "hinge2"]

@@ -82,6 +82,11 @@ class CorotatedDamping:
     def __bool__(self) -> bool:
         return bool(self.kinds)
 
+    def active(self, params: dict[str, Any]) -> bool:
+        """Whether there is a damping force: kinds to damp and a β that is not zero (in any of
+        the parameter sets, its imaginary part included)."""
+        return bool(self.kinds) and bool(np.any(params["pv"][..., self.beta_index]))
+
     def force(self, qe: Array, qde: Array, params: dict[str, Any]) -> Array:
         """Nodal damping forces (..., n) at extended states qe, qde (..., n+1)."""
         beta = params["pv"][..., self.beta_index]

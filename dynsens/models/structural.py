@@ -314,7 +314,7 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
 
     def _corotated_damping_force(self, q: np.ndarray, qd: np.ndarray, params: dict[str, Any]) -> Any:
         """Nodal forces (..., n) of β K on the elements' deformation rates (0 where there is none)."""
-        if not self.corotated_damping or not np.any(params["pv"][..., self.corotated_damping.beta_index]):
+        if not self.corotated_damping.active(params):
             return 0.0
         return self.corotated_damping.force(self._ext(q), self._ext(qd), params)
 

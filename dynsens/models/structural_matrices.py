@@ -180,7 +180,7 @@ class StructuralMatrices:
             Ms.append(self._assemble("inertia_M", [rows], [cols], [m_v], dtype))
             Ks.append(self._assemble("inertia_K", [rows], [cols], [k_v], dtype))
             Ds.append(self._assemble("inertia_C", [rows], [cols], [c_v], dtype))
-        if self.corotated_damping and np.any(params["pv"][self.corotated_damping.beta_index]):
+        if self.corotated_damping.active(params):
             dtype = np.result_type(s.q, s.qd, params["pv"])
             for j, (rows, cols, k_v, c_v) in enumerate(
                     self.corotated_damping.jacobians(self._ext(s.q), self._ext(s.qd), params)):
