@@ -2,6 +2,9 @@
 the errors of a run with a compiled step and with the Python iteration."""
 from __future__ import annotations
 
+import contextlib
+import signal
+
 import numpy as np
 import pytest
 
@@ -53,6 +56,20 @@ def complex_step_jacobians(model, t, q, qd, qdd, params, h=1e-30):
             J[:, j] = np.imag(model.residual(t, StepState(*st, empty, empty, empty), params)) / h
         out.append(J)
     return out
+
+
+@contextlib.contextmanager
+def time_limit(seconds):
+    """Fail (not hang) when the block takes longer than ``seconds`` (SIGALRM; a fuzz example)."""
+    def on_alarm(signum, frame):
+        raise TimeoutError(f"one fuzz example took more than {seconds} s (a hang)")
+    old = signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
 
 
 def key_paths(node, prefix=()):

@@ -26,13 +26,11 @@ Counts and times measured are in BENCHMARKS.md ("Command-line fuzz").
 """
 from __future__ import annotations
 
-import contextlib
 import copy
 import json
 import math
 import os
 import re
-import signal
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -50,7 +48,7 @@ import dynsens.cli.optimize  # noqa: F401  (registers the command)
 import dynsens.cli.simulate  # noqa: F401  (registers the command)
 import dynsens.cli.study  # noqa: F401  (registers the command)
 from dynsens.cli.main import cli
-from helpers import key_paths
+from helpers import key_paths, time_limit
 
 REPO = Path(__file__).resolve().parents[1]
 SEED = int(os.environ.get("FUZZ_CLI_SEED", "20261128"))
@@ -326,19 +324,6 @@ def nonfinite_printed(text: str) -> list[str]:
             and "FAILED" not in line and "simulation failed" not in line]
 
 
-@contextlib.contextmanager
-def _time_limit(seconds: int) -> Any:
-    def on_alarm(signum: int, frame: Any) -> None:
-        raise TimeoutError(f"one fuzz example took more than {seconds} s (a hang)")
-    old = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-
-
 def _status(path: Path) -> str:
     with h5py.File(path, "r") as f:
         return str(f.attrs.get("status", ""))
@@ -395,7 +380,7 @@ def run_example(index: int, rng: np.random.Generator, folder: Path) -> Outcome:
     outcome = Outcome(name, command, [" ".join(options)] + notes)
     args = _command_args(command, case_file, out, options, overrides)
     t0 = time.perf_counter()
-    with warnings.catch_warnings(), _time_limit(EXAMPLE_SECONDS):
+    with warnings.catch_warnings(), time_limit(EXAMPLE_SECONDS):
         warnings.simplefilter("ignore")
         result = CliRunner().invoke(cli, args, catch_exceptions=True)
     outcome.seconds = time.perf_counter() - t0

@@ -12,10 +12,8 @@ deadline per example; the README's reliability section records the count and the
 """
 from __future__ import annotations
 
-import contextlib
 import copy
 import os
-import signal
 import warnings
 from pathlib import Path
 from typing import Any
@@ -31,7 +29,7 @@ from hypothesis import strategies as st  # noqa: E402
 from dynsens.case.load import load_case, load_case_text  # noqa: E402
 from dynsens.errors import DynsensError  # noqa: E402
 from dynsens.simulation import run_case  # noqa: E402
-from helpers import key_paths  # noqa: E402
+from helpers import key_paths, time_limit  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 # the fast cases (structural and multibody), so that a loaded case can also be run briefly
@@ -112,20 +110,6 @@ def _run_briefly(case: Any) -> None:
 EXAMPLE_SECONDS = 60
 
 
-@contextlib.contextmanager
-def _time_limit(seconds: int = EXAMPLE_SECONDS) -> Any:
-    """Fail (not hang) when one example takes longer than ``seconds``."""
-    def on_alarm(signum: int, frame: Any) -> None:
-        raise TimeoutError(f"one fuzz example took more than {seconds} s (a hang)")
-    old = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-
-
 @pytest.fixture(scope="module", autouse=True)
 def _compiled() -> None:
     """Run every base case once so that kernel compilation is not inside an example."""
@@ -153,7 +137,7 @@ def test_mutated_mappings_load_or_are_refused(tmp_path_factory: Any, case: tuple
         text = yaml.safe_dump(raw, sort_keys=False, allow_unicode=True)
     except yaml.YAMLError:
         return
-    with _time_limit():
+    with time_limit(EXAMPLE_SECONDS):
         loaded = _load_or_refuse(lambda: load_case_text(text, f"{name}.yaml"))
         if loaded is not None:
             with warnings.catch_warnings():
@@ -191,5 +175,5 @@ def mutated_text(draw: Any) -> bytes:
 def test_mutated_texts_load_or_are_refused(tmp_path_factory: Any, data: bytes) -> None:
     path = tmp_path_factory.mktemp("fuzz") / "case.yaml"
     path.write_bytes(data)
-    with _time_limit():
+    with time_limit(EXAMPLE_SECONDS):
         _load_or_refuse(lambda: load_case(path))
