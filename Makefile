@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test test-fast lint test-min example reproduce-table1 figures views report bench bench-peers cases clean
+.PHONY: setup test test-fast lint docs test-min example reproduce-table1 figures views report bench bench-peers cases clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,15 @@ $(LINT_STAMP): $(STAMP)
 lint: $(LINT_STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
+
+# the documentation site -> site/ (MkDocs; warnings are errors; CI runs this)
+DOCS_STAMP := $(VENV)/.docs-installed
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # the lowest versions pyproject.toml allows, in a venv of their own (CI runs this); a subset of
 # the suite: the API, closed forms, case errors, the optimizer (multi-start sampling), the

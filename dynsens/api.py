@@ -1,6 +1,6 @@
 """The Python API: simulate, optimize and check gradients from a script or a notebook.
 
-Each function takes a case as a loaded :class:`~dynsens.Case`, a path to a YAML file or a
+Each function takes a case as a loaded `Case`, a path to a YAML file or a
 mapping (as a script builds it), plus overrides by key path, exactly like ``--set`` on the
 command line::
 
@@ -82,9 +82,9 @@ def _default_workers(workers: int | None) -> int | None:
 
 
 def as_case(case: CaseLike, overrides: Mapping[str, Any] | None = None) -> Case:
-    """A validated :class:`Case` from a case, a YAML path or a mapping, with ``overrides`` applied.
+    """A validated `Case` from a case, a YAML path or a mapping, with ``overrides`` applied.
 
-    Raises :class:`~dynsens.CaseError` (file, key path, expected, found) for bad input.
+    Raises `CaseError` (file, key path, expected, found) for bad input.
     """
     sets = _override_strings(overrides or {})
     if isinstance(case, Case):
@@ -104,18 +104,29 @@ class Simulation:
 
     Attributes
     ----------
-    case : the validated case that ran (overrides applied).
-    x : design (m,), in the case's units; ``design_names`` names its entries.
-    time : (N,) time points of the stored histories (s, or the case's time unit).
-    history : state histories by field (``q``, ``qd``, ``qdd``, ``lam``, ``p``, ``pd``), each (N, n);
+    case
+        The validated case that ran (overrides applied).
+    x
+        Design (m,), in the case's units; ``design_names`` names its entries.
+    time
+        (N,) time points of the stored histories (s, or the case's time unit).
+    history
+        State histories by field (``q``, ``qd``, ``qdd``, ``lam``, ``p``, ``pd``), each (N, n);
         ``labels[field]`` names their columns.
-    responses : name -> :class:`~dynsens.responses.ResponseValue` (value, gradient, unit, missing).
-    values, gradients, units : the same as plain dicts (a missing response has value NaN).
-    monitors : per-step diagnostics, e.g. constraint drift of mechanisms.
-    counters : steps, Newton iterations, factorizations, solves, ...
-    wall_time : seconds of this run (numba compilation excluded once the cache is warm).
-    status, message : ``completed`` / ``terminated`` and why.
-    run : the raw run record.
+    responses
+        Name -> `ResponseValue` (value, gradient, unit, missing).
+    values, gradients, units
+        The same as plain dicts (a missing response has value NaN).
+    monitors
+        Per-step diagnostics, e.g. constraint drift of mechanisms.
+    counters
+        Steps, Newton iterations, factorizations, solves, ...
+    wall_time
+        Seconds of this run (numba compilation excluded once the cache is warm).
+    status, message
+        ``completed`` / ``terminated`` and why.
+    run
+        The raw run record.
     """
 
     case: Case
@@ -197,11 +208,16 @@ def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
 
     Parameters
     ----------
-    case : a :class:`Case`, a path to a case file or a mapping.
-    x : design values (m,) in the case's units, in the order of ``design.variables``.
-    sensitivities : override ``sensitivity.enabled`` (False: primal run only, no gradients).
-    history : which state histories to keep (``("q", "qd")``, ``()`` for none).
-    **overrides : case entries by key path, as ``--set`` (``**{"integrator.dt": 5e-4}``
+    case
+        A `Case`, a path to a case file or a mapping.
+    x
+        Design values (m,) in the case's units, in the order of ``design.variables``.
+    sensitivities
+        Override ``sensitivity.enabled`` (False: primal run only, no gradients).
+    history
+        Which state histories to keep (``("q", "qd")``, ``()`` for none).
+    **overrides
+        Case entries by key path, as ``--set`` (``**{"integrator.dt": 5e-4}``
         or ``integrator__dt=5e-4``).
 
     Returns
@@ -220,7 +236,7 @@ def simulate(case: CaseLike, x: Sequence[float] | np.ndarray | None = None, *,
 
 
 class OptimizeResult(_ScipyResult):
-    """Result of :func:`optimize`, with scipy's names (a dict with attribute access).
+    """Result of `optimize`, with scipy's names (a dict with attribute access).
 
     ``x`` (optimum, case units), ``fun`` (objective there, its unit), ``jac`` (∂f/∂x there,
     objective unit per design unit), ``nit`` (the optimizer's iterations), ``nfev`` (simulations),
@@ -242,20 +258,26 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
 
     Parameters
     ----------
-    case : a case with an ``optimization`` section (Case, path or mapping).
-    output : OPT.h5 to write as ``dynsens optimize -o`` does; None runs in memory (the file is
+    case
+        A case with an ``optimization`` section (Case, path or mapping).
+    output
+        OPT.h5 to write as ``dynsens optimize -o`` does; None runs in memory (the file is
         kept in a temporary directory for the run and removed afterwards).
-    x0 : start values by design-variable name, replacing the case's initial design.
-    starts, seed, maxiter, ftol, workers, scheduler, overwrite, resume : as the command's options.
-    verify : run the optimum again at a refined step and on a longer window (default: the
+    x0
+        Start values by design-variable name, replacing the case's initial design.
+    starts, seed, maxiter, ftol, workers, scheduler, overwrite, resume
+        As the command's options.
+    verify
+        Run the optimum again at a refined step and on a longer window (default: the
         case's ``optimization.verification.enabled``, on); the result's ``verification`` holds
-        :class:`~dynsens.optimize.verify.Verification` (None when not run), ``verified`` its verdict.
-    **overrides : case entries by key path, as ``--set``.
+        `Verification` (None when not run), ``verified`` its verdict.
+    **overrides
+        Case entries by key path, as ``--set``.
 
     Returns
     -------
     OptimizeResult
-        scipy's names for the best start; see :class:`OptimizeResult`.
+        scipy's names for the best start; see `OptimizeResult`.
     """
     if ftol is not None and not (isinstance(ftol, (int, float)) and not isinstance(ftol, bool)
                                  and np.isfinite(ftol) and ftol > 0):
@@ -304,7 +326,7 @@ def check_gradients(case: CaseLike, steps: Sequence[float] = (1e-3, 1e-4, 1e-5, 
     ``steps`` are relative (Δx_j = h·|x_j|, or h·scale_j at x_j = 0); ``scheme`` is ``forward``,
     ``central`` or ``complex``.  The report holds ``semi_analytical`` and ``columns`` (one per
     step, with ``gradients`` and ``rel_diff``); ``report.passes(rtol)`` is the command's exit test
-    and :func:`dynsens.gradcheck.to_markdown` its table.
+    and `to_markdown` its table.
     """
     c = as_case(case, overrides)
     return _check_gradients(c, list(steps), scheme, x=None if x is None else np.asarray(x, dtype=float),

@@ -1,6 +1,6 @@
 """Exception hierarchy of dynsens.
 
-Every error a user can cause derives from :class:`DynsensError`; the command line
+Every error a user can cause derives from `DynsensError`; the command line
 turns these into one clean message and exit status, anything else is a bug and
 keeps its traceback.  Each class also derives from the matching builtin so that
 callers may catch either.

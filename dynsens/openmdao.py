@@ -9,7 +9,7 @@ general, on every design variable through the whole trajectory.
 Units: a design variable's or response's unit becomes the OpenMDAO unit where OpenMDAO knows it
 (``mm``, ``t``, ``MPa`` ...); otherwise the variable has no OpenMDAO unit and the case's unit is
 in its description.  OpenMDAO forbids ``. * ? ! [ ]`` in names: a family member ``A[3]`` is the
-variable ``A_3``; :attr:`CaseComponent.input_names` maps the case's names to the component's.
+variable ``A_3``; `input_names` maps the case's names to the component's.
 
 Install with ``pip install 'dynsens[openmdao]'``.
 """
@@ -53,16 +53,19 @@ class CaseComponent(om.ExplicitComponent):
 
     Options
     -------
-    case : a :class:`~dynsens.Case`, a path to a case file or a mapping.
+    case : a `Case`, a path to a case file or a mapping.
     overrides : overrides by key path, as ``--set`` (``{"integrator.t_end": 0.02}``).
     responses : the responses to output (default: the optimization section's objective and
         constraints, or every response of a case without one).
 
     Attributes
     ----------
-    n_simulations : simulations run so far (one per distinct design point).
-    counters : run statistics of the last simulation (steps, solves, backward solves, ...).
-    input_names, output_names : case name -> component variable name.
+    n_simulations
+        Simulations run so far (one per distinct design point).
+    counters
+        Run statistics of the last simulation (steps, solves, backward solves, ...).
+    input_names, output_names
+        Case name -> component variable name.
     """
 
     def initialize(self) -> None:
@@ -155,10 +158,13 @@ def add_case_driver_variables(group: Any, path: str, component: CaseComponent, *
 
     Parameters
     ----------
-    path : the component's path in ``group`` (e.g. ``"truss"``).
-    objective : add the optimization section's objective (False for a second load case whose
+    path
+        The component's path in ``group`` (e.g. ``"truss"``).
+    objective
+        Add the optimization section's objective (False for a second load case whose
         constraints only count).
-    ref : response name -> reference value (its unit) that scales the objective; default 1.
+    ref
+        Response name -> reference value (its unit) that scales the objective; default 1.
 
     Scaling follows ``dynsens optimize``: a bounded design variable maps to [0, 1], an unbounded
     one to x/scale; a constraint bound b ≠ 0 divides its response by |b|.

@@ -19,7 +19,7 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class SimulationResult(RunResult):
-    """A :class:`~dynsens.march.RunResult` with the case's recorded quantities
+    """A `RunResult` with the case's recorded quantities
     (``output.quantities``), by name, on the run's time grid."""
 
     quantities: dict[str, RecordedQuantity] = field(default_factory=dict)
@@ -42,17 +42,28 @@ def run_case(case: Case, x: np.ndarray | None = None, *, sensitivities: bool | N
 
     Parameters
     ----------
-    x : design (m,), real or complex (complex forces ``sensitivities=False``).
-    sensitivities : override the case's ``sensitivity.enabled``.
-    history : override which state histories are stored.
-    progress : called as ``progress(step, n_steps)`` while the run advances.
-    record : keep the recorded quantities (``output.quantities``; for a case that names none,
+    x
+        Design (m,), real or complex (complex forces ``sensitivities=False``).
+    sensitivities
+        Override the case's ``sensitivity.enabled``.
+    history
+        Override which state histories are stored.
+    progress
+        Called as ``progress(step, n_steps)`` while the run advances.
+    record
+        Keep the recorded quantities (``output.quantities``; for a case that names none,
         the quantities its responses read); default: yes, unless ``history=()`` asks for a run
         that stores no time histories (as the finite-difference, optimization and convergence
         runs do).
 
-    Raises DesignError (an entry invalid at ``x``), RunSizeError (the run would not fit),
-    NonFiniteError (a non-finite state, response value or gradient) with their context.
+    Raises
+    ------
+    DesignError
+        An entry invalid at ``x``, with its context.
+    RunSizeError
+        The run would not fit, with its context.
+    NonFiniteError
+        A non-finite state, response value or gradient, with its context.
     """
     x = case.x0 if x is None else np.asarray(x)
     plan = case.plan

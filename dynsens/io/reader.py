@@ -137,7 +137,7 @@ class Result:
 
 
 def read_result(path: str | Path, group: str = "/") -> Result:
-    """Read a ``dynsens simulate`` result file (HDF5) into a :class:`Result`; with
+    """Read a ``dynsens simulate`` result file (HDF5) into a `Result`; with
     ``group="optimization/optimum"`` (or ``"optimization/initial"``) the run an optimization
     file stores for its best (or start) design."""
     path = Path(path)
