@@ -251,8 +251,7 @@ def choose_method(plan: RunPlan, responses: ResponseSet, m: int) -> tuple[str, s
     outputs' seeds, the transposed sweep and the records it keeps (or recomputes).  ``auto``
     takes the adjoint when it covers the case and m ≥ 4 (r + 1): the paper's rule of thumb
     (adjoint when the design variables outnumber the functions) with the fixed costs priced from
-    the measured chain runs of BENCHMARKS.md (r = 4: adjoint ≈ 1.8× the primal whatever m;
-    direct 1.3× at m = 10, 2.9× at m = 100)."""
+    the measured chain runs of BENCHMARKS.md ("Where `auto` switches")."""
     r = sum(1 for rsp in responses.responses if rsp.output_ids or isinstance(rsp, EventTime))
     why_not = adjoint_obstacles(plan, responses)
     if plan.method == "direct":

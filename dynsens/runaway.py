@@ -23,7 +23,7 @@ from .models.base import Model, StepState
 #: growth of |q|∞ and |q̇|∞ beyond their early-run scale at which a run is stopped
 RUNAWAY_FACTOR = 1e6
 #: every STRIDE-th accepted step is looked at (a runaway takes hundreds of steps from 1e6 times
-#: its scale to overflow; a look costs a few µs, a small model's step ~100 µs)
+#: its scale to overflow; a look costs a small share of a step, BENCHMARKS.md)
 STRIDE = 4
 #: looks after the state first moved before the first verdict: the window then holds at least
 #: four looks, so one value at round-off (a load switched on between grid points, ~1e-31)

@@ -1,9 +1,9 @@
 """Compile the compiled kernels and steps once, into numba's on-disk cache: ``python -m dynsens.warmup``.
 
 The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on its first use on a
-machine, real and complex separately (≈ 25 s and ≈ 8 s on 2 cores), and so is the compiled step
-that calls it (``models/multibody/compiled_step.py``, ≈ 30 s; one signature for every mechanism)
-and the compiled step of spring networks (``models/structural_step_kernels.py``, ≈ 10 s; one signature
+machine, real and complex separately, and so is the compiled step
+that calls it (``models/multibody/compiled_step.py``; one signature for every mechanism)
+and the compiled step of spring networks (``models/structural_step_kernels.py``; one signature
 for every network), and the compiled block of sensitivity steps (``derivatives/direct_step.py``; one
 signature for every dense model); all are cached on disk beside the package.  ``make setup`` runs this module
 so that a user's first ``dynsens simulate`` takes as long as the second, and so that no reported
@@ -11,6 +11,7 @@ timing includes compilation.  It runs a short piece (``--steps`` steps) of each 
 with forward partials (real arithmetic), complex partials and a complex-step run of the whole
 simulation (complex arithmetic), which reaches every compiled function with every argument type
 the runs use, and of the shipped Duffing chain on the sparse path (the spring networks' step).
+How long each compilation takes: BENCHMARKS.md ("Figures moved from docstrings").
 
 Usage: python -m dynsens.warmup [CASE.yaml ...] [--steps N]   (default: the shipped mechanisms
 and the sparse chain)

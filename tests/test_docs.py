@@ -300,6 +300,25 @@ def test_cited_test_files_exist() -> None:
     assert len(cited) > 20 and not missing, missing
 
 
+def test_cited_test_functions_exist() -> None:
+    """A test cited by name (`test_name` in backquotes, or FILE.py::test_name) is defined in that file, or in tests/."""
+    defined: dict[str, set[str]] = {f.name: set(re.findall(r"^\s*def (test_\w+)", f.read_text(encoding="utf-8"), re.M))
+                                     for f in (REPO / "tests").glob("test_*.py")}
+    every = set().union(*defined.values())
+    missing, n = [], 0
+    for path in [*(REPO / "dynsens").rglob("*.py"), *(REPO / "scripts").glob("*.py"), *DOCS]:
+        text = path.read_text(encoding="utf-8")
+        for file, name in re.findall(r"\b(test_\w+\.py)::(test_\w+)", text):
+            n += 1
+            if name not in defined.get(file, set()):
+                missing.append((path.name, f"{file}::{name}"))
+        for name in re.findall(r"`(test_\w+)`", text):
+            n += 1
+            if name not in every:
+                missing.append((path.name, name))
+    assert n > 10 and not missing, missing
+
+
 def test_make_targets_in_the_documents_exist() -> None:
     targets = set(re.findall(r"^([\w-]+):", (REPO / "Makefile").read_text(encoding="utf-8"), re.M))
     named = {(d.name, t) for d in COMMAND_DOCS for t in re.findall(r"`make ([\w-]+)`|^make ([\w-]+)",
