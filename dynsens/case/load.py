@@ -1,6 +1,6 @@
 """Read and validate a case: every problem is collected with its YAML path, then raised once.
 
-Top-level keys (see the README's case-file reference): ``name``, ``description``,
+Top-level keys (see docs/case-files.md and docs/case-reference.md): ``name``, ``description``,
 ``design``, ``model``, ``integrator``, ``sensitivity``, ``output``, ``events``,
 ``responses``.
 """

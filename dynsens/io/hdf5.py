@@ -1,6 +1,6 @@
 """The HDF5 result file: the only module that writes or reads it.
 
-Layout (a contract; see the README):
+Layout (a contract; see docs/outputs.md):
 
 * root attributes ``dynsens_version``, ``created`` (ISO 8601 UTC), ``case`` (YAML text),
   ``case_source``, ``status``, ``message``, and what produced the file: ``provenance_versions``

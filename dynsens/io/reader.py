@@ -31,7 +31,7 @@ def _need(module: str) -> Any:
 
 @dataclass
 class Result:
-    """The contents of a simulation result file (see the README's "Output files").
+    """The contents of a simulation result file (see docs/outputs.md, "Output files").
 
     time : (N,) s.  quantities[name] : (N,) or (N, k) recorded quantities, with ``units``,
     ``labels`` (long names) and ``components`` (labels of k components) by name;

@@ -22,7 +22,7 @@ gradients (memoized by u).  A simulation that fails at a trial point (Newton div
 SLSQP as a finite penalty (f_s raised by ``FAIL_PENALTY``, every g lowered by it) so that
 its line search backs off; a start whose first design cannot be simulated is not
 optimized (and for the reference start the whole run stops with an
-:class:`OptimizationError`).
+``OptimizationError``).
 
 Output file (OPT.h5, appended after every iteration so an interruption loses nothing)
 --------------------------------------------------------------------------------------

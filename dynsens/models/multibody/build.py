@@ -37,7 +37,7 @@ JOINT_KEYS = allowed("multibody.joint")
 @register("multibody")
 def build_multibody(spec: dict, path: str, table: ParameterTable,
                     problems: ProblemCollector) -> MultibodyModel | None:
-    """Read the ``model`` mapping (see the README's multibody section)."""
+    """Read the ``model`` mapping (see docs/multibody.md)."""
     n0 = len(problems.problems)
     check_keys(spec, path, TOP_KEYS, problems, required=("bodies",))
     rd = Reader(table, problems)

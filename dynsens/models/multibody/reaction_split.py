@@ -5,7 +5,7 @@ multipliers are not: every λ with the same generalized constraint force J_Φᵀ
 bodies alike, and the model's own λ (that of the independent equations kept in Φ, the left-out
 ones at zero) is the split that follows the joints' order in the case file.  The reactions of
 the joints of a dependent set are reported for one split fixed by a rule that does not see the
-order (README, "Redundant joints"):
+order (docs/multibody.md, "Redundant joints"):
 
     among all multipliers of the complete set of equations that give the model's constraint
     force, the one whose joint part has the least 2-norm.

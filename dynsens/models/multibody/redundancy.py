@@ -5,7 +5,7 @@ mechanism: six revolutes, 30 equations for 5 × 6 freedoms, one of them redundan
 everywhere; a planar four-bar written with spatial revolutes: three).  The constraint
 Jacobian J_Φ then has rank r < n_eq and the index-1 iteration matrix is singular.
 
-What is done (README "Redundant joints"):
+What is done (docs/multibody.md, "Redundant joints"):
 
 1. At load, the case's initial design x0 is assembled by minimum-norm Gauss–Newton on all
    equations (joints, normalisations, holds, distances), which converges for consistent

@@ -64,7 +64,7 @@ class Reader:
                 self.problems.add(f"{bp}.point_mass", f"expected true or false, found {point!r}")
                 continue
             if point:
-                # no inertia, no orientation: the body is its mass point (README "Point masses")
+                # no inertia, no orientation: the body is its mass point (docs/multibody.md "Point masses")
                 extra = [k for k in ("inertia", "orientation", "angular_velocity") if k in b]
                 for k in extra:
                     self.problems.add(f"{bp}.{k}", "a point mass has no rotational inertia or "
