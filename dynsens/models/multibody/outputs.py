@@ -285,6 +285,10 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         i = 0 if kind == "position" else 1
         return Output(lambda t, s, prm: pt.kin(_ctx(s, prm, t))[i][:, 0],
                       tuple(f"{name}.{c}" for c in ("x", "y", "z")))
+    members = {mb.name: mb for mb in model.members}
+    if name in members:                            # flexible members (:mod:`.members`)
+        from .members import member_output
+        return member_output(model, members[name], kind, path, problems)
     cyls = {c.name: c for c in model.cylinders}
     springs = {sp.name: sp for sp in model.springs}
     if name in cyls:

@@ -1,0 +1,141 @@
+"""Flexible members inside a mechanism (dynsens/models/multibody/members.py, issue 33): a bar
+between node bodies against the closed form of a hanging mass, the rigid limit (a point mass
+on a very stiff bar against the distance-joint pendulum of cases/point_pendulum.yaml), the
+coupled sensitivities of cases/mechanism_members.yaml against the complex step of the whole run
+and the adjoint, and the input errors."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+import dynsens
+from conftest import CASES
+from dynsens.case.load import load_case_dict
+from dynsens.errors import CaseError
+from helpers import assert_gradients_match_complex_step_and_adjoint
+
+G = 9.81
+
+
+def _hanging(E=2.0e9, m=2.0, L=1.0, rho=7800.0, A=1.0e-6):
+    """A point mass m hanging from the ground on a bar (E, A, ρ, length L), released unstretched
+    and settling under a critically damped axial dashpot."""
+    k = E * A / L
+    m_node = m + rho * A * L / 2
+    return {
+        "name": "hanging_bar",
+        "design": {"variables": [{"name": "A", "value": A, "lower": A / 10, "upper": 10 * A}]},
+        "model": {
+            "type": "multibody", "gravity": [0, -G, 0],
+            "bodies": {"ground": {"markers": {"O": [0, 0, 0]}},
+                       "bob": {"point_mass": True, "mass": m, "position": [0, -L, 0]}},
+            "members": [{"name": "bar", "type": "bar", "nodes": ["ground.O", "bob"], "E": E, "area": "A",
+                         "density": rho, "damping": 2 * np.sqrt(k * m_node)}],
+        },
+        "integrator": {"scheme": "newmark", "dt": 1e-3, "t_end": 1.0},
+        "sensitivity": {"enabled": True, "partials": "complex"},
+        "responses": [
+            {"name": "y_end", "type": "value", "quantity": {"body": "bob", "kind": "position"},
+             "component": "bob.y"},
+            {"name": "force_end", "type": "value", "quantity": {"element": "bar", "kind": "force"}},
+            {"name": "stress_end", "type": "value", "quantity": {"element": "bar", "kind": "stress"}},
+            {"name": "strain_end", "type": "value", "quantity": {"element": "bar", "kind": "strain"}},
+            {"name": "mass", "type": "mass"},
+        ],
+    }
+
+
+def test_hanging_mass_stretches_the_bar_by_m_g_L_over_E_A():
+    """Static elongation δ = (m + ρAL/2) g L/(EA): the tip mass plus the bar's own weight, whose
+    end displacement ρ g L²/(2E) the half-mass lumped on the tip reproduces exactly (Timoshenko &
+    Goodier, a bar hanging under its own weight); the damped run settles to it (critically damped
+    axial mode, 1 s ≈ 20 time constants).  Force m_node g, stress force/A, strain δ/L; the mass
+    response counts the whole bar (ρAL, half of it on the ground); dδ/dA closed form too."""
+    E, m, L, rho, A = 2.0e9, 2.0, 1.0, 7800.0, 1.0e-6
+    res = dynsens.run_case(load_case_dict(_hanging(E, m, L, rho, A)))
+    r = {n: v for n, v in res.responses.items()}
+    m_node = m + rho * A * L / 2
+    delta = m_node * G * L / (E * A)
+    assert abs(-r["y_end"].value - (L + delta)) < 1e-9 * delta
+    assert abs(r["force_end"].value / (m_node * G) - 1) < 1e-9
+    assert abs(r["stress_end"].value / (m_node * G / A) - 1) < 1e-9
+    assert abs(r["strain_end"].value / (delta / L) - 1) < 1e-9
+    assert abs(r["mass"].value - (m + rho * A * L)) < 1e-15
+    # y = −(L + δ(A)), δ = m g L/(EA) + ρ g L²/(2E): dy/dA = m g L/(E A²)
+    assert abs(r["y_end"].gradient[0] / (m * G * L / (E * A * A)) - 1) < 1e-7
+    assert abs(r["mass"].gradient[0] / (rho * L) - 1) < 1e-14
+
+
+def _pendulum(dt, rod):
+    """cases/point_pendulum.yaml at step dt with its distance joint ('joint') or a bar of E A = 1e12 N
+    ('bar') as the rod; the rod force response reads the joint's multiplier or the bar's tension."""
+    raw = yaml.safe_load((CASES / "point_pendulum.yaml").read_text(encoding="utf-8"))
+    raw["integrator"]["dt"] = dt
+    if rod == "bar":
+        raw["model"].pop("joints")
+        raw["model"]["members"] = [{"name": "rod", "type": "bar", "nodes": ["ground.O", "bob"],
+                                    "E": 1.0e12, "area": 1.0}]
+        raw["responses"][-1]["quantity"] = {"element": "rod", "kind": "force"}
+    return dynsens.run_case(load_case_dict(raw))
+
+
+def test_a_very_stiff_bar_reproduces_the_rigid_pendulum_and_its_gradients():
+    """Rigid limit: a point mass on a bar of EA/L = 1e12 N/m (ω Δt ≈ 5e3) against the distance
+    joint. At Δt = 2.5 ms the responses (half period, far-side position, KS of the rod force) agree
+    within 5e-5 and their gradients (by L and m) within 1e-4 of the largest entry; halving Δt cuts the
+    half-period difference about four times (3 to 5: both are second-order in Δt and tend to the same
+    limit, so the difference is the scheme's error, not the bar's compliance)."""
+    diffs = {}
+    for dt in (5e-3, 2.5e-3):
+        rigid, flex = _pendulum(dt, "joint"), _pendulum(dt, "bar")
+        diffs[dt] = abs(flex.responses["half_period"].value / rigid.responses["half_period"].value - 1)
+    for name, r in rigid.responses.items():
+        f = flex.responses[name]
+        assert abs(f.value / r.value - 1) < 5e-5, name
+        assert np.max(np.abs(f.gradient - r.gradient)) < 1e-4 * np.max(np.abs(r.gradient)), name
+    assert 3.0 < diffs[5e-3] / diffs[2.5e-3] < 5.0, diffs
+
+
+def test_coupled_sensitivities_of_a_member_in_a_mechanism():
+    """cases/mechanism_members.yaml: the rope's section A (stiffness and lumped mass) and the drive
+    torque; the KS of the rope stress and of the hinge reaction, the mass and the arm angle against
+    the complex step of the whole run (1e-8) and the adjoint (1e-10)."""
+    case = dynsens.load_case(CASES / "mechanism_members.yaml")
+    res = dynsens.run_case(case)
+    assert res.status == "completed"
+    assert_gradients_match_complex_step_and_adjoint(case, res, rtol_cs=1e-8, rtol_adjoint=1e-10)
+    # the rope's mass is in the system: ρ A L0 with L0 the initial tip-to-payload distance 0.8 m
+    assert abs(res.responses["mass"].gradient[0] - 1200.0 * 0.8) < 1e-9
+
+
+def _raw():
+    return yaml.safe_load((CASES / "mechanism_members.yaml").read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("edit, path, words", [
+    (lambda m: m[0].update(type="cable"), "model.members[0].type", "unknown member type"),
+    (lambda m: m[0].update(nodes=["arm.tip"]), "model.members[0].nodes", "[node_1, node_2]"),
+    (lambda m: m[0].update(nodes=["arm.tip", "payloda"]), "model.members[0].nodes[1]", "unknown body"),
+    (lambda m: m[0].update(nodes=["arm.tipp", "payload"]), "model.members[0].nodes[0]", "no marker"),
+    (lambda m: m[0].update(nodes=["ground", "payload"]), "model.members[0].nodes[0]", "ground.MARKER"),
+    (lambda m: m[0].update(nodes=["payload", "payload"]), "model.members[0].nodes", "two different"),
+    (lambda m: m[0].pop("area"), "model.members[0].area", "missing"),
+    (lambda m: m[0].update(E=-1.0), "model.members[0].E", ""),
+    (lambda m: m[0].update(aera=1.0), "model.members[0].aera", "did you mean 'area'"),
+    (lambda m: m.append(dict(m[0])), "model.members[1].name", "duplicate"),
+])
+def test_member_input_errors(edit, path, words):
+    raw = _raw()
+    edit(raw["model"]["members"])
+    with pytest.raises(CaseError) as exc:
+        load_case_dict(raw)
+    text = str(exc.value)
+    assert path in text and words in text, text
+
+
+def test_unknown_member_quantity_is_reported():
+    raw = _raw()
+    raw["responses"][0]["quantity"]["kind"] = "stres"
+    with pytest.raises(CaseError, match=r"did you mean 'stress'"):
+        load_case_dict(raw)
