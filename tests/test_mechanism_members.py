@@ -139,3 +139,48 @@ def test_unknown_member_quantity_is_reported():
     raw["responses"][0]["quantity"]["kind"] = "stres"
     with pytest.raises(CaseError, match=r"did you mean 'stress'"):
         load_case_dict(raw)
+
+
+# ---------------------------------------------------------------------------------- beams
+BEAM = {"E": 2.0e11, "G": 8.0e10, "area": 1.0e-4, "Iy": 2.0e-9, "Iz": 8.0e-9, "J": 3.0e-9}
+
+
+def _cantilever(force, torque):
+    """A beam member clamped to the ground (node ground.O) with a small rigid tip body (its COM the
+    node) at L = 1 along x, loaded at the tip; β = 0.05 s damps every mode (the slowest decays as
+    e^(−t/β)), so 1 s settles to the static state."""
+    raw = {
+        "name": "cantilever",
+        "design": {"variables": [{"name": "A", "value": BEAM["area"], "lower": 1e-5, "upper": 1e-3}]},
+        "model": {
+            "type": "multibody",
+            "bodies": {"ground": {"markers": {"O": [0, 0, 0]}},
+                       "tip": {"mass": 1.0, "inertia": [0.01, 0.01, 0.01], "position": [1.0, 0, 0]}},
+            "members": [{"name": "beam", "type": "beam", "nodes": ["ground.O", "tip"], **BEAM, "area": "A",
+                         "damping": 0.05}],
+            "forces": [{"type": "point_force", "name": "P", "body": "tip", "force": list(force)},
+                       {"type": "torque", "name": "T", "body": "tip", "torque": list(torque)}],
+        },
+        "integrator": {"scheme": "newmark", "dt": 5e-3, "t_end": 1.0},
+        "sensitivity": {"enabled": False},
+    }
+    return dynsens.run_case(load_case_dict(raw), history=("q",)).history["q"][-1]
+
+
+def test_beam_member_cantilever_static_closed_forms():
+    """Tip of a cantilever (Euler–Bernoulli, small deflections; local y = global z by the default
+    orientation, so a load along global y bends about local y): axial δ = PL/(EA), twist
+    φ = TL/(GJ) (φ = 2 e₁ of the tip's Euler parameters), lateral w = PL³/(3EI) and end slope
+    PL²/(2EI) in both planes.  Loads small (w/L ~ 1e-5) so the co-rotational element's geometric
+    terms stay below 1e-9; the axial check is limited by the absolute settling of the position
+    (~2e-10 of L = 1 against δ = 1e-5)."""
+    E, G, A, Iy, Iz, J = (BEAM[k] for k in ("E", "G", "area", "Iy", "Iz", "J"))
+    q = _cantilever([200.0, 0, 0], [0.05, 0, 0])
+    assert abs((q[0] - 1.0) / (200.0 / (E * A)) - 1) < 1e-4
+    assert abs(2 * q[4] / (0.05 / (G * J)) - 1) < 1e-7
+    Py, Pz = -0.012, 0.05
+    q = _cantilever([0, Py, Pz], [0, 0, 0])
+    assert abs(q[1] / (Py / (3 * E * Iy)) - 1) < 1e-8
+    assert abs(q[2] / (Pz / (3 * E * Iz)) - 1) < 1e-8
+    assert abs(2 * q[6] / (Py / (2 * E * Iy)) - 1) < 1e-8           # slope about z of the y deflection
+    assert abs(2 * q[5] / (-Pz / (2 * E * Iz)) - 1) < 1e-6          # about y of the z deflection

@@ -51,7 +51,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     cylinders: list[HydraulicCylinder] = []
     springs: list[SpringDamper] = []
     read_forces(rd, spec.get("forces", []), f"{path}.forces", forces, cylinders, springs)
-    members = read_members(rd, spec.get("members"), f"{path}.members", springs)
+    members = read_members(rd, spec.get("members"), f"{path}.members", springs, forces)
     assembly = _initial(rd, spec.get("initial", {}), f"{path}.initial")
     alpha = beta = 0.0
     st = spec.get("stabilization")

@@ -31,6 +31,8 @@ a bar hanging under its own weight the lumping is exact at the free end: the con
 end displacement ρ g L²/(2E) equals (ρ A L/2) g L/(E A).
 
 Outputs: ``{element: BAR, kind: force | stress | strain | length}`` (N, σ, ε, L).
+
+Beams (``type: beam``): co-rotational beams between node frames, :mod:`.member_beams`.
 """
 from __future__ import annotations
 
@@ -39,19 +41,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...case_keys import allowed
+from ...case_keys import allowed, required
 from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
 from ..base import Output, StepState
 from .bodies import GROUND, BodyDef, Diff, MBParams, Point
 from .forces import SpringDamper
 from .kernel import KParams, kernel_params
+from .member_beams import BeamMember, read_beam
 from .spec import Reader
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel
 
-MEMBER_TYPES = ("bar",)
+MEMBER_TYPES = ("bar", "beam")
 BAR_KINDS = ("force", "stress", "strain", "length")
 
 
@@ -107,17 +110,17 @@ def _node(rd: Reader, ref: Any, path: str) -> tuple[BodyDef, str] | None:
     return body, "zero"
 
 
-def read_members(rd: Reader, spec: Any, path: str, springs: list) -> list[Bar]:
+def read_members(rd: Reader, spec: Any, path: str, springs: list, forces: list) -> list[Any]:
     """Read the ``members`` list at ``path``: bars are appended to ``springs`` (they act through
-    the axial-element kernel) and returned (the model lumps their masses, :meth:`Bar.lump_mass`).
-    Problems go to rd.problems with their YAML paths."""
+    the axial-element kernel), beams to ``forces`` (:mod:`.member_beams`); all are returned (the
+    model lumps their masses, ``lump_mass``).  Problems go to rd.problems with their YAML paths."""
     if spec is None:
         return []
     if not isinstance(spec, list):
         rd.problems.add(path, "expected a list of members ({type: bar, nodes: [A, B], E, area, ...})")
         return []
-    bars: list[Bar] = []
-    names = {getattr(s, "name", None) for s in springs}
+    bars: list[Any] = []
+    names = {getattr(s, "name", None) for s in springs + forces}
     for i, m in enumerate(spec):
         mp = f"{path}[{i}]"
         kind = m.get("type") if isinstance(m, dict) else m
@@ -126,13 +129,19 @@ def read_members(rd: Reader, spec: Any, path: str, springs: list) -> list[Bar]:
                                           f"(known: {', '.join(MEMBER_TYPES)})")
             continue
         if not check_keys(m, mp, allowed(f"multibody.member.{kind}"), rd.problems,
-                          required=("type", "nodes", "E", "area")):
+                          required=required(f"multibody.member.{kind}")):
             continue
         name = str(m.get("name", f"member{i + 1}"))
         if name in names:
             rd.problems.add(f"{mp}.name", f"duplicate element name '{name}' (members and forces share names)")
             continue
         names.add(name)
+        if kind == "beam":
+            beam = read_beam(rd, m, mp, name)
+            if beam is not None:
+                forces.append(beam)
+                bars.append(beam)
+            continue
         nodes = m.get("nodes")
         if not isinstance(nodes, list) or len(nodes) != 2:
             rd.problems.add(f"{mp}.nodes", f"expected [node_1, node_2] (body or body.marker), found {nodes!r}")
@@ -160,10 +169,13 @@ def read_members(rd: Reader, spec: Any, path: str, springs: list) -> list[Bar]:
     return bars
 
 
-def member_output(model: "MultibodyModel", bar: Bar, kind: Any, path: str,
+def member_output(model: "MultibodyModel", bar: Any, kind: Any, path: str,
                   problems: ProblemCollector) -> Output | None:
-    """``{element: BAR, kind: force | stress | strain | length}`` (batched, autonomous)."""
+    """``{element: BAR, kind: force | stress | strain | length}`` (batched, autonomous), or a
+    beam's quantity (:meth:`.member_beams.BeamMember.output`)."""
     from .outputs import _axial
+    if isinstance(bar, BeamMember):
+        return bar.output(model, kind, path, problems)
     if kind not in BAR_KINDS:
         problems.add(f"{path}.kind", f"unknown member quantity {kind!r}{did_you_mean(kind, BAR_KINDS)} "
                                      f"(known: {', '.join(BAR_KINDS)})")
