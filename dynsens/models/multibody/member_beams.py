@@ -164,19 +164,24 @@ class BeamMember(ForceElement):
         return Output(fn, labels)
 
 
-def _beam_node(rd: Reader, ref: Any, path: str) -> tuple[BodyDef, str] | None:
-    """A beam end: ``body`` (its COM frame) or ``body.marker``; rigid bodies or the ground only."""
+def member_node(rd: Reader, ref: Any, path: str) -> tuple[BodyDef, str] | None:
+    """A member end: ``body`` (its COM) or ``body.marker`` (the ground only through a marker);
+    (body, vec key of the point in body axes) or None once a problem is reported."""
     if not isinstance(ref, str):
         rd.problems.add(path, f"expected a body name or 'body.marker', found {ref!r}")
         return None
     if "." in ref:
-        end = rd.marker_ref(ref, path)
-    else:
-        body = rd.body(ref, path)
-        end = None if body is None else (body, "zero")
-        if body is not None and body.index == GROUND:
-            rd.problems.add(path, "the ground has no nodal point: name a marker, 'ground.MARKER'")
-            return None
+        return rd.marker_ref(ref, path)
+    body = rd.body(ref, path)
+    if body is not None and body.index == GROUND:
+        rd.problems.add(path, "the ground has no nodal point: name a marker, 'ground.MARKER'")
+        return None
+    return None if body is None else (body, "zero")
+
+
+def _beam_node(rd: Reader, ref: Any, path: str) -> tuple[BodyDef, str] | None:
+    """A beam end (:func:`member_node`): rigid bodies or the ground only."""
+    end = member_node(rd, ref, path)
     if end is not None and end[0].point_mass:
         rd.problems.add(path, f"'{end[0].name}' is a point mass, which has no orientation: a beam needs "
                               "node bodies with rotational inertia (use a bar, or a small rigid body)")

@@ -45,10 +45,10 @@ from ...case_keys import allowed, required
 from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
 from ..base import Output, StepState
-from .bodies import GROUND, BodyDef, Diff, MBParams, Point
+from .bodies import GROUND, Diff, MBParams, Point
 from .forces import SpringDamper
 from .kernel import KParams, kernel_params
-from .member_beams import BeamMember, read_beam
+from .member_beams import BeamMember, member_node, read_beam
 from .spec import Reader
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -94,22 +94,6 @@ class Bar(SpringDamper):
         return sum(self.half_mass(prm) for b in self.nodes if b == GROUND)
 
 
-def _node(rd: Reader, ref: Any, path: str) -> tuple[BodyDef, str] | None:
-    """A member end: ``body`` (its COM) or ``body.marker``; (body, vec key) or None."""
-    if not isinstance(ref, str):
-        rd.problems.add(path, f"expected a body name or 'body.marker', found {ref!r}")
-        return None
-    if "." in ref:
-        return rd.marker_ref(ref, path)
-    body = rd.body(ref, path)
-    if body is None:
-        return None
-    if body.index == GROUND:
-        rd.problems.add(path, "the ground has no nodal point: name a marker, 'ground.MARKER'")
-        return None
-    return body, "zero"
-
-
 def read_members(rd: Reader, spec: Any, path: str, springs: list, forces: list) -> list[Any]:
     """Read the ``members`` list at ``path``: bars are appended to ``springs`` (they act through
     the axial-element kernel), beams to ``forces`` (:mod:`.member_beams`); all are returned (the
@@ -146,7 +130,7 @@ def read_members(rd: Reader, spec: Any, path: str, springs: list, forces: list) 
         if not isinstance(nodes, list) or len(nodes) != 2:
             rd.problems.add(f"{mp}.nodes", f"expected [node_1, node_2] (body or body.marker), found {nodes!r}")
             continue
-        ends = [_node(rd, ref, f"{mp}.nodes[{k}]") for k, ref in enumerate(nodes)]
+        ends = [member_node(rd, ref, f"{mp}.nodes[{k}]") for k, ref in enumerate(nodes)]
         iE = rd.num(m.get("E"), f"{mp}.E", positive=True)
         iA = rd.num(m.get("area"), f"{mp}.area", positive=True)
         irho = rd.num(m.get("density", 0.0), f"{mp}.density", nonnegative=True)
