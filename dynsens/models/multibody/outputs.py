@@ -320,7 +320,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         level = kinds.index(kind)
         return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{name}.{kind}",),
                       {"angle": "rad", "angle_rate": "rad/s", "torque": ""}[kind])
-    allnames = list(cyls) + list(springs) + list(rots)
+    allnames = list(dict.fromkeys([*cyls, *springs, *rots, *members]))
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")
     return None
