@@ -336,7 +336,7 @@ def test_event_time_responses_with_the_dissipative_schemes(scheme):
 # spring-dampers (torsional pair), point masses with distance joints (point pendulum) and adaptive
 # steps (cart pole): whole runs, their events included; the two longest (no events) over the first
 # part of their runs (the cart pole: through the pole's first crossings of the vertical)
-MECHANISMS = ["bricard", "rheonomic", "torsional_pair", "point_pendulum", "cart_pole"]
+MECHANISMS = ["bricard", "rheonomic", "torsional_pair", "point_pendulum", "cart_pole", "mechanism_members"]
 HORIZON = {"torsional_pair": ["integrator.t_end=0.5"], "cart_pole": ["integrator.t_end=2.5"]}
 
 

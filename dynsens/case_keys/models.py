@@ -119,6 +119,8 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("joints", "list", "joints, distance rods and drivers",
            item=("multibody.joint", "multibody.distance_joint", "multibody.driver")),
         _k("forces", "list", "force elements", item=tuple(f"multibody.{t}" for t in FORCE_TYPES)),
+        _k("members", "list", "flexible structural members between node bodies (docs/flexible_members.md)",
+           item=("multibody.member.bar", "multibody.member.beam")),
         _k("initial", "section", "consistent initial assembly", item="multibody.initial"),
         _k("stabilization", "section", "Baumgarte terms (part of the residual)", item="multibody.stabilization"),
         _k("projection", "section", "project each step's end state onto the position and velocity "
@@ -202,6 +204,28 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("stiffness", "expr", "k", default=0.0), _k("cubic_stiffness", "expr", "k3", default=0.0),
         _k("damping", "expr", "d", default=0.0), _k("free_length", "expr", "L0 (default: the initial length)"),
     ), type_value="spring_damper"),
+    "multibody.member.bar": Section("members[i], type: bar", "A bar between two node bodies: tension "
+                                    "N = E A (L − L0)/L0 + c L̇ (engineering strain), mass ρ A L0 lumped half on "
+                                    "each node.", (
+        _req("type", "enum", "member type", values=("bar",)), _k("name", "name", "member name"),
+        _req("nodes", "list", "[node_1, node_2]: a body (its COM) or body.marker", item="name"),
+        _req("E", "expr", "Young's modulus"), _req("area", "expr", "cross-section area"),
+        _k("density", "expr", "density (mass lumped on the nodes)", default=0.0),
+        _k("damping", "expr", "axial dashpot c (force·time/length)", default=0.0),
+    ), type_value="bar"),
+    "multibody.member.beam": Section("members[i], type: beam", "A 3D co-rotational Euler–Bernoulli beam between two "
+                                     "node frames (rigid bodies or ground markers); lumped mass and rotary "
+                                     "inertia on the nodes.", (
+        _req("type", "enum", "member type", values=("beam",)), _k("name", "name", "member name"),
+        _req("nodes", "list", "[node_1, node_2]: a rigid body (its COM frame) or body.marker", item="name"),
+        _req("E", "expr", "Young's modulus"), _req("G", "expr", "shear modulus"),
+        _req("area", "expr", "cross-section area A"), _req("Iy", "expr", "second moment about local y"),
+        _req("Iz", "expr", "second moment about local z"), _req("J", "expr", "torsion constant"),
+        _k("density", "expr", "density (lumped mass and rotary inertia)", default=0.0),
+        _k("damping", "expr", "stiffness-proportional damping β (time)", default=0.0),
+        _k("orientation", "vector", "a vector in the local x–y plane, giving local y", length=3,
+           default="global z; global y for a beam along z"),
+    ), type_value="beam"),
     "multibody.rotational_spring_damper": Section("forces[i], type: rotational_spring_damper",
                                                   "Torque −k(φ − φ0) − d φ̇ about an axis between two bodies.", (
         _req("type", "enum", "force type", values=("rotational_spring_damper",)), _k("name", "name", "force name"),
@@ -263,7 +287,8 @@ MODEL_SECTIONS: dict[str, Section] = {
                            "angular_velocity_z"),
         _k("marker", "string", "body.marker: position | velocity"),
         _k("element", "name", "cylinder: stroke | stroke_rate | pressure_1 | pressure_2 | force | volume_1 | "
-                              "volume_2; spring_damper: length | length_rate | force"),
+                              "volume_2; spring_damper: length | length_rate | force; member bar: force | stress | "
+                              "strain | length"),
         _req("kind", "string", "what to read (by the head key, above)"),
     )),
 }

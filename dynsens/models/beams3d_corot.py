@@ -126,14 +126,21 @@ def local_deformations(U: list, D0: np.ndarray, L: Any, R0: np.ndarray) -> list:
     """(u, θ₁ₓ, θ₁ᵧ, θ₁_z, θ₂ₓ, θ₂ᵧ, θ₂_z) of the elements: U the 12 unknowns (jets or arrays),
     D0 (..., 3) initial chords, R0 (..., 3, 3) initial frames (rows e₁, e₂, e₃)."""
     d = [U[6 + k] - U[k] + D0[..., k] for k in range(3)]
-    ell2 = _dot(d, d)
-    ell = ell2.sqrt() if isinstance(ell2, Jet2) else np.sqrt(ell2)
-    u = (ell2 - L * L) / (ell + L)
-    e1 = [d[k] / ell for k in range(3)]
     frames = []
     for node in (0, 1):
         psi = U[6 * node + 3:6 * node + 6]
         frames.append([_rotate(psi, [R0[..., j, k] for k in range(3)]) for j in range(3)])   # rotated e1, e2, e3
+    return corotated_deformations(d, frames, L)
+
+
+def corotated_deformations(d: list, frames: list, L: Any) -> list:
+    """(u, θ₁ₓ, θ₁ᵧ, θ₁_z, θ₂ₓ, θ₂ᵧ, θ₂_z) from the current chord d (3 components) and the node
+    frames ``frames[i][j]`` (the element's initial axis e_j carried by node i, 3 components each;
+    jets or arrays), L the initial length; shared with the multibody beam members."""
+    ell2 = _dot(d, d)
+    ell = ell2.sqrt() if isinstance(ell2, Jet2) else np.sqrt(ell2)
+    u = (ell2 - L * L) / (ell + L)
+    e1 = [d[k] / ell for k in range(3)]
     q = [(frames[0][1][k] + frames[1][1][k]) * 0.5 for k in range(3)]
     c = _cross(e1, q)
     cn2 = _dot(c, c)

@@ -24,6 +24,7 @@ from .model import Assembly, MultibodyModel
 from .sparse import SparseUnsupported
 from .redundancy import InconsistentRedundancy, analyse
 from .projection import read_projection
+from .members import read_members
 from .pointmass import attachment_problem, orientation_lock, read_distance_joint
 from .rotations import rotate, atan2_cs
 from .spec import Reader
@@ -50,6 +51,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     cylinders: list[HydraulicCylinder] = []
     springs: list[SpringDamper] = []
     read_forces(rd, spec.get("forces", []), f"{path}.forces", forces, cylinders, springs)
+    members = read_members(rd, spec.get("members"), f"{path}.members", springs, forces)
     assembly = _initial(rd, spec.get("initial", {}), f"{path}.initial")
     alpha = beta = 0.0
     st = spec.get("stabilization")
@@ -75,6 +77,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
         m.drift_limit = None if drift_limit is None else float(drift_limit)
         m.projection = projection
         m.point_mass_attachments = list(rd.point_mass_attachments)
+        m.members = members
         m.entry_paths = _entry_paths(spec, path)
         return m
     try:

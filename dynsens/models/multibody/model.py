@@ -77,6 +77,7 @@ class MultibodyModel(Model):
         self.forces = forces
         self.cylinders = cylinders
         self.springs = springs or []
+        self.members: list[Any] = []               # flexible members (:mod:`.members`), set by the builder
         self.vec_recipes = vec_recipes
         self.scal_recipes = scal_recipes
         self.assembly = assembly
@@ -137,6 +138,8 @@ class MultibodyModel(Model):
             prm.vec[key] = np.asarray(fn(prm)).reshape(3, 1)
         for key, fn in self.scal_recipes:          # may use the vectors (free lengths)
             prm.scal[key] = fn(prm)
+        for member in self.members:                # member masses lumped on their nodes (:mod:`.members`)
+            member.lump_mass(prm)
         return prm
 
     @staticmethod
@@ -156,8 +159,8 @@ class MultibodyModel(Model):
                           np.array([pv[i] for i in b.angular_velocity]))
 
     def structural_mass(self, params: MBParams) -> Any:
-        """Sum of the body masses (mass unit)."""
-        return sum(bp.mass for bp in params.bodies)
+        """Sum of the body masses, members' included (mass unit)."""
+        return sum(bp.mass for bp in params.bodies) + sum(mb.grounded_mass(params) for mb in self.members)
 
     # ------------------------------------------------------------------ residual
     def constraint_values(self, ctx: Ctx, eqs: list[Equation] | None = None

@@ -285,6 +285,10 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         i = 0 if kind == "position" else 1
         return Output(lambda t, s, prm: pt.kin(_ctx(s, prm, t))[i][:, 0],
                       tuple(f"{name}.{c}" for c in ("x", "y", "z")))
+    members = {mb.name: mb for mb in model.members}
+    if name in members:                            # flexible members (:mod:`.members`)
+        from .members import member_output
+        return member_output(model, members[name], kind, path, problems)
     cyls = {c.name: c for c in model.cylinders}
     springs = {sp.name: sp for sp in model.springs}
     if name in cyls:
@@ -316,7 +320,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
         level = kinds.index(kind)
         return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{name}.{kind}",),
                       {"angle": "rad", "angle_rate": "rad/s", "torque": ""}[kind])
-    allnames = list(cyls) + list(springs) + list(rots)
+    allnames = list(dict.fromkeys([*cyls, *springs, *rots, *members]))
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")
     return None
