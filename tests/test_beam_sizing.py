@@ -301,3 +301,27 @@ def test_stability_gradients_equal_complex_step_of_the_whole_run_and_the_adjoint
     res = dynsens.run_case(case)
     assert all(np.isfinite(np.real(r.value)) and np.any(r.gradient != 0) for r in res.responses.values())
     assert_gradients_match_complex_step_and_adjoint(case, res, rtol_cs=1e-8, rtol_adjoint=1e-10)
+
+
+def test_space_beam_interaction_adds_both_bending_ratios_as_H1_1_does() -> None:
+    """A linear 3D cantilever column (clamped at a; along x; h = 50 along global z by the default
+    orientation, b = 20 along y) under P and tip loads H_y, H_z: N = −P, base moments H_y L about
+    the weak axis (I = h b³/12, W = I/(b/2)) and H_z L about the strong one (b h³/12, h/2); H1-1
+    with ΣM_r/M_c = M_weak/(F_y W_weak) + M_strong/(F_y W_strong) and P_c of the weaker axis."""
+    from test_beams3d import static
+    b, h, P, Hy, Hz, K = 20.0, 50.0, 1.5e3, 20.0, 30.0, 2.0
+    raw = space_column(b, h)
+    raw["model"]["elements"][0].pop("kinematics")            # small rotations: the linear beam
+    raw["model"]["loads"] = [{"node": "b", "direction": d, "value": v, "function": "constant"}
+                             for d, v in (("x", -P), ("y", Hy), ("z", Hz))]
+    raw["responses"] = [{"name": "u", "type": "interaction_ratio", "yield_stress": FY, "aggregate": "max",
+                         "effective_length_factor": K}]
+    case = load_case_dict(raw)
+    q = np.array(list(static(case).values()))
+    chk = check_members(case, result=SimpleNamespace(history={"q": q[None, :]}))
+    weak, strong = h * b ** 3 / 12, b * h ** 3 / 12
+    p = max(P * (K * L) ** 2 / (np.pi ** 2 * E * weak), P / (FY * b * h))
+    m = Hy * L / (FY * weak / (b / 2)) + Hz * L / (FY * strong / (h / 2))
+    assert p >= 0.2 and p >= 2 * m / 9                      # H1-1a governs: u is its value
+    assert chk.interaction[0] == pytest.approx(h1_1(p, m), rel=1e-10)
+    assert chk.buckling[0] == pytest.approx(P * (K * L) ** 2 / (np.pi ** 2 * E * weak), rel=1e-10)
