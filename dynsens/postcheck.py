@@ -23,6 +23,7 @@ import yaml
 
 from .case.load import Case
 from .errors import CaseError, ProblemCollector
+from .expressions import compile_expression
 from .member_stability import MEMBER_COMPONENTS, buckling_scale, interaction_forms
 from .models.base import StepState
 from .models.structural import StructuralModel
@@ -75,6 +76,11 @@ class MemberCheck:
         return self.largest <= 1.0 + tol
 
 
+def _number(value: Any) -> float:
+    """A limit of a (validated) response entry: a number or a constant expression such as '470/2'."""
+    return float(compile_expression(value, set()).evaluate({})) if isinstance(value, str) else float(value)
+
+
 def _response_entries(case: Case, kind: str) -> list[dict]:
     return [r for r in (yaml.safe_load(case.text) or {}).get("responses", []) or []
             if isinstance(r, dict) and r.get("type") == kind]
@@ -87,7 +93,7 @@ def stress_limits(case: Case) -> tuple[float | None, float | None]:
         for key in limits:
             value = r.get(key, r.get("limit"))
             if value is not None:
-                limits[key].append(float(value))
+                limits[key].append(_number(value))
     return (min(limits["tension_limit"], default=None), min(limits["compression_limit"], default=None))
 
 
@@ -105,10 +111,10 @@ def stability_limits(case: Case) -> StabilityLimits:
     """K (the largest of the ``buckling_ratio`` and ``interaction_ratio`` responses'), F_y and φ
     (the smallest of the ``interaction_ratio`` responses'); the defaults without them."""
     inter = _response_entries(case, "interaction_ratio")
-    Ks = [float(r.get("effective_length_factor", 1.0)) for r in inter + _response_entries(case, "buckling_ratio")]
+    Ks = [_number(r.get("effective_length_factor", 1.0)) for r in inter + _response_entries(case, "buckling_ratio")]
     return StabilityLimits(max(Ks, default=1.0),
-                           min((float(r["yield_stress"]) for r in inter if "yield_stress" in r), default=None),
-                           min((float(r.get("resistance_factor", 1.0)) for r in inter), default=1.0))
+                           min((_number(r["yield_stress"]) for r in inter if "yield_stress" in r), default=None),
+                           min((_number(r.get("resistance_factor", 1.0)) for r in inter), default=1.0))
 
 
 def check_members(case: Case, x: Any = None, *, tension_limit: float | None = None,

@@ -188,7 +188,7 @@ def frame_with_stability() -> dict:
          "rho": 20.0},
         {"name": "interaction_ks", "type": "interaction_ratio", "yield_stress": FY, "rho": 20.0,
          "effective_length_factor": 2.0},
-        {"name": "interaction_max", "type": "interaction_ratio", "yield_stress": FY, "aggregate": "max",
+        {"name": "interaction_max", "type": "interaction_ratio", "yield_stress": "470/2", "aggregate": "max",
          "elements": ["col_a", "col_b"], "effective_length_factor": 2.0, "resistance_factor": 0.9},
     ]
     return raw
