@@ -197,3 +197,53 @@ class MagnitudeAggregate(Aggregate):
             np.add.at(out[t.output_id].T, t.groups.ravel(), w.T)
             start += G
         return out
+
+
+@dataclass(frozen=True)
+class FormTerm:
+    """Linear forms of members' components: the outputs' components ``parts`` ((output_id,
+    components (k_o,)), …) side by side give the columns of V (K, n); member i reads the columns
+    ``columns[i]`` (k,) and its forms are ``forms[i]`` (F, k): g_if = forms[i] · V[columns[i]]."""
+
+    parts: tuple[tuple[int, np.ndarray], ...]
+    columns: np.ndarray
+    forms: np.ndarray
+
+
+class FormAggregate(Aggregate):
+    """Sampled maximum or KS of linear forms g_if of the members' components over forms,
+    members and instants (e.g. the beam-column interaction of :mod:`dynsens.member_stability`,
+    a maximum of linear forms itself)."""
+
+    def __init__(self, name: str, term: FormTerm, how: str, unit: str, *, rho: float | None = None):
+        super().__init__(name, (), how, unit, rho=rho)
+        self.form_term = term
+        self.output_ids = tuple(dict.fromkeys(o for o, _ in term.parts))
+
+    def _columns(self, values: dict[int, Any]) -> np.ndarray:
+        """V (K, n, ...) of one block: the parts' components side by side."""
+        return np.concatenate([values[o][:, c] for o, c in self.form_term.parts], axis=1)
+
+    def _gather(self, smp: Samples) -> tuple[np.ndarray, np.ndarray | None]:
+        t = self.form_term
+        V = self._columns(smp.value)[:, t.columns]                           # (K, n_m, k)
+        value = np.einsum("Kmk,mfk->Kmf", V, t.forms).ravel()
+        if any(smp.grad[o] is None for o, _ in t.parts):
+            return value, None
+        G = self._columns(smp.grad)[:, t.columns]                            # (K, n_m, k, d)
+        return value, np.einsum("Kmkd,mfk->Kmfd", G, t.forms).reshape(value.size, G.shape[-1])
+
+    def adjoint_weights(self, trace: OutputTrace) -> dict[Any, Any] | None:
+        """The sample weights times ∂g_if/∂V = forms[i, f] at the member's columns."""
+        t = self.form_term
+        V = np.real(self._columns(trace.value))                              # (K, n)
+        g = np.einsum("Kmk,mfk->Kmf", V[:, t.columns], t.forms)
+        W = self._sample_weights(g.reshape(len(V), -1)).reshape(g.shape)
+        dV = np.zeros_like(V)
+        np.add.at(dV.T, t.columns.ravel(), np.einsum("Kmf,mfk->Kmk", W, t.forms).reshape(len(V), -1).T)
+        out: dict[Any, Any] = {o: np.zeros(np.shape(trace.value[o])) for o in self.output_ids}
+        start = 0
+        for o, comp in t.parts:
+            np.add.at(out[o].T, comp, dV[:, start:start + len(comp)].T)
+            start += len(comp)
+        return out

@@ -25,12 +25,14 @@ OutputId = Callable[[Any, str], "int | None"]
 
 
 def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
-                    outputs: list[Output], pc: ProblemCollector) -> Callable[[], Response] | None:
+                    outputs: list[Output], pc: ProblemCollector,
+                    beams: tuple[str, ...] = ()) -> Callable[[], Response] | None:
     """Validate response entry ``r`` (at YAML ``path``) of type ``kind`` in AGGREGATE_TYPES;
-    a factory of fresh :class:`Aggregate` accumulators, or None (problems reported)."""
+    a factory of fresh :class:`Aggregate` accumulators, or None (problems reported).
+    ``beams``: the model's beam names (their buckling ratio scales with the response's K²)."""
     unit = r.get("unit")
     if kind in ("stress_ratio", "buckling_ratio"):
-        return _ratio_maker(name, kind, r, path, output_id, outputs, pc)
+        return _ratio_maker(name, kind, r, path, output_id, outputs, pc, beams)
     if kind == "displacement_limit":
         return _displacement_maker(name, r, path, output_id, outputs, pc)
     check_keys(r, path, allowed(f"response.{kind}"), pc, required=("rho",) if kind == "ks" else ())
@@ -44,14 +46,14 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
     # (a single 'quantity' is reported as quantities[0], as the loader always has)
     oids = [output_id(q, f"{path}.quantities[{k}]") for k, q in enumerate(qs)]
     # (a missing rho is reported by check_keys above)
-    rho = _positive(r["rho"], f"{path}.rho", pc) if kind == "ks" and "rho" in r else None
+    rho = positive(r["rho"], f"{path}.rho", pc) if kind == "ks" and "rho" in r else None
     side = r.get("side", "upper")
     if side not in ("upper", "lower"):
         pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
     absolute = r.get("absolute", False)
     if not isinstance(absolute, bool):
         pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
-    limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
+    limit = positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
     ids = [o for o in oids if o is not None]
     if len(ids) != len(oids) or limit is None or (kind == "ks" and rho is None) or len(pc.problems) > n0:
         return None
@@ -68,19 +70,23 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
 
 
 def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
-                 outputs: list[Output], pc: ProblemCollector) -> Callable[[], Response] | None:
+                 outputs: list[Output], pc: ProblemCollector,
+                 beams: tuple[str, ...] = ()) -> Callable[[], Response] | None:
     """``stress_ratio``: σ/σ_t (tension) and −σ/σ_c (compression), or |σ|/σ_lim (``limit``);
-    ``buckling_ratio``: −N/P_E; both aggregated over the elements and the run."""
+    ``buckling_ratio``: −N/P_E (a beam's P_E with the response's effective-length factor K);
+    both aggregated over the elements and the run."""
     limits = ("tension_limit", "compression_limit", "limit") if kind == "stress_ratio" else ()
     check_keys(r, path, allowed(f"response.{kind}"), pc)
     n0 = len(pc.problems)
-    how, rho = _how_and_rho(r, path, pc)
+    how, rho = how_and_rho(r, path, pc)
     elements = r.get("elements", "all")
     side_rows: list[float] = [1.0]
     quantity_kind = "buckling"
+    K = positive(r.get("effective_length_factor", 1.0), f"{path}.effective_length_factor", pc) \
+        if kind == "buckling_ratio" else 1.0
     if kind == "stress_ratio":
         quantity_kind = "stress"
-        read = {k: _positive(r[k], f"{path}.{k}", pc) for k in limits if k in r}
+        read = {k: positive(r[k], f"{path}.{k}", pc) for k in limits if k in r}
         given = {k: v for k, v in read.items() if v is not None}   # a bad limit is reported above
         if "limit" in given and len(given) > 1:
             pc.add(f"{path}.limit", "give 'limit' (|σ|) or tension_limit/compression_limit, not both")
@@ -100,23 +106,31 @@ def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
     for p in pc.problems[n1:]:
         if p.path == f"{path}.elements.kind":   # the kind is the response type's, not a key of the case
             p.path, p.message = f"{path}.type", f"{kind} of response {name!r} reads '{quantity_kind}': {p.message}"
-    if picked is None:
+        elif p.path == f"{path}.elements.element":      # the quantity's key is the response's 'elements'
+            p.path = f"{path}.elements"
+    if picked is None or K is None:
         return None
     oid, comps = picked
-    k = len(comps)
-    term = Term(oid, comps, np.array([[c] * k for c in side_rows]))
+    # a beam's −N/P_E is given at K = 1 (P_E ∝ 1/K²); a bar's carries its element's K already
+    is_beam = np.array([outputs[oid].labels[c].split(".", 1)[0] in beams for c in comps], dtype=bool)
+    scale = np.where(is_beam, K * K, 1.0)
+    if "effective_length_factor" in r and not is_beam.any():
+        pc.add(f"{path}.effective_length_factor", "applies to beams (a bar takes its own from its element's "
+                                                  "effective_length_factor); the response names no beam")
+        return None
+    term = Term(oid, comps, np.array([c * scale for c in side_rows]))
     u = str(r.get("unit", "-"))
     return lambda: Aggregate(name, (term,), str(how), u, rho=rho)
 
 
-def _how_and_rho(r: dict, path: str, pc: ProblemCollector) -> tuple[str, float | None]:
+def how_and_rho(r: dict, path: str, pc: ProblemCollector) -> tuple[str, float | None]:
     """``aggregate`` (ks or max) and ``rho`` (required with ks, refused with max)."""
     how = r.get("aggregate", "ks")
     if how not in ("ks", "max"):
         pc.add(f"{path}.aggregate", f"expected ks or max, found {how!r}")
     rho = None
     if how == "ks":
-        rho = _positive(r["rho"], f"{path}.rho", pc) if "rho" in r else None
+        rho = positive(r["rho"], f"{path}.rho", pc) if "rho" in r else None
         if "rho" not in r:
             pc.add(f"{path}.rho", "missing required key (aggregate: ks)")
     elif "rho" in r:
@@ -130,8 +144,8 @@ def _displacement_maker(name: str, r: dict, path: str, output_id: OutputId, outp
     each DOF (``dofs``, both signs), aggregated over them and the run."""
     check_keys(r, path, allowed("response.displacement_limit"), pc, required=("limit",))
     n0 = len(pc.problems)
-    how, rho = _how_and_rho(r, path, pc)
-    limit = _positive(r["limit"], f"{path}.limit", pc) if "limit" in r else None
+    how, rho = how_and_rho(r, path, pc)
+    limit = positive(r["limit"], f"{path}.limit", pc) if "limit" in r else None
     if ("nodes" in r) == ("dofs" in r):
         pc.add(path, "give 'nodes' (length of each node's translation) or 'dofs' (|u| of each DOF), one of them")
     if len(pc.problems) > n0 or limit is None:
@@ -175,7 +189,7 @@ def _shared_output(elements: Any, kind: str, path: str, output_id: OutputId, out
     return None if oid is None else (oid, np.arange(len(outputs[oid].labels)))
 
 
-def _positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
+def positive(value: Any, path: str, pc: ProblemCollector) -> float | None:
     """A positive finite number (or a constant expression) at ``path``."""
     found = value
     if isinstance(value, str):

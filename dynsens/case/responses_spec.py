@@ -4,6 +4,7 @@ paths, responses returned as makers so that each run gets fresh accumulators."""
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -19,6 +20,7 @@ from ..responses import EventSpec, EventTime, ExpressionIntegral, Response, Time
 from ..responses_final import Combination, StructuralMass
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
+from .member_checks import beam_names, interaction_maker
 from .quantities import component_index
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -163,96 +165,161 @@ def _modal(r: dict, p: str, name: str, kind: str, unit: str, model: Model | None
     return make
 
 
+@dataclass
+class _Context:
+    """What every response reader needs besides its entry: the loader's outputs, the events, the
+    design and the model, the problems, and the names read so far (this response's last)."""
+
+    output_id: Callable
+    outputs: list[Output]
+    event_names: list[str]
+    design_names: tuple[str, ...]
+    model: Model | None
+    plan: RunPlan | None
+    pc: ProblemCollector
+    names: list[str]
+
+
+Maker = Callable[[], Response]
+
+
+def _value(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: value``: a quantity's component at the end, at a time or at an event."""
+    pc, plan = ctx.pc, ctx.plan
+    check_keys(r, p, allowed("response.value"), pc, required=("quantity",))
+    oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
+    deriv = r.get("derivative", "total")
+    if deriv not in ("total", "fixed_time"):
+        pc.add(f"{p}.derivative", f"expected total or fixed_time, found {deriv!r}")
+    time = read_number(r["time"], f"{p}.time", pc) if "time" in r else None
+    if time is not None and plan is not None and not plan.t0 <= time <= plan.t_end:
+        pc.add(f"{p}.time", f"{time} is outside the simulated interval [{plan.t0}, {plan.t_end}] s")
+    event = r.get("event")
+    if event is not None and event not in ctx.event_names:
+        pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, ctx.event_names)}")
+    at = r.get("at", "end")
+    if at != "end":
+        pc.add(f"{p}.at", f"expected 'end' (use 'time: T' or 'event: NAME' otherwise), found {at!r}")
+    if oid is None:
+        return None
+    comp = _component(ctx.outputs[oid], r.get("component"), f"{p}.component", pc)
+    if comp is None:
+        return None
+    u = unit or ctx.outputs[oid].unit
+    return lambda: ValueAt(name, oid, comp, u, time=time, event=event, fixed_time=(deriv == "fixed_time"))
+
+
+def _aggregate(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """The aggregates over time and components (:mod:`.aggregates`)."""
+    return aggregate_maker(name, str(r.get("type")), r, p, ctx.output_id, ctx.outputs, ctx.pc,
+                           beams=beam_names(ctx.model))
+
+
+def _interaction(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: interaction_ratio``: the beam-column check (:mod:`.member_checks`)."""
+    return interaction_maker(name, r, p, ctx.output_id, ctx.outputs, ctx.model, ctx.pc)
+
+
+def _integral(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: integral`` of a quantity's component, or of an expression of quantities."""
+    if "expression" in r:
+        return _expression_integral(r, p, name, unit, ctx.output_id, ctx.outputs, ctx.pc)
+    check_keys(r, p, _INTEGRAL_OF_QUANTITY, ctx.pc, required=("quantity",))
+    oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
+    if oid is None:
+        return None
+    comp = _component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
+    if comp is None:
+        return None
+    u = unit or f"{ctx.outputs[oid].unit}*s"
+    return lambda: TimeIntegral(name, oid, comp, u)
+
+
+def _event_time(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: event_time`` / ``end_time``."""
+    kind = r.get("type")
+    check_keys(r, p, allowed(f"response.{kind}"), ctx.pc, required=("event",) if kind == "event_time" else ())
+    event = r.get("event")
+    if kind == "event_time" and event not in ctx.event_names:
+        ctx.pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, ctx.event_names)}")
+    return lambda: EventTime(name, event)
+
+
+def _mass(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: mass``: the model's structural mass."""
+    check_keys(r, p, allowed("response.mass"), ctx.pc)
+    if ctx.model is not None and type(ctx.model).structural_mass is Model.structural_mass:
+        ctx.pc.add(f"{p}.type", f"model type {type(ctx.model).__name__} defines no structural mass")
+    return lambda: StructuralMass(name, unit or "mass")
+
+
+def _modal_entry(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: frequency`` / ``buckling_factor``."""
+    return _modal(r, p, name, str(r.get("type")), unit, ctx.model, ctx.plan, ctx.design_names, ctx.pc)
+
+
+def _expression(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+    """``type: expression`` of earlier responses and design variables."""
+    check_keys(r, p, allowed("response.expression"), ctx.pc, required=("expression",))
+    try:
+        expr = compile_expression(str(r.get("expression")), set(ctx.names[:-1]) | set(ctx.design_names))
+    except ExpressionError as exc:
+        ctx.pc.add(f"{p}.expression", f"{exc} (an expression may use earlier responses and design variables)")
+        return None
+    design_names = ctx.design_names
+    return lambda: Combination(name, expr, unit, design_names)
+
+
+_READERS: dict[str, Callable[[dict, str, str, str, _Context], "Maker | None"]] = {
+    "value": _value, **{k: _aggregate for k in AGGREGATE_TYPES}, "interaction_ratio": _interaction,
+    "integral": _integral, "event_time": _event_time, "end_time": _event_time, "mass": _mass,
+    "frequency": _modal_entry, "buckling_factor": _modal_entry, "expression": _expression,
+}
+
+
+def _name_and_unit(r: dict, p: str, ctx: _Context) -> tuple[str, str] | None:
+    """The response's name (registered in ``ctx.names``) and unit, or None (no usable name)."""
+    pc, names, name = ctx.pc, ctx.names, r.get("name")
+    if not isinstance(name, str) or not _IDENT.match(name):
+        pc.add(f"{p}.name", f"expected an identifier, found {name!r}")
+        return None
+    if name in names or name in ctx.design_names:
+        pc.add(f"{p}.name", f"{name!r} is already a response or design variable name")
+    elif name in RESERVED_NAMES:
+        pc.add(f"{p}.name", reserved_message(name))
+    # register the name first: a later expression using it must not report it again
+    names.append(name)
+    unit = r.get("unit", "")
+    if not isinstance(unit, str):
+        pc.add(f"{p}.unit", f"expected text such as 'N' or 'm*s' (quote a number: '1'), found {unit!r}")
+        unit = ""
+    return name, unit
+
+
 def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_names: list[str],
                design_names: tuple[str, ...], model: Model | None, plan: RunPlan | None,
                pc: ProblemCollector) -> tuple[Callable[[], list[Response]], tuple[str, ...]]:
+    """The ``responses`` section: a factory of fresh responses and their names (problems in ``pc``)."""
     if not isinstance(spec, list):
         pc.add("responses", "expected a list")
         spec = []
-    makers: list[Callable[..., Response]] = []  # called without arguments
-    names: list[str] = []
+    makers: list[Maker] = []
+    ctx = _Context(output_id, outputs, event_names, design_names, model, plan, pc, [])
     for i, r in enumerate(spec):
         p = f"responses[{i}]"
         if not isinstance(r, dict):
             pc.add(p, f"expected a mapping, found {r!r}")
             continue
-        name, kind = r.get("name"), r.get("type")
-        if not isinstance(name, str) or not _IDENT.match(name):
-            pc.add(f"{p}.name", f"expected an identifier, found {name!r}")
+        named = _name_and_unit(r, p, ctx)
+        if named is None:
             continue
-        if name in names or name in design_names:
-            pc.add(f"{p}.name", f"{name!r} is already a response or design variable name")
-        elif name in RESERVED_NAMES:
-            pc.add(f"{p}.name", reserved_message(name))
-        # register the name first: a later expression using it must not report it again
-        names.append(name)
-        unit = r.get("unit", "")
-        if not isinstance(unit, str):
-            pc.add(f"{p}.unit", f"expected text such as 'N' or 'm*s' (quote a number: '1'), found {unit!r}")
-            unit = ""
-        if kind == "value":
-            check_keys(r, p, allowed("response.value"), pc,
-                       required=("quantity",))
-            oid = output_id(r.get("quantity"), f"{p}.quantity")
-            deriv = r.get("derivative", "total")
-            if deriv not in ("total", "fixed_time"):
-                pc.add(f"{p}.derivative", f"expected total or fixed_time, found {deriv!r}")
-            time = read_number(r["time"], f"{p}.time", pc) if "time" in r else None
-            if time is not None and plan is not None and not plan.t0 <= time <= plan.t_end:
-                pc.add(f"{p}.time", f"{time} is outside the simulated interval [{plan.t0}, {plan.t_end}] s")
-            event = r.get("event")
-            if event is not None and event not in event_names:
-                pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
-            at = r.get("at", "end")
-            if at != "end":
-                pc.add(f"{p}.at", f"expected 'end' (use 'time: T' or 'event: NAME' otherwise), found {at!r}")
-            if oid is None:
-                continue
-            comp = _component(outputs[oid], r.get("component"), f"{p}.component", pc)
-            u = unit or outputs[oid].unit
-            makers.append(lambda n=name, o=oid, c=comp, u=u, tm=time, e=event, f=(deriv == "fixed_time"):
-                          ValueAt(n, o, c, u, time=tm, event=e, fixed_time=f))
-        elif kind in AGGREGATE_TYPES:
-            maker = aggregate_maker(name, kind, r, p, output_id, outputs, pc)
-            if maker is not None:
-                makers.append(maker)
-        elif kind == "integral" and "expression" in r:
-            made = _expression_integral(r, p, name, unit, output_id, outputs, pc)
-            if made is not None:
-                makers.append(made)
-        elif kind == "integral":
-            check_keys(r, p, _INTEGRAL_OF_QUANTITY, pc, required=("quantity",))
-            oid = output_id(r.get("quantity"), f"{p}.quantity")
-            if oid is None:
-                continue
-            comp = _component(outputs[oid], r.get("component"), f"{p}.component", pc)
-            u = unit or f"{outputs[oid].unit}*s"
-            makers.append(lambda n=name, o=oid, c=comp, u=u: TimeIntegral(n, o, c, u))
-        elif kind in ("event_time", "end_time"):
-            check_keys(r, p, allowed(f"response.{kind}"), pc,
-                       required=("event",) if kind == "event_time" else ())
-            event = r.get("event")
-            if kind == "event_time" and event not in event_names:
-                pc.add(f"{p}.event", f"unknown event {event!r}{did_you_mean(event, event_names)}")
-            makers.append(lambda n=name, e=event: EventTime(n, e))
-        elif kind == "mass":
-            check_keys(r, p, allowed("response.mass"), pc)
-            if model is not None and type(model).structural_mass is Model.structural_mass:
-                pc.add(f"{p}.type", f"model type {type(model).__name__} defines no structural mass")
-            makers.append(lambda n=name, u=unit or "mass": StructuralMass(n, u))
-        elif kind in ("frequency", "buckling_factor"):
-            maker = _modal(r, p, name, kind, unit, model, plan, design_names, pc)
-            if maker is not None:
-                makers.append(maker)
-        elif kind == "expression":
-            check_keys(r, p, allowed("response.expression"), pc, required=("expression",))
-            try:
-                expr = compile_expression(str(r.get("expression")), set(names[:-1]) | set(design_names))
-            except ExpressionError as exc:
-                pc.add(f"{p}.expression", f"{exc} (an expression may use earlier responses and design variables)")
-                continue
-            makers.append(lambda n=name, e=expr, u=unit: Combination(n, e, u, design_names))
-        else:
+        kind = r.get("type")
+        reader = _READERS.get(kind) if isinstance(kind, str) else None
+        if reader is None:
             pc.add(f"{p}.type", f"unknown response type {kind!r}{did_you_mean(kind, RESPONSE_TYPES)} "
                                 f"(known: {', '.join(RESPONSE_TYPES)})")
-    return (lambda: [mk() for mk in makers]), tuple(names)
+            continue
+        maker = reader(r, p, named[0], named[1], ctx)
+        if maker is not None:
+            makers.append(maker)
+    return (lambda: [mk() for mk in makers]), tuple(ctx.names)

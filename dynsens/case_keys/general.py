@@ -214,8 +214,23 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _k("limit", "expr", "one allowable |σ| for both signs (instead of the two limits)"),
     ), type_value="stress_ratio"),
     "response.buckling_ratio": Section("responses[i], type: buckling_ratio", "−N/P_E (compression over the Euler "
-                                       "load π²EI/(KL)²) of bars with `inertia`, aggregated over the elements and "
-                                       "the run.", _RATIO_KEYS, type_value="buckling_ratio"),
+                                       "load π²EI/(KL)²) of bars with `inertia` and of beams (3D beams: about "
+                                       "each axis), aggregated over the elements and the run.", (
+        *_RATIO_KEYS,
+        _k("effective_length_factor", "expr", "K of the beams' Euler load π²EI/(KL)², L the beam element's "
+                                              "length (bars take theirs from the element)", default=1.0),
+    ), type_value="buckling_ratio"),
+    "response.interaction_ratio": Section("responses[i], type: interaction_ratio", "Beam-column stability: "
+                                          "AISC 360-16 Eq. H1-1a/b with the elastic strengths P_c = "
+                                          "φ·min(π²EI/(KL)², F_y A) (tension φF_y A) and M_c = φF_y W, as "
+                                          "max(p + 8/9 m, p/2 + m) (≤ 1 exactly where H1-1 holds), at both ends "
+                                          "of every beam, aggregated over the beams and the run.", (
+        *_RATIO_KEYS,
+        _req("yield_stress", "expr", "F_y, a positive constant (the unit of the beams' stresses)"),
+        _k("effective_length_factor", "expr", "K of the Euler load π²EI/(KL)², L the beam element's length",
+           default=1.0),
+        _k("resistance_factor", "expr", "φ in (0, 1] multiplying both strengths (LRFD: 0.9)", default=1.0),
+    ), type_value="interaction_ratio"),
     "response.displacement_limit": Section("responses[i], type: displacement_limit", "|u|/limit, aggregated "
                                            "over the nodes (or DOFs) and the run: |u| is the length of a node's "
                                            "translation vector, or the absolute value of a DOF (both signs).", (

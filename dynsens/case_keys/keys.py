@@ -53,8 +53,8 @@ def _req(name: str, kind: str, doc: str, **kw: Any) -> Key:
 
 TIME_FUNCTION_TYPES = ("constant", "step", "ramp", "smoothstep", "harmonic", "pulse", "table")
 AGGREGATE_TYPES = ("ks", "max", "min", "stress_ratio", "buckling_ratio", "displacement_limit")
-RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "integral", "event_time", "end_time", "mass", "frequency",
-                  "buckling_factor", "expression")
+RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "interaction_ratio", "integral", "event_time", "end_time", "mass",
+                  "frequency", "buckling_factor", "expression")
 STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar", "beam")
 BEAM_SECTION_SHAPES = ("tube", "rectangle", "box", "properties")
 FORCE_TYPES = ("point_force", "torque", "spring_damper", "rotational_spring_damper", "hydraulic_cylinder")

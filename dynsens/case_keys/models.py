@@ -106,7 +106,7 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("node", "name", "a node: its free translation DOFs x, y (z) (kinds displacement, velocity, "
                            "acceleration)"),
         _k("kind", "enum", "displacement | velocity | acceleration (DOFs); force | stress | strain | buckling "
-                           "(elements; beams: force, stress; dampers: force)",
+                           "(elements; beams: force, stress, buckling; dampers: force)",
            values=("displacement", "velocity", "acceleration", "force", "stress", "strain", "buckling")),
     )),
     # ------------------------------------------------------------------ multibody models

@@ -37,7 +37,8 @@ class StructuralOutputs:
         ``{node: NAME, kind: ...}`` (the node's free translation DOFs x, y (z)) or
         ``{element: NAME|[NAMES]|all, kind: force|stress|strain|buckling}``; ``buckling`` is the
         ratio −N/P_E of the compressive axial force to the Euler load π²EI/(KL)² (bars with
-        ``inertia``; positive in compression, > 1 means buckled)."""
+        ``inertia``; positive in compression, > 1 means buckled); of beams with K = 1 and the
+        beam's own length L (plane beams one component, 3D beams one per axis: EI_y, EI_z)."""
         if not check_keys(spec, path, allowed("structural.quantity"), problems):
             return None
         kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
@@ -99,12 +100,13 @@ class StructuralOutputs:
         for nm in names:
             if nm in self.bar_names:
                 bars.append(self.bar_names.index(nm))
-            elif nm in self.beams.names and kind in ("force", "stress"):
+            elif nm in self.beams.names and kind in ("force", "stress", "buckling"):
                 beams.append(self.beams.names.index(nm))
-            elif nm in self.frames.names and kind in ("force", "stress"):
+            elif nm in self.frames.names and kind in ("force", "stress", "buckling"):
                 frames.append(self.frames.names.index(nm))
             elif nm in self.beams.names or nm in self.frames.names:
-                refused.setdefault("beams report 'force' (N, M1, M2) and 'stress' (extreme fibres)", []).append(nm)
+                refused.setdefault("beams report 'force' (N, M1, M2), 'stress' (extreme fibres) and 'buckling'",
+                                   []).append(nm)
             elif nm in self.spring_names and kind == "force":
                 springs.append(self.spring_names.index(nm))
             elif nm in self.spring_names:
@@ -176,6 +178,11 @@ class StructuralOutputs:
         """Beams ``bi``: extreme-fibre stresses (4 per beam: end 1 ±, end 2 ±) or end forces
         (N, M1, M2 per beam); the function and the component labels."""
         names = [self.beams.names[b] for b in bi]
+        if kind == "buckling":
+            def ratio(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+                N = self.beams.state(self._ext(s.q), prm)["N"]
+                return (-N * prm["beam_L"] ** 2 / (np.pi ** 2 * prm["beam_EI"]))[..., bi]
+            return ratio, tuple(f"{n}.buckling" for n in names)
         if kind == "stress":
             labels = tuple(f"{n}.stress.{e}" for n in names for e in ("1+", "1-", "2+", "2-"))
 
@@ -195,6 +202,15 @@ class StructuralOutputs:
         """3D beams ``fi``: largest and smallest fibre stresses at both ends (4 per beam) or
         section forces N, T, My1, Mz1, My2, Mz2; the function and the component labels."""
         names = [self.frames.names[b] for b in fi]
+        if kind == "buckling":
+            labels = tuple(f"{n}.buckling.{a}" for n in names for a in "yz")
+
+            def ratio(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+                N = self.frames.end_forces(self._ext(s.q), prm)[..., fi, 0]
+                L2 = (prm["frame_L"] ** 2 / np.pi ** 2)[..., fi]
+                r = np.stack([-N * L2 / prm["frame_EIy"][..., fi], -N * L2 / prm["frame_EIz"][..., fi]], axis=-1)
+                return r.reshape(r.shape[:-2] + (-1,))
+            return ratio, labels
         if kind == "stress":
             labels = tuple(f"{n}.stress.{e}" for n in names for e in ("1+", "1-", "2+", "2-"))
             method = self.frames.fibre_stress
