@@ -49,10 +49,18 @@ def history(path: Path, k: int = 0) -> dict[str, np.ndarray]:
     return opt.read_history(path, k)
 
 
-def test_truss_converges_feasible_with_active_stress_constraint(tmp_path: Path) -> None:
-    out = tmp_path / "opt.h5"
+@pytest.fixture(scope="module")
+def truss_optimum(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    """The truss optimized without interruption (its file and the command's result), made once:
+    checked by test_truss_converges_feasible_with_active_stress_constraint and the reference the
+    interrupted and resumed run must reach."""
+    out = tmp_path_factory.mktemp("truss_optimum") / "opt.h5"
+    return out, invoke("optimize", TRUSS, "-o", out, "--no-verify")
+
+
+def test_truss_converges_feasible_with_active_stress_constraint(truss_optimum) -> None:  # type: ignore[no-untyped-def]
     # the optimizer alone (tests/test_verification.py: the same case verified and tightened)
-    r = invoke("optimize", TRUSS, "-o", out, "--no-verify")
+    out, r = truss_optimum
     assert r.exit_code == 0, r.output
     assert "The optimizer converged" in r.output and "The result is feasible" in r.output
     assert len(re.findall(r"^\[start 0\] it +\d+ ", r.output, re.M)) >= 3      # a progress line per iteration
@@ -83,10 +91,11 @@ def test_truss_converges_feasible_with_active_stress_constraint(tmp_path: Path) 
     assert check.largest > 0.99                                 # and the design is not over-sized
 
 
-def test_interrupted_run_keeps_history_and_resume_finishes(tmp_path: Path, monkeypatch) -> None:
+def test_interrupted_run_keeps_history_and_resume_finishes(tmp_path: Path, monkeypatch,  # type: ignore[no-untyped-def]
+                                                           truss_optimum) -> None:
     out = tmp_path / "opt.h5"
-    ref = tmp_path / "ref.h5"
-    assert invoke("optimize", TRUSS, "-o", ref, "--no-verify").exit_code == 0
+    ref, r_ref = truss_optimum
+    assert r_ref.exit_code == 0
     f_ref = history(ref)["f"][-1]
     real = cli_opt.progress_line
     seen = []

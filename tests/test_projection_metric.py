@@ -6,8 +6,9 @@ P = M ẋ_cart + m ẋ_pole is a constant of the motion.
 * The mass-weighted projection moves no momentum between the cart and the pole: P stays to
   round-off (measured 7e-17 kg m/s over 10 s at rtol 1e-8; the Euclidean projection drifts by
   2e-6, BENCHMARKS.md).  θ(10) against the minimal-coordinate reference (DOP853 at rtol 1e-12)
-  at rtol 1e-8: measured 2.8e-3 rad (Euclidean 3.4e-3), bound 5e-3.  The 1e-3 of issue 38 is
-  not reached at rtol 1e-8: the remaining error is the time integration's, not the projection's.
+  at rtol 1e-8: measured 2.8e-3 rad (Euclidean 3.4e-3).  The test runs the first 5 s: θ(5)
+  measured 7.7e-4 rad, bound 1.4e-3.  The 1e-3 of issue 38 (at
+  10 s) is not reached at rtol 1e-8: the remaining error is the time integration's, not the projection's.
 * Its derivative: direct and adjoint gradients of a short run (mode state, the projection fed
   back) against complex step of the whole run (1e-8), and direct against adjoint (1e-11).
 """
@@ -24,12 +25,20 @@ from helpers import complex_step_gradients, rel_err
 from projection_metric_report import CASE, measure, overrides, reference_theta
 
 
+# the first 5 s of the report's 10 s (8626 of 16077 accepted steps, three crossings of the
+# bottom): the projection keeps P at every step, so its drift is a per-step property (measured
+# 5.1e-17 by 5 s, 6.4e-17 by 10 s; bound 1e-12 as before); θ's error is the integration's phase
+# error, which grows with time (measured 7.7e-4 rad at 5 s, 2.8e-3 at 10 s): its bound is
+# tightened in proportion, 5e-3 at 10 s -> 1.4e-3 at 5 s (the same margin, 1.8)
+SHORTER = "integrator.t_end=5.0"
+
+
 def test_mass_metric_keeps_the_momentum_and_theta_of_the_light_cart_pole():
-    res = dynsens.run_case(dynsens.load_case(CASE, overrides("mass", 1e-8)), sensitivities=False)
-    assert res.status == "completed"
-    m = measure(res, reference_theta())
+    res = dynsens.run_case(dynsens.load_case(CASE, [*overrides("mass", 1e-8), SHORTER]), sensitivities=False)
+    assert res.status == "completed" and res.time[-1] == pytest.approx(5.0, abs=1e-12)
+    m = measure(res, reference_theta(5.0))
     assert m["drift"] < 1e-12, m
-    assert m["theta_error"] < 5e-3, m
+    assert m["theta_error"] < 1.4e-3, m
 
 
 def test_mass_metric_moves_the_light_cart_less_than_the_euclidean_projection():
