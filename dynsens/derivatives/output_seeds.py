@@ -49,6 +49,13 @@ class _Dependence:
         self.stacked = stacked      # the same, stacked (None when the model does not stack)
         self.cols = cols            # the design variables of the differences
         self.entries = entries      # the batch entries (into the partials' batch)
+        self.copies: dict[int, Any] = {}    # the batch stacked B times, by B (:meth:`stacked_copies`)
+
+    def stacked_copies(self, model: Any, B: int) -> Any:
+        """The output's reduced parameter sets stacked B times by ``model`` (kept per B)."""
+        if B not in self.copies:
+            self.copies[B] = model.stack_parameters(self.batch * B)
+        return self.copies[B]
 
 
 class OutputSeeds:
@@ -211,15 +218,8 @@ class OutputSeeds:
                     out[start + b][0][dep.state] += ybar[b]
             if dep.cols.size:
                 Y = np.repeat(Y0, P, axis=0)                                      # (B·P, n_y)
-                F = self._eval(o, 0.0, self._split(Y, sizes), [], self._stacked_copies(dep, B))
+                F = self._eval(o, 0.0, self._split(Y, sizes), [], dep.stacked_copies(self.model, B))
                 F = F.reshape(B, P, -1)
                 for b in range(B):
                     Dx = self._design_partial(F[b], dep)                          # (k, cols)
                     out[start + b][1][dep.cols] += np.real(Dx).T @ W[b]
-
-    def _stacked_copies(self, dep: _Dependence, B: int) -> Any:
-        """The output's reduced parameter sets stacked B times (cached per B)."""
-        cache = dep.__dict__.setdefault("copies", {})
-        if B not in cache:
-            cache[B] = self.model.stack_parameters(dep.batch * B)
-        return cache[B]

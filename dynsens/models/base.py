@@ -9,6 +9,8 @@ A model is a residual :math:`F_R(z; q, \dot q, p, t, x) = 0` in the per-step unk
 
 Implementer contract
 --------------------
+Required (abstract):
+
 1. ``traits`` declares sizes and what the integrator may leave out (linear, constant
    matrices, damping, sparsity).  It is read once, when the run is planned.
 2. ``parameters(x)`` evaluates every design-dependent system parameter for the design
@@ -16,15 +18,81 @@ Implementer contract
    complex designs to form the partial derivatives :math:`\partial_x F_R` numerically
    ("semi-analytical").  The returned object is opaque to the integrator.
 3. ``initial_state(params)`` returns ``(q0, qd0, p0)``; its design derivative is taken
-   numerically unless the model overrides ``initial_state_gradient``.
+   numerically unless the model defines ``initial_state_gradient(params0, partials)``
+   (:mod:`dynsens.sensitivity`).
 4. ``residual(t, s, params)`` returns F_R (n_z,) for a :class:`StepState` ``s``.
 5. ``linearize(t, s, params)`` returns the exact partial derivatives of F_R with respect
    to z, q, q̇ and p (:class:`Linearization`); the integrator forms the iteration matrix
    from them.  Blocks that are structurally zero are ``None``.
 6. ``output(spec, path, problems)`` resolves a quantity named in a case (a dof's
    displacement, an element force, a joint reaction...) into an :class:`Output`.
-7. All code in 2.-6. must be complex-safe (no ``abs``, no ``np.real`` on results,
-   comparisons on real parts only) so that complex step runs end to end.
+7. All code in 2.-6. and in the batch evaluations below must be complex-safe (no ``abs``,
+   no ``np.real`` on results, comparisons on real parts only) so that complex step runs end
+   to end.
+
+Optional, with defaults here (each method's docstring says what it must return):
+
+8. ``initial_guess(params)``: (λ0, ṗ0) to start the initial solve (zeros).
+9. Batches for the design partials: ``stack_parameters(params_list)`` (None: not
+   stacked), ``residual_batch(t, s, params_list)`` (n_z, B) and ``residual_batch_steps(ts,
+   states, params_list)`` (K, n_z, B) (one :meth:`~Model.residual` per set and state), and
+   ``design_pattern()``, the rows each design variable's partial can touch (None: unknown).
+10. ``structural_mass(params)``: total mass, for the mass response (not defined).
+11. Per accepted step: ``project(t, s, params)`` (the state the run continues from and the
+    map the derivative modes need; s itself), ``check_state(t, s, params)`` (ModelError out
+    of range; nothing) and ``monitors(t, s, params)`` (scalar diagnostics; none).
+12. ``compiled_step(newton, refactor)``: the compiled Newton iteration of a step where the
+    model has one (None).
+13. Messages and reports: ``diagnose_singular``, ``describe_equation``, ``dof_labels``;
+    ``displacement_scale`` for the runaway monitor.
+14. Read where a model has them (by ``getattr``, not declared here): ``initial_state_gradient``
+    (3.), ``constraint_levels`` and ``kinematics`` (the drift of the sensitivities,
+    :mod:`dynsens.sensitivity_drift`), ``redundant`` and ``multiplier_labels`` (the
+    multipliers' names in the results).
+
+Invariants the callers keep, and the caches rely on
+---------------------------------------------------
+A. A state's arrays are never modified in place: the solver, the step sequences and the
+   derivative modes make a new array for every iterate and every accepted state.  A cache may
+   therefore reuse work for the same array objects (``is``), or for equal contents
+   (``tobytes()``) when it keeps the arrays it compares.
+B. A parameter set (the object ``parameters(x)`` returned) keeps its identity and its values
+   for a run: it is formed once per design and never changed.  Derived data may be kept with
+   it, in a declared cache field of its own (never as extra keys in its tables), and caches may
+   be keyed by its identity.
+C. A list of parameter sets passed to the batch evaluations is the same list object for a
+   whole run (the design partials' perturbed sets), so stacked parameters can be kept on the
+   list's identity.
+D. An identity-keyed entry keeps the objects whose ``id`` it uses alive, so the identity
+   cannot pass to a new object while the entry exists.
+E. No module keeps state on another object: a model's caches are its own, declared (for
+   the multibody model one :class:`~dynsens.models.multibody.run_cache.RunCache`, each field
+   with the rule that replaces it); tests/test_no_reach_ins.py checks it.
+
+The caches that rely on A.-D. (keyed by identity ``is``/``id`` or by bytes):
+
+* multibody, :class:`~dynsens.models.multibody.run_cache.RunCache` (``model.cache``):
+  ``initial`` (set), ``evaluation`` (kinematics, λ, p, ṗ; bytes), ``linearization``
+  (evaluation), ``stacked`` (list), ``constraint_levels`` (q, q̇, set), ``solved`` (q);
+* multibody kinematics, :class:`~dynsens.models.multibody.kernel_compiled.KinCache`: by
+  q, q̇, q̈ and kernel parameters, then by their bytes;
+* multibody parameter sets, :class:`~dynsens.models.multibody.bodies.ParamsCache` (point
+  tensors, kernel parameters per layout, size) and
+  :class:`~dynsens.models.multibody.kernel.KParamsCache` (coefficients and time inputs at
+  the last t, steady inputs and compiled forms per dtype): kept with the set (B.);
+* multibody compiled step (:mod:`~dynsens.models.multibody.compiled_step`): the design's
+  fields by set; reaction split (:mod:`~dynsens.models.multibody.reaction_split`): sets
+  grouped by identity within one call; term kinematics and forces per call by term
+  (:class:`~dynsens.models.multibody.bodies.Ctx`);
+* structural models: stacked parameters by list (:mod:`dynsens.models.structural`), the
+  compiled spring step's design by set (:mod:`dynsens.models.structural_step`);
+* derivative modes: stacked directions by the block's state list and stacked parameter
+  copies per block length (:mod:`dynsens.sensitivity`), output seeds' stacked copies per
+  length (:mod:`dynsens.derivatives.output_seeds`), the direct mode's transition matrices by
+  linearization and factorization (:mod:`dynsens.derivatives.direct`), checkpoints' seen
+  objects (:mod:`dynsens.derivatives.checkpoints`);
+* designs by bytes of x: :mod:`dynsens.openmdao` and :mod:`dynsens.optimize.problem`
+  (one simulation per design).
 """
 from __future__ import annotations
 
@@ -194,7 +262,8 @@ class Output:
 
 
 class Model(ABC):
-    """Base class of all models; see the module docstring for the contract."""
+    """Base class of all models; see the module docstring for the contract (methods 1.-13.)
+    and the invariants its caches rely on (A.-E.)."""
 
     traits: Traits
 

@@ -22,11 +22,14 @@ elements are built from them, so J_Φ, Φ̇ and Φ̈ are consistent by construct
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .rotations import E_mul, point_tensor, rmatmul
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .kernel import KParams, Layout
 
 GROUND = -1
 Array = np.ndarray
@@ -76,12 +79,35 @@ class BodyParams:
 
 
 @dataclass
+class ParamsCache:
+    """What is derived from one :class:`MBParams` and kept with it (the only state kept on a
+    parameter set).  Every entry is a function of the set's values alone, which never change
+    after :meth:`.model.MultibodyModel.parameters` formed them; the cache lives and dies with
+    the set (a new design is a new set), so nothing is ever dropped.
+
+    point_tensors : point tensor of ``vec[key]`` (:func:`.rotations.point_tensor`) by key, as
+        :meth:`Ctx.ts` forms them.
+    kernels : the kernel parameters of the set (B = 1) per kernel :class:`.kernel.Layout`
+        (keyed by the layout object: the model's own, and the left-out redundant equations'
+        of :mod:`.redundancy`), as :func:`.kernel.kernel_params` forms them.
+    size : the mechanism's size (length units), the largest norm of the set's vectors (1 when
+        all are zero), the scale of the default drift limit (:mod:`.drift`).
+    """
+
+    point_tensors: dict[str, Array] = field(default_factory=dict)
+    kernels: dict["Layout", "KParams"] = field(default_factory=dict)
+    size: float | None = None
+
+
+@dataclass
 class MBParams:
     """System parameters of a multibody model for one design.
 
     pv : the evaluated parameter vector; bodies : per moving body; vec : body-fixed or
     global vectors (3, 1) by key (marker positions, joint points and axes in body axes);
-    scal : derived scalars by key (free lengths, areas); x : the design.
+    scal : derived scalars by key (free lengths, areas); x : the design; cache : what is
+    derived from these values and kept with them (:class:`ParamsCache`).  The values are never
+    changed once formed: the caches depend on it.
     """
 
     pv: Array
@@ -89,7 +115,15 @@ class MBParams:
     vec: dict[str, Array]
     scal: dict[str, Any]
     x: Array
-    ts: dict[str, Array] = field(default_factory=dict)
+    cache: ParamsCache = field(default_factory=ParamsCache, init=False, repr=False, compare=False)
+
+    def size(self) -> float:
+        """The mechanism's size (length units): the largest norm of the vectors (real parts),
+        1 when there are none or all are zero; formed once per set."""
+        if self.cache.size is None:
+            size = max((float(np.linalg.norm(np.real(v))) for v in self.vec.values()), default=1.0)
+            self.cache.size = size if size > 0 else 1.0
+        return self.cache.size
 
 
 class Ctx:
@@ -109,7 +143,7 @@ class Ctx:
 
     def ts(self, key: str) -> Array:
         """point_tensor of params.vec[key], cached with the parameters."""
-        cache = self.params.ts
+        cache = self.params.cache.point_tensors
         t = cache.get(key)
         if t is None:
             t = point_tensor(self.params.vec[key])

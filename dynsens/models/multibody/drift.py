@@ -34,32 +34,16 @@ def norm2(v: Any) -> float:
 
 
 def drift_limit(model: "MultibodyModel", params: Any) -> float:
-    """The bound on ‖Φ‖ (length units), cached with the parameters."""
+    """The bound on ‖Φ‖ (length units): ``model.drift_limit``, else 1 % of the mechanism's size
+    (:meth:`.bodies.MBParams.size`, formed once per parameter set)."""
     if model.drift_limit is not None:
         return model.drift_limit
-    limit = params.ts.get("__drift_limit__")
-    if limit is None:
-        size = max((float(np.linalg.norm(np.real(v))) for v in params.vec.values()), default=1.0)
-        limit = params.ts["__drift_limit__"] = 1e-2 * (size if size > 0 else 1.0)
-    return float(limit)
-
-
-def constraint_residuals(model: "MultibodyModel", t: float, s: StepState, params: Any) -> Any:
-    """(Φ, Φ̇, Φ̈) (n_eq, 3) at (t, s), kept for the same state object: the guard after a step and
-    the monitors recorded for it share one evaluation (also when they name the step's time
-    differently, t_prev + h and the grid's time, where no constraint depends on time)."""
-    last = model.__dict__.get("_phi_last")
-    if last is not None and last[1] is s.q and last[2] is s.qd and last[3] is params and \
-            (last[0] == t or not (model.layout.coefs or model.layout.shifts)):
-        return last[4]
-    Phi = model.constraint_levels(t, model.kinematics(s, params))[0][0]
-    model.__dict__["_phi_last"] = (t, s.q, s.qd, params, Phi)
-    return Phi
+    return 1e-2 * params.size()
 
 
 def check_drift(model: "MultibodyModel", t: float, s: StepState, params: Any) -> None:
     """ModelError when ‖Φ‖ at (t, s) exceeds the limit (module docstring)."""
-    Phi = constraint_residuals(model, t, s, params)
+    Phi = model.constraint_residuals(t, s, params)
     phi = np.real(Phi[:, 0])
     drift = norm2(phi)
     limit = drift_limit(model, params)

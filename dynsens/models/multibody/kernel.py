@@ -19,8 +19,8 @@ broadcast, so perturbed designs (design partials, output gradients) take one cal
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from . import compiled as cc
 from .bodies import GROUND, Const, Diff, Direction, MBParams, Point, Term
 from .joints import ONE, DotEq, Equation, NormEq
 from .rotations import matmul_real, point_tensor, rmatmul
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .kernel_compiled import CompiledParams
 
 Array = np.ndarray
 
@@ -209,8 +212,33 @@ class Layout:
 
 
 @dataclass
+class KParamsCache:
+    """What is derived from one :class:`KParams` and kept with it (the only state kept on
+    kernel parameters).  The parameter sets never change, so entries that depend on them
+    alone are never dropped; those that depend on time name their key.
+
+    coefficients : ``(t, (cf, shift))``, the constraint coefficients and shifts at the last
+        time t (s) asked for (:meth:`.model.MultibodyModel.coefficients`); replaced when
+        another t is asked for (Newton evaluates all iterates of a step at one time).
+    inputs : per dtype char, ``(t, settled, (ext, f_ext, g))``, the time inputs at the last t
+        (:func:`.residual.time_inputs`); replaced at another t unless both are past
+        ``settled``, the time after which the inputs no longer change.
+    steady_inputs : per dtype char, what does not depend on t (:func:`.residual._steady`):
+        gravity, constant point forces, the list of point forces, the settling time.
+    compiled : per dtype char, the sets in the compiled kernel's form
+        (:func:`.kernel_compiled.compiled_params`).
+    """
+
+    coefficients: tuple[float, tuple[Array, Array]] | None = None
+    inputs: dict[str, tuple[float, float, tuple[Array, Array, Array]]] = field(default_factory=dict)
+    steady_inputs: dict[str, tuple[Array, Array | None, list[Any], float]] = field(default_factory=dict)
+    compiled: dict[str, "CompiledParams"] = field(default_factory=dict)
+
+
+@dataclass
 class KParams:
-    """Design-dependent arrays of the kernel for B parameter sets (leading axis B)."""
+    """Design-dependent arrays of the kernel for B parameter sets (leading axis B); ``cache``:
+    what is derived from them (:class:`KParamsCache`)."""
 
     Ts: Array              # (B, n_t, 12, 4) point tensors, rows (a, k)
     Ts4: Array             # (B, n_t, 3, 4, 4) the same
@@ -222,6 +250,7 @@ class KParams:
     ec: list[Array]        # per axial element: its constants (B, n_c)
     prms: list[MBParams]
     rc: Array              # (B, n_rot, 3) the rotational spring-dampers' k, c, θ_0
+    cache: KParamsCache = field(default_factory=KParamsCache, init=False, repr=False, compare=False)
 
     @property
     def B(self) -> int:
@@ -229,10 +258,10 @@ class KParams:
 
 
 def kernel_params(lay: Layout, prm: MBParams) -> KParams:
-    """KParams (B = 1) of one parameter set, cached on ``prm``."""
-    hit = prm.ts.get("__kernel__")
+    """KParams (B = 1) of one parameter set for the layout ``lay``, kept in ``prm.cache``."""
+    hit = prm.cache.kernels.get(lay)
     if hit is not None:
-        return hit  # type: ignore[return-value]
+        return hit
     dt = np.result_type(prm.pv, float)
     Ts4 = np.array([point_tensor(prm.vec[t.key]) for t in lay.prims], dt).reshape(lay.n_t, 3, 4, 4)  # type: ignore[attr-defined]
     c = np.zeros((2, lay.n_prod, 3), dt)
@@ -243,7 +272,7 @@ def kernel_params(lay: Layout, prm: MBParams) -> KParams:
                  np.array([b.mass for b in bs], dt)[None], np.array([b.inertia for b in bs], dt)[None],
                  np.asarray(prm.pv)[None], [np.asarray(el.constants(prm))[None] for el in lay.axial],
                  [prm], np.array([el.constants(prm.pv) for el in lay.rotational], dt).reshape(1, -1, 3))
-    prm.ts["__kernel__"] = kp  # type: ignore[assignment]
+    prm.cache.kernels[lay] = kp
     return kp
 
 

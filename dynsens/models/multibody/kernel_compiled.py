@@ -116,7 +116,7 @@ class CompiledParams:
 def compiled_params(kp: KParams, dtype: Any) -> CompiledParams:
     """:class:`CompiledParams` of the parameter sets in ``dtype`` (float64 or complex128; cached
     on kp per dtype)."""
-    cache = kp.__dict__.setdefault("_compiled", {})
+    cache = kp.cache.compiled
     hit = cache.get(np.dtype(dtype).char)
     if hit is None:
         ax_c = np.zeros((kp.B, len(kp.ec), max([10] + [c.shape[-1] for c in kp.ec])), dtype)

@@ -18,7 +18,7 @@ The residual, its exact (analytic) linearization and the design partials are eva
 by the vectorized kernel (:mod:`.kernel`, :mod:`.residual`); the term-by-term building
 blocks define the same equations for the assembly, the outputs and the tests.  Kinematics
 are cached by state, so residual, linearization, outputs and monitors at one state share
-them.
+them; everything else the model keeps between calls is declared in its :class:`.RunCache`.
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from ...errors import ProblemCollector
 from ..base import Linearization, Model, Output, StepState, Traits
 from ..parameters import ParameterTable
 from .bodies import BodyDef, BodyParams, Ctx, MBParams
-from .drift import check_drift, constraint_residuals, describe_equation, diagnose_singular, norm2
+from .drift import check_drift, describe_equation, diagnose_singular, norm2
 from .forces import ForceElement, Gravity, PointForce, SpringDamper
 from .hydraulics import HydraulicCylinder
 from .joints import Equation, Joint, NormEq
@@ -40,11 +40,14 @@ from .kernel_compiled import CompiledKin, KinCache, _use_compiled
 from .residual import Evaluation, other_forces_q, time_inputs_steps
 from .rotational import RotationalSpringDamper
 from .rotations import from_axis_angle, rmatmul
+from .run_cache import RunCache
 from .sparse import SparseStructure, sparse_linearization, use_sparse
 
 if TYPE_CHECKING:  # pragma: no cover
     from .assembly import InitialConditions
     from .projection import ProjectionSettings
+    from .reaction_split import MinimumNormSplit
+    from .redundancy import DroppedEquations
 
 Array = np.ndarray
 Recipe = Callable[..., Any]  # recipe(params); "..." admits lambdas with bound defaults
@@ -94,7 +97,6 @@ class MultibodyModel(Model):
         n_q = 7 * len(bodies)
         n_p = sum(c.n_pressures for c in cylinders)     # actuators' first-order states
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p)
-        self._ic_cache: tuple[MBParams, InitialConditions] | None = None
         grav = [f for f in forces if isinstance(f, Gravity)]
         self.gravity = grav[0] if grav else None
         self.point_forces = [f for f in forces if isinstance(f, PointForce) and f.frame == "global"]
@@ -106,11 +108,8 @@ class MultibodyModel(Model):
         # the storage of the linearization (:mod:`.sparse`): chosen by size unless the case says
         self.traits = Traits(n_q=n_q, n_lam=len(self.eqs), n_p=n_p,
                              sparse=use_sparse(self.traits.n_z, self.other_forces, sparse))
-        self._sparse: SparseStructure | None = None
-        self._lin: tuple[Evaluation, Linearization] | None = None
+        self.cache = RunCache()
         self._kin = KinCache(self.layout)
-        self._eval: tuple[tuple[Any, ...], Evaluation, tuple[Array, Array, Array]] | None = None
-        self._stacked: tuple[list[MBParams], KParams] | None = None
         lay = self.layout
         self._cf0 = np.zeros((1, lay.n_cp, 3))
         self._cf0[..., 0] = 1.0
@@ -179,13 +178,13 @@ class MultibodyModel(Model):
         lay = self.layout
         if not lay.coefs and not lay.shifts:
             return self._cf0, self._shift0
-        # kept on kp for the last t: Newton evaluates all iterates of a step at one time
-        hit = kp.__dict__.get("_coefficients")
+        # kept with kp for the last t: Newton evaluates all iterates of a step at one time
+        hit = kp.cache.coefficients
         if hit is not None and hit[0] == t:
             return hit[1]
         cf, shift = self.coefficients_steps(np.array([t]), kp)
         cf.flags.writeable = shift.flags.writeable = False
-        kp.__dict__["_coefficients"] = (t, (cf, shift))
+        kp.cache.coefficients = (t, (cf, shift))
         return cf, shift
 
     def coefficients_steps(self, ts: Array, kp: KParams) -> tuple[Array, Array]:
@@ -235,7 +234,7 @@ class MultibodyModel(Model):
 
     def _evaluation(self, t: float, s: StepState, params: MBParams | KParams) -> Evaluation:
         kin = self.kinematics(s, params)
-        last = self._eval
+        last = self.cache.evaluation
         if last is not None and last[1].kin is kin and last[1].t == t and \
                 last[2][0] is s.lam and last[2][1] is s.p and last[2][2] is s.pd:
             return last[1]        # the same state objects (residual, then linearize)
@@ -246,7 +245,7 @@ class MultibodyModel(Model):
         if last is not None and last[0] == key and last[1].kin is kin:
             return last[1]
         ev = Evaluation(self, kin, t, lam, p, pd)
-        self._eval = (key, ev, (s.lam, s.p, s.pd))
+        self.cache.evaluation = (key, ev, (s.lam, s.p, s.pd))
         return ev
 
     def residual(self, t: float, s: StepState, params: MBParams) -> Array:
@@ -258,10 +257,10 @@ class MultibodyModel(Model):
         if len(params_list) == 1:                # one set: its own kernel parameters (cached on it)
             return kernel_params(self.layout, params_list[0])
         # the entry keeps its list alive: a new list cannot take over its identity
-        if self._stacked is None or self._stacked[0] is not params_list:
-            self._stacked = (params_list, stack_kernel_params(
+        if self.cache.stacked is None or self.cache.stacked[0] is not params_list:
+            self.cache.stacked = (params_list, stack_kernel_params(
                 [kernel_params(self.layout, p) for p in params_list]))
-        return self._stacked[1]
+        return self.cache.stacked[1]
 
     def residual_batch(self, t: float, s: StepState, params_list: list[MBParams]) -> Array:
         """F_R (n_z, B) at one state for B parameter sets, one vectorized evaluation."""
@@ -298,11 +297,11 @@ class MultibodyModel(Model):
         """Exact ∂F_R/∂(z, q, q̇, p), analytic (:mod:`.residual`); CSC blocks on the model's kept
         pattern when ``traits.sparse`` (:mod:`.sparse`)."""
         ev = self._evaluation(t, s, params)
-        last = self._lin
+        last = self.cache.linearization
         if last is not None and last[0] is ev:      # the same evaluation (the redundancy check
             return last[1]                          # after a step reads the solver's own)
         lin = sparse_linearization(self, ev) if self.traits.sparse else ev.linearization()
-        self._lin = (ev, lin)
+        self.cache.linearization = (ev, lin)
         return lin
 
     def compiled_step(self, newton: bool, refactor: bool) -> Callable[..., Any] | None:
@@ -312,9 +311,25 @@ class MultibodyModel(Model):
 
     def sparse_structure(self) -> SparseStructure:
         """The positions of the sparse linearization's entries (built on first use)."""
-        if self._sparse is None:
-            self._sparse = SparseStructure.of(self)
-        return self._sparse
+        if self.cache.sparse is None:
+            self.cache.sparse = SparseStructure.of(self)
+        return self.cache.sparse
+
+    def dropped_equations(self) -> "DroppedEquations":
+        """The kernel of the redundant equations left out of Φ (:mod:`.redundancy`; built on
+        first use)."""
+        if self.cache.dropped is None:
+            from .redundancy import DroppedEquations
+            self.cache.dropped = DroppedEquations.of(self)
+        return self.cache.dropped
+
+    def reaction_split(self) -> "MinimumNormSplit":
+        """The minimum-norm split of the dependent joints' reactions (:mod:`.reaction_split`;
+        built on first use)."""
+        if self.cache.reaction_split is None:
+            from .reaction_split import MinimumNormSplit
+            self.cache.reaction_split = MinimumNormSplit(self)
+        return self.cache.reaction_split
 
     # ------------------------------------------------------------------ diagnostics
     redundant: list[tuple[str, str, Equation]] = []   # (joint, label, equation) left out of Φ
@@ -346,6 +361,20 @@ class MultibodyModel(Model):
         return diagnose_singular(self, t, s, params, rel_tol)
 
     drift_limit: float | None = None
+
+    def constraint_residuals(self, t: float, s: StepState, params: MBParams) -> Array:
+        """(Φ, Φ̇, Φ̈) (n_eq, 3) at (t, s), kept for the same state object: the drift guard after
+        a step and the monitors recorded for it share one evaluation (also when they name the
+        step's time differently, t_prev + h and the grid's time, where no constraint depends on
+        time); :attr:`.RunCache.constraint_levels`."""
+        last = self.cache.constraint_levels
+        if last is not None and last[1] is s.q and last[2] is s.qd and last[3] is params and \
+                (last[0] == t or not (self.layout.coefs or self.layout.shifts)):
+            return last[4]
+        Phi = self.constraint_levels(t, self.kinematics(s, params))[0][0]
+        self.cache.constraint_levels = (t, s.q, s.qd, params, Phi)
+        return Phi
+
     #: ``model.projection`` (None: off): each step's end state projected onto Φ = 0, Φ̇ = 0
     projection: "ProjectionSettings | None" = None
 
@@ -355,18 +384,22 @@ class MultibodyModel(Model):
         if self.projection is None:
             return s, None
         from .projection import project
-        return project(self, self.projection, t, s, params)
+        out, proj = project(self, self.projection, t, s, params)
+        self.cache.solved = (t, proj.projected, s)          # for the monitors of this step
+        return out, proj
 
     def monitors(self, t: float, s: StepState, params: MBParams) -> dict[str, float]:
         """‖Φ‖ and ‖Φ̇‖ (real parts) at one step (the drift guard is in :meth:`check_state`); with
         ``model.projection`` also those of the state Newton solved before the projection
         (``*_solved``: in mode output the state the integration continues from)."""
-        Phi = constraint_residuals(self, t, s, params)
+        Phi = self.constraint_residuals(t, s, params)
         out = {"constraint_position": norm2(np.real(Phi[:, 0])),
                "constraint_velocity": norm2(np.real(Phi[:, 1]))}
         if self.projection is not None:
             from .projection import solved_monitors
-            out.update(solved_monitors(self, t, s, params, Phi))
+            last = self.cache.solved
+            solved = last[2] if last is not None and last[0] == t and last[1].q is s.q else s
+            out.update(solved_monitors(self, t, solved, s, params, Phi))
         return out
 
     def dof_labels(self) -> list[str]:
@@ -398,13 +431,13 @@ class MultibodyModel(Model):
         if self.redundant:          # the dropped equations hold at this design's assembly too
             from .redundancy import check_values
             check_values(self, self.assembly.t0, res.q0, params, 0.0)
-        self._ic_cache = (params, res)
+        self.cache.initial = (params, res)
         return res.q0, res.qd0, res.p0
 
     def _initial_conditions(self, params: MBParams) -> "InitialConditions":
         """The assembly of :meth:`initial_state` when it was for the same parameter object."""
-        if self._ic_cache is not None and self._ic_cache[0] is params:
-            return self._ic_cache[1]
+        if self.cache.initial is not None and self.cache.initial[0] is params:
+            return self.cache.initial[1]
         from .assembly import initial_conditions
         return initial_conditions(self, params)
 

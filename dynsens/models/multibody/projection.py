@@ -347,16 +347,14 @@ def project(model: "MultibodyModel", settings: "ProjectionSettings", t: float, s
     Q, QD, nu, kappa = _project_columns(model, settings, t, s.q[:, None], s.qd[:, None], params)
     projected = s._replace(q=Q[:, 0], qd=QD[:, 0])
     feedback = settings.mode == "state"
-    model.__dict__["_solved_last"] = (t, projected, s)          # for the monitors of this step
     return (projected if feedback else s), Projection(model, settings, t, s, projected, feedback,
                                                       (nu, kappa))
 
 
-def solved_monitors(model: "MultibodyModel", t: float, s: StepState, params: Any, Phi: Array) -> dict[str, float]:
-    """‖Φ‖, ‖Φ̇‖ of the state Newton solved at t before the projection that gave the reported
-    state s (``Phi``: the levels at s; at t0, or for a state not projected here, s itself)."""
-    last = model.__dict__.get("_solved_last")
-    solved = last[2] if last is not None and last[0] == t and last[1].q is s.q else s
+def solved_monitors(model: "MultibodyModel", t: float, solved: StepState, s: StepState, params: Any,
+                    Phi: Array) -> dict[str, float]:
+    """‖Φ‖, ‖Φ̇‖ of the state ``solved`` Newton solved at t before the projection that gave the
+    reported state s (``Phi``: the levels at s; at t0, or for a state not projected, solved is s)."""
     if solved is not s:
         Phi = model.constraint_levels(t, model.kinematics(solved, params))[0][0]
     return {"constraint_position_solved": float(np.linalg.norm(np.real(Phi[:, 0]))),

@@ -123,10 +123,7 @@ def split_of(model: "MultibodyModel") -> MinimumNormSplit | None:
     """The model's :class:`MinimumNormSplit` (built on first use), None without dependent joints."""
     if not model.dependent_joints:
         return None
-    hit = model.__dict__.get("_reaction_split")
-    if hit is None:
-        hit = model.__dict__["_reaction_split"] = MinimumNormSplit(model)
-    return hit
+    return model.reaction_split()
 
 
 def split_is_timed(model: "MultibodyModel") -> bool:

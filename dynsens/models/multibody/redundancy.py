@@ -33,7 +33,7 @@ the time and the joints, never a silently different mechanism.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -45,6 +45,7 @@ from .assembly import guess, jacobian_rows
 from .bodies import Ctx
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .kernel import Layout
     from .model import MultibodyModel
 
 Array = np.ndarray
@@ -274,27 +275,45 @@ def check_values(model: "MultibodyModel", t: float, q: Array, params: Any, kept_
             "or equations that conflict as time goes on, e.g. two drivers of one freedom)")
 
 
+@dataclass(frozen=True)
+class DroppedEquations:
+    """The redundant equations left out of Φ as a kernel of their own (built once per model,
+    :meth:`.model.MultibodyModel.dropped_equations`).
+
+    layout : their kernel layout; S : its products-to-equations map (sparse: no dense product);
+    probe : fixed random combinations (n_d, 4) of their rows, the first test of
+    :func:`check_dependency` (each leaves the kept rows' span when any row does).
+    """
+
+    layout: "Layout"
+    S: Any
+    probe: Array
+
+    @classmethod
+    def of(cls, model: "MultibodyModel") -> "DroppedEquations":
+        """The left-out equations of ``model`` (``model.redundant``)."""
+        from .kernel import Layout
+        eqs = [eq for _, _, eq in model.redundant]
+        lay = Layout(model.layout.n_b, eqs, [], [])
+        return cls(lay, sp.csr_matrix(lay.S), np.random.default_rng(0).standard_normal((len(eqs), 4)))
+
+
 def dropped_values_and_rows(model: "MultibodyModel", t: float, q: Array, params: Any) -> tuple[Array, Array]:
     """(Φ_d (n_d,), J_d (n_d, n_q)) of the left-out equations at (t, q), real parts: by the
     compiled kernel on a layout of their own when their terms have unit coefficients and no
     shifts (joints' equations), term by term otherwise."""
     from . import compiled as cc
     from . import compiled_linearization as clin
-    from .kernel import Layout, kernel_params
+    from .kernel import kernel_params
     from .kernel_compiled import CompiledKin
     eqs = [eq for _, _, eq in model.redundant]
-    kept = model.__dict__.get("_dropped_layout")
-    if kept is None:        # the layout and its products-to-equations map (sparse: no dense product)
-        lay = Layout(model.layout.n_b, eqs, [], [])
-        kept = model.__dict__["_dropped_layout"] = (lay, sp.csr_matrix(lay.S))
-    lay, S = kept
+    dropped = model.dropped_equations()
+    lay, S = dropped.layout, dropped.S
     q = np.real(q)
     if lay.coefs or lay.shifts or not cc.enabled() or lay.n_eq != lay.n_cp:
         return (np.real(model.constraint_values(_ctx(q, params, t), eqs)[0][:, 0]),
                 np.real(jacobian_rows(eqs, q, params, t)))
-    kp = params.ts.get("__kernel_dropped__")
-    if kp is None:      # the kernel parameters of this layout, kept apart from the model's own
-        kp = params.ts["__kernel_dropped__"] = kernel_params(lay, replace(params, ts={}))
+    kp = kernel_params(lay, params)      # kept with the set, apart from the model layout's
     z = np.zeros_like(q)[None]
     kin = CompiledKin(lay, kp, q[None], z, z)
     cl = kin.arrays
@@ -342,17 +361,14 @@ def check_dependency(model: "MultibodyModel", t: float, state: Any, params: Any)
     rows = np.maximum(np.linalg.norm(Jd, axis=1), 1e-300)
     # first a few fixed random combinations of the dropped rows (each leaves the span when any
     # row does), then, only if one is off, every row apart (to name them)
-    W = model.__dict__.get("_span_probe")
-    if W is None or W.shape[0] != Jd.shape[0]:
-        W = model.__dict__["_span_probe"] = np.random.default_rng(0).standard_normal((Jd.shape[0], 4))
+    W = model.dropped_equations().probe
     probe = (W / rows[:, None]).T @ Jd
     off = _span_distance(Jk, probe)
     if not np.all(off <= 0.01 * RUN_TOL):
         off = _span_distance(Jk, Jd)
     else:
         off = np.zeros(Jd.shape[0])
-    from .drift import constraint_residuals
-    kept = float(np.linalg.norm(np.real(constraint_residuals(model, t, state, params)[:, 0])))
+    kept = float(np.linalg.norm(np.real(model.constraint_residuals(t, state, params)[:, 0])))
     check_values(model, t, state.q, params, kept, phi=phi_d)
     bad = np.flatnonzero(off > RUN_TOL)
     if bad.size:

@@ -82,7 +82,7 @@ def time_inputs(model: "MultibodyModel", kp: Any, t: float, dtype: Any) -> tuple
     evaluates all iterates of a step at one time; the arrays are read-only), and from then on
     once the time functions have settled (their ``settled_from``)."""
     dt = np.dtype(dtype)
-    cache = kp.__dict__.setdefault("_inputs", {})
+    cache = kp.cache.inputs
     hit = cache.get(dt.char)
     if hit is not None and (hit[0] == t or (t > hit[1] and hit[0] > hit[1])):
         return hit[2]
@@ -120,7 +120,7 @@ def _steady(model: "MultibodyModel", kp: Any, dt: np.dtype) -> tuple[Array, Arra
     forces when all of them are constant in time (else None, with the list of them), and the
     time after which nothing changes.  The arrays are never written to: the kernel reads them,
     and numba would compile another specialization for read-only arrays."""
-    kept = kp.__dict__.setdefault("_steady_inputs", {}).get(dt.char)
+    kept = kp.cache.steady_inputs.get(dt.char)
     if kept is not None:
         return kept
     lay, B = model.layout, kp.B
@@ -134,7 +134,7 @@ def _steady(model: "MultibodyModel", kp: Any, dt: np.dtype) -> tuple[Array, Arra
             f0[:, j] -= point_force(pf, 0.0, kp.pv)
     settled = max([el.settled_from(kp.pv) for el in lay.axial] + [pf.fn.settled_from(kp.pv) for pf, _ in forces],
                   default=-np.inf)
-    kept = kp.__dict__["_steady_inputs"][dt.char] = (g, f0, forces, float(settled))
+    kept = kp.cache.steady_inputs[dt.char] = (g, f0, forces, float(settled))
     return kept
 
 
