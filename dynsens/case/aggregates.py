@@ -56,9 +56,13 @@ def _extremum_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
     signs = [1.0, -1.0] if absolute else [1.0]
     terms = tuple(Term(o, c, np.array([[s / limit] * len(c) for s in signs])) for o, c in zip(ids, comps))
     how = "ks" if kind == "ks" else "max"
-    unit = r.get("unit")
-    u = str(unit) if unit is not None else ("-" if "limit" in r else outputs[ids[0]].unit)
+    u = _unit(r.get("unit"), "limit" in r, outputs[ids[0]])
     return lambda: Aggregate(name, terms, how, u, sense=sense, rho=rho)
+
+
+def _unit(unit: Any, divided: bool, first: Output) -> str:
+    """The response's unit: as given, else '-' for quantities divided by a limit, else the first quantity's."""
+    return str(unit) if unit is not None else ("-" if divided else first.unit)
 
 
 def _sense(r: dict, kind: str, path: str, pc: ProblemCollector) -> tuple[int, bool]:
