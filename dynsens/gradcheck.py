@@ -112,6 +112,17 @@ def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
     return d / ref if ref > 0 else d
 
 
+Values = dict[str, Any]
+#: per scheme: the number of runs of one derivative (at x + δ, and x − δ for central differences,
+#: δ = h·ref along one design variable) and its difference quotient from those runs ((values,
+#: wall time) each) and the unperturbed values
+_QUOTIENTS: dict[str, tuple[int, Callable[[list[tuple[Values, float]], Values, str, float], Any]]] = {
+    "forward": (1, lambda runs, base, n, hj: np.real(runs[0][0][n] - base[n]) / hj),
+    "central": (2, lambda runs, base, n, hj: np.real(runs[0][0][n] - runs[1][0][n]) / (2 * hj)),
+    "complex": (1, lambda runs, base, n, hj: np.imag(runs[0][0][n]) / hj),
+}
+
+
 def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
                     x: np.ndarray | None = None, workers: int | None = None, scheduler: str | None = None,
                     executor: Executor | None = None,
@@ -173,17 +184,6 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     return GradientReport(case.name, case.design_names, x, names,
                           {n: float(np.real(sa_run.responses[n].value)) for n in names}, sa, sa_time,
                           primal_time, columns, missing, fixed, times is not None)
-
-
-Values = dict[str, Any]
-#: per scheme: the number of runs of one derivative (at x + δ, and x − δ for central differences,
-#: δ = h·ref along one design variable) and its difference quotient from those runs ((values,
-#: wall time) each) and the unperturbed values
-_QUOTIENTS: dict[str, tuple[int, Callable[[list[tuple[Values, float]], Values, str, float], Any]]] = {
-    "forward": (1, lambda runs, base, n, hj: np.real(runs[0][0][n] - base[n]) / hj),
-    "central": (2, lambda runs, base, n, hj: np.real(runs[0][0][n] - runs[1][0][n]) / (2 * hj)),
-    "complex": (1, lambda runs, base, n, hj: np.imag(runs[0][0][n]) / hj),
-}
 
 
 def _fd_designs(x: np.ndarray, j: int, hj: float, scheme: str) -> list[np.ndarray]:
