@@ -31,7 +31,8 @@ test-fast: $(STAMP)
 	DYNSENS_MODULE_COVERAGE=$(FAST_RECORDS) $(PY) -m pytest -q -n auto --dist loadfile -m "not slow"
 	$(PY) scripts/check_module_coverage.py $(FAST_RECORDS)
 
-# ruff and mypy with the configuration in pyproject.toml (CI runs this)
+# ruff and mypy with the configuration in pyproject.toml, and no function of dynsens/ above
+# cyclomatic complexity 30 (radon; scripts/check_complexity.py). CI runs this
 LINT_STAMP := $(VENV)/.lint-installed
 $(LINT_STAMP): $(STAMP)
 	$(PY) -m pip install --quiet -e ".[lint]"
@@ -40,6 +41,7 @@ $(LINT_STAMP): $(STAMP)
 lint: $(LINT_STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
+	$(PY) scripts/check_complexity.py
 
 # the documentation site -> site/ (MkDocs; warnings are errors; CI runs this)
 DOCS_STAMP := $(VENV)/.docs-installed

@@ -186,22 +186,49 @@ def _member_symbol(node: ast.AST) -> str | None:
     return None
 
 
-def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
-                  text: str, depth: int = 0, functions: Mapping[str, Callable[..., Number]] | None = None
-                  ) -> Callable[[Mapping[str, Number]], Number]:
-    table = FUNCTIONS if functions is None else functions
+Compiled = Callable[[Mapping[str, Number]], Number]
 
-    def sub(n: ast.AST, deeper: int = 1) -> Callable[[Mapping[str, Number]], Number]:
-        return _compile_node(n, names, known, text, depth + deeper, functions)
-    if depth > MAX_DEPTH:
-        raise ExpressionError(f"expression '{_short(text)}' nests parentheses, calls or powers more than "
-                              f"{MAX_DEPTH} levels deep: split it into simpler terms")
-    if isinstance(node, ast.Expression):
-        return sub(node.body, 0)
-    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
-        # a long sum (or product) is evaluated in a loop, not by one nested call per term
+
+class _Compiler:
+    """Turns the syntax tree of one expression into nested closures: one method per kind of node
+    (``_KINDS``); any other node is not allowed.  ``names`` collects the symbols read."""
+
+    def __init__(self, text: str, known: frozenset[str] | None,
+                 functions: Mapping[str, Callable[..., Number]] | None):
+        self.text = text
+        self.known = known
+        self.table = FUNCTIONS if functions is None else functions
+        self.names: set[str] = set()
+
+    def compile(self, node: ast.AST, depth: int = 0) -> Compiled:
+        if depth > MAX_DEPTH:
+            raise ExpressionError(f"expression '{_short(self.text)}' nests parentheses, calls or powers more than "
+                                  f"{MAX_DEPTH} levels deep: split it into simpler terms")
+        handler = self._KINDS.get(type(node))
+        fn = handler(self, node, depth) if handler is not None else None
+        if fn is None:
+            raise ExpressionError(
+                f"expression '{self.text}': '{ast.dump(node)[:40]}...' is not allowed "
+                "(only numbers, names, + - * / **, parentheses and math functions)")
+        return fn
+
+    def _expression(self, node: ast.Expression, depth: int) -> Compiled:
+        return self.compile(node.body, depth)
+
+    def _binop(self, node: ast.BinOp, depth: int) -> Compiled | None:
+        if isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+            return self._chain(node, depth)
+        if type(node.op) not in _BINOPS:
+            return None
+        op = _BINOPS[type(node.op)]
+        left = self.compile(node.left, depth + 1)
+        right = self.compile(node.right, depth + 1)
+        return lambda env: op(left(env), right(env))
+
+    def _chain(self, node: ast.BinOp, depth: int) -> Compiled:
+        """A long sum (or product) is evaluated in a loop, not by one nested call per term."""
         operands, ops = _chain(node)
-        first, *rest = [sub(o) for o in operands]
+        first, *rest = [self.compile(o, depth + 1) for o in operands]
         if not rest:
             return first
         fns = [_BINOPS[o] for o in ops]
@@ -213,58 +240,67 @@ def _compile_node(node: ast.AST, names: set[str], known: frozenset[str] | None,
                 acc = op(acc, term(env))
             return acc
         return chain
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
-            and not isinstance(node.value, bool):
+
+    def _constant(self, node: ast.Constant, depth: int) -> Compiled | None:
+        if not isinstance(node.value, (int, float)) or isinstance(node.value, bool):
+            return None
         try:
             value = float(node.value)
         except OverflowError:
-            raise ExpressionError(f"expression '{_short(text)}' has a number too large for a floating-point "
+            raise ExpressionError(f"expression '{_short(self.text)}' has a number too large for a floating-point "
                                   "value") from None
         return lambda env: value
-    member = _member_symbol(node)
-    if member is None and isinstance(node, ast.Name):
-        member = node.id
-    if member is not None:
-        name = member
+
+    def _name(self, node: ast.Name, depth: int) -> Compiled:
+        return self._symbol(node.id)
+
+    def _subscript(self, node: ast.Subscript, depth: int) -> Compiled | None:
+        member = _member_symbol(node)
+        return None if member is None else self._symbol(member)
+
+    def _symbol(self, name: str) -> Compiled:
+        """A constant (pi, ...) or a symbol the environment gives (checked against ``known``)."""
         if name in CONSTANTS:
             c = CONSTANTS[name]
             return lambda env: c
-        if known is not None and name not in known:
-            close = difflib.get_close_matches(name, sorted(known), n=1)
+        if self.known is not None and name not in self.known:
+            close = difflib.get_close_matches(name, sorted(self.known), n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
             raise ExpressionError(
-                f"expression '{text}' names unknown symbol '{name}'{hint} "
-                f"(known: {', '.join(sorted(known)) or 'none'})")
-        names.add(name)
+                f"expression '{self.text}' names unknown symbol '{name}'{hint} "
+                f"(known: {', '.join(sorted(self.known)) or 'none'})")
+        self.names.add(name)
         return lambda env: env[name]
-    if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-        op = _BINOPS[type(node.op)]
-        left = sub(node.left)
-        right = sub(node.right)
-        return lambda env: op(left(env), right(env))
-    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        operand = sub(node.operand)
+
+    def _unary(self, node: ast.UnaryOp, depth: int) -> Compiled | None:
+        if not isinstance(node.op, (ast.USub, ast.UAdd)):
+            return None
+        operand = self.compile(node.operand, depth + 1)
         if isinstance(node.op, ast.USub):
             return lambda env: -operand(env)
         return operand
-    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and not node.keywords:
+
+    def _call(self, node: ast.Call, depth: int) -> Compiled | None:
+        if not isinstance(node.func, ast.Name) or node.keywords:
+            return None
         fname = node.func.id
-        if fname not in table:
+        if fname not in self.table:
             raise ExpressionError(
-                f"expression '{text}' calls '{fname}', which is not allowed "
-                f"(allowed: {', '.join(sorted(table))})")
+                f"expression '{self.text}' calls '{fname}', which is not allowed "
+                f"(allowed: {', '.join(sorted(self.table))})")
         want = _ARITY.get(fname, 1)
         if (len(node.args) != want) if want else not node.args:
             raise ExpressionError(
-                f"expression '{_short(text)}': {fname}() takes "
+                f"expression '{_short(self.text)}': {fname}() takes "
                 f"{f'{want} argument' + ('s' if want > 1 else '') if want else 'one or more arguments'}, "
                 f"found {len(node.args)}")
-        fn = table[fname]
-        args = [sub(a) for a in node.args]
+        fn = self.table[fname]
+        args = [self.compile(a, depth + 1) for a in node.args]
         return lambda env: fn(*(a(env) for a in args))
-    raise ExpressionError(
-        f"expression '{text}': '{ast.dump(node)[:40]}...' is not allowed "
-        "(only numbers, names, + - * / **, parentheses and math functions)")
+
+    _KINDS: dict[type, Callable[..., Compiled | None]] = {
+        ast.Expression: _expression, ast.BinOp: _binop, ast.Constant: _constant, ast.Name: _name,
+        ast.Subscript: _subscript, ast.UnaryOp: _unary, ast.Call: _call}
 
 
 def compile_expression(text: str, known: frozenset[str] | set[str] | None = None,
@@ -286,14 +322,14 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
         raise ExpressionError(f"expected an expression of at most {MAX_LENGTH} characters, found {len(text)}")
     try:
         tree = ast.parse(text.strip(), mode="eval")
-        names: set[str] = set()
-        fn = _compile_node(tree, names, frozenset(known) if known is not None else None, text, 0, functions)
+        compiler = _Compiler(text, frozenset(known) if known is not None else None, functions)
+        fn = compiler.compile(tree)
     except SyntaxError as exc:
         raise ExpressionError(f"expression '{_short(text)}' is not valid: {exc.msg}") from None
     except (RecursionError, MemoryError):
         raise ExpressionError(f"expression '{_short(text)}' nests too deeply: split it into simpler terms") \
             from None
-    return Expression(text, frozenset(names), fn)
+    return Expression(text, frozenset(compiler.names), fn)
 
 
 def _short(text: str) -> str:

@@ -112,6 +112,17 @@ def rel_diff(fd: np.ndarray, sa: np.ndarray) -> float:
     return d / ref if ref > 0 else d
 
 
+Values = dict[str, Any]
+#: per scheme: the number of runs of one derivative (at x + δ, and x − δ for central differences,
+#: δ = h·ref along one design variable) and its difference quotient from those runs ((values,
+#: wall time) each) and the unperturbed values
+_QUOTIENTS: dict[str, tuple[int, Callable[[list[tuple[Values, float]], Values, str, float], Any]]] = {
+    "forward": (1, lambda runs, base, n, hj: np.real(runs[0][0][n] - base[n]) / hj),
+    "central": (2, lambda runs, base, n, hj: np.real(runs[0][0][n] - runs[1][0][n]) / (2 * hj)),
+    "complex": (1, lambda runs, base, n, hj: np.imag(runs[0][0][n]) / hj),
+}
+
+
 def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
                     x: np.ndarray | None = None, workers: int | None = None, scheduler: str | None = None,
                     executor: Executor | None = None,
@@ -123,12 +134,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     ``progress(done, total)`` is called after every simulation (the semi-analytical and the
     primal run, then each finite-difference run as it finishes).
     """
-    if scheme not in SCHEMES:
-        raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
-    for h in steps:
-        why = step_problem(h, scheme)
-        if why:
-            raise ValueError(f"steps: {why}")
+    _check_steps(steps, scheme)
     x = case.x0 if x is None else np.asarray(x, dtype=float)
     m = x.size
     from .warmup import warm_case
@@ -136,7 +142,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     t0 = time.perf_counter()
     sa_run = run_case(case, x, sensitivities=True, history=())
     sa_time = time.perf_counter() - t0
-    n_runs = 2 + len(steps) * m * (2 if scheme == "central" else 1)
+    n_runs = 2 + len(steps) * m * _QUOTIENTS[scheme][0]
     done = [0]
 
     def tick(what: str) -> None:
@@ -155,14 +161,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     base_vals, primal_time = _values(case, x, times)
     tick(f"primal run ({primal_time:.2f} s)")
     ref = np.where(np.abs(x) > 0, np.abs(x), case.scale)
-    jobs: list[np.ndarray] = []
-    for h in steps:
-        for j in range(m):
-            dx = np.zeros(m, dtype=complex if scheme == "complex" else float)
-            dx[j] = (1j if scheme == "complex" else 1.0) * h * ref[j]
-            jobs.append(x + dx)
-            if scheme == "central":
-                jobs.append(x - dx)
+    jobs = [xj for h in steps for j in range(m) for xj in _fd_designs(x, j, h * ref[j], scheme)]
     remember_case(case)                       # in-process runs reuse the loaded case
     tasks = [(case.text, case.source, xj, times) for xj in jobs]
 
@@ -173,33 +172,51 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     else:
         with make_executor(workers, scheduler, tasks=len(tasks), default_workers=DEFAULT_WORKERS) as ex:
             outs = ex.map(_values_task, tasks, fd_done)
+    per = _QUOTIENTS[scheme][0]
     columns = []
-    per = 2 if scheme == "central" else 1
     for k, h in enumerate(steps):
-        grads = {n: np.zeros(m) for n in names}
-        wall = 0.0 if scheme != "forward" else primal_time
-        for j in range(m):
-            idx = (k * m + j) * per
-            hj = h * ref[j]
-            vals, tj = outs[idx]
-            wall += tj
-            for n in names:
-                if scheme == "forward":
-                    grads[n][j] = np.real(vals[n] - base_vals[n]) / hj
-                elif scheme == "complex":
-                    grads[n][j] = np.imag(vals[n]) / hj
-                else:
-                    vm, tm = outs[idx + 1]
-                    grads[n][j] = np.real(vals[n] - vm[n]) / (2 * hj)
-            if scheme == "central":
-                wall += outs[idx + 1][1]
-        col = FDColumn(h, scheme, grads, wall)
-        col.rel_diff = {n: (rel_diff(grads[n], sa[n]) if n not in missing else float("nan")) for n in names}
+        runs = outs[k * m * per:(k + 1) * m * per]
+        col = _fd_column(h, scheme, [runs[j * per:(j + 1) * per] for j in range(m)], h * ref, names,
+                         base_vals, primal_time)
+        col.rel_diff = {n: (rel_diff(col.gradients[n], sa[n]) if n not in missing else float("nan")) for n in names}
         columns.append(col)
     fixed = tuple(n for n, r in sa_run.responses.items() if r.kind == "fixed_time")
     return GradientReport(case.name, case.design_names, x, names,
                           {n: float(np.real(sa_run.responses[n].value)) for n in names}, sa, sa_time,
                           primal_time, columns, missing, fixed, times is not None)
+
+
+def _fd_designs(x: np.ndarray, j: int, hj: float, scheme: str) -> list[np.ndarray]:
+    """The designs the ``scheme``'s derivative along variable j with the step hj runs at."""
+    dx = np.zeros(x.size, dtype=complex if scheme == "complex" else float)
+    dx[j] = (1j if scheme == "complex" else 1.0) * hj
+    return [x + dx, x - dx][:_QUOTIENTS[scheme][0]]
+
+
+def _check_steps(steps: list[float], scheme: str) -> None:
+    """ValueError unless ``scheme`` is known and every relative step is meaningful for it."""
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
+    for h in steps:
+        why = step_problem(h, scheme)
+        if why:
+            raise ValueError(f"steps: {why}")
+
+
+def _fd_column(h: float, scheme: str, runs: list[list[tuple[Values, float]]], hs: np.ndarray,
+               names: tuple[str, ...], base: Values, primal_time: float) -> FDColumn:
+    """The finite-difference gradients for the relative step h from the runs of each design
+    variable j (at the absolute steps hs[j]); the wall time is the serial sum of the runs (and
+    the primal run a forward difference shares)."""
+    quotient = _QUOTIENTS[scheme][1]
+    grads = {n: np.zeros(len(runs)) for n in names}
+    wall = 0.0 if scheme != "forward" else primal_time
+    for j, at_j in enumerate(runs):
+        for _, tj in at_j:
+            wall += tj
+        for n in names:
+            grads[n][j] = quotient(at_j, base, n, hs[j])
+    return FDColumn(h, scheme, grads, wall)
 
 
 def _vec(v: np.ndarray) -> str:

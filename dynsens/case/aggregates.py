@@ -30,29 +30,26 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
     """Validate response entry ``r`` (at YAML ``path``) of type ``kind`` in AGGREGATE_TYPES;
     a factory of fresh :class:`Aggregate` accumulators, or None (problems reported).
     ``beams``: the model's beam names (their buckling ratio scales with the response's K²)."""
-    unit = r.get("unit")
-    if kind in ("stress_ratio", "buckling_ratio"):
+    maker = _MAKERS[kind]
+    if maker is _ratio_maker:
         return _ratio_maker(name, kind, r, path, output_id, outputs, pc, beams)
-    if kind == "displacement_limit":
-        return _displacement_maker(name, r, path, output_id, outputs, pc)
+    return maker(name, kind, r, path, output_id, outputs, pc)
+
+
+def _extremum_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
+                    outputs: list[Output], pc: ProblemCollector) -> Callable[[], Response] | None:
+    """``ks`` (smooth maximum or minimum), ``max``, ``min``: the extremum of quantities over their
+    components and the run, optionally of their absolute values and divided by a ``limit``."""
     check_keys(r, path, allowed(f"response.{kind}"), pc, required=("rho",) if kind == "ks" else ())
     n0 = len(pc.problems)
-    qs = r["quantities"] if "quantities" in r else [r["quantity"]] if "quantity" in r else None
-    if "quantity" in r and "quantities" in r:
-        pc.add(path, "give 'quantity' or 'quantities', not both")
-    if not isinstance(qs, list) or not qs:
-        pc.add(path, f"a {kind} response needs 'quantity' or a non-empty list 'quantities'")
+    qs = _quantities(r, kind, path, pc)
+    if qs is None:
         return None
     # (a single 'quantity' is reported as quantities[0], as the loader always has)
     oids = [output_id(q, f"{path}.quantities[{k}]") for k, q in enumerate(qs)]
     # (a missing rho is reported by check_keys above)
     rho = positive(r["rho"], f"{path}.rho", pc) if kind == "ks" and "rho" in r else None
-    side = r.get("side", "upper")
-    if side not in ("upper", "lower"):
-        pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
-    absolute = r.get("absolute", False)
-    if not isinstance(absolute, bool):
-        pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
+    sense, absolute = _sense(r, kind, path, pc)
     limit = positive(r["limit"], f"{path}.limit", pc) if "limit" in r else 1.0
     ids = [o for o in oids if o is not None]
     if len(ids) != len(oids) or limit is None or (kind == "ks" and rho is None) or len(pc.problems) > n0:
@@ -64,9 +61,35 @@ def aggregate_maker(name: str, kind: str, r: dict, path: str, output_id: OutputI
     signs = [1.0, -1.0] if absolute else [1.0]
     terms = tuple(Term(o, c, np.array([[s / limit] * len(c) for s in signs])) for o, c in zip(ids, comps))
     how = "ks" if kind == "ks" else "max"
-    sense = -1 if kind == "min" or side == "lower" else 1
-    u = str(unit) if unit is not None else ("-" if "limit" in r else outputs[ids[0]].unit)
+    u = _unit(r.get("unit"), "limit" in r, outputs[ids[0]])
     return lambda: Aggregate(name, terms, how, u, sense=sense, rho=rho)
+
+
+def _unit(unit: Any, divided: bool, first: Output) -> str:
+    """The response's unit: as given, else '-' for quantities divided by a limit, else the first quantity's."""
+    return str(unit) if unit is not None else ("-" if divided else first.unit)
+
+
+def _sense(r: dict, kind: str, path: str, pc: ProblemCollector) -> tuple[int, bool]:
+    """(sense: 1 for a maximum, -1 for a minimum (``min``, ``side: lower``), whether of |quantity|)."""
+    side = r.get("side", "upper")
+    if side not in ("upper", "lower"):
+        pc.add(f"{path}.side", f"expected upper (smooth maximum) or lower (smooth minimum), found {side!r}")
+    absolute = r.get("absolute", False)
+    if not isinstance(absolute, bool):
+        pc.add(f"{path}.absolute", f"expected true or false, found {absolute!r}")
+    return (-1 if kind == "min" or side == "lower" else 1), absolute
+
+
+def _quantities(r: dict, kind: str, path: str, pc: ProblemCollector) -> list | None:
+    """The entry's quantity specs: ``quantity`` (one) or ``quantities`` (a non-empty list)."""
+    qs = r["quantities"] if "quantities" in r else [r["quantity"]] if "quantity" in r else None
+    if "quantity" in r and "quantities" in r:
+        pc.add(path, "give 'quantity' or 'quantities', not both")
+    if not isinstance(qs, list) or not qs:
+        pc.add(path, f"a {kind} response needs 'quantity' or a non-empty list 'quantities'")
+        return None
+    return qs
 
 
 def _ratio_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId,
@@ -138,10 +161,10 @@ def how_and_rho(r: dict, path: str, pc: ProblemCollector) -> tuple[str, float | 
     return str(how), rho
 
 
-def _displacement_maker(name: str, r: dict, path: str, output_id: OutputId, outputs: list[Output],
+def _displacement_maker(name: str, kind: str, r: dict, path: str, output_id: OutputId, outputs: list[Output],
                         pc: ProblemCollector) -> Callable[[], Response] | None:
-    """``displacement_limit``: |u|/limit of each node's translation vector (``nodes``) or of
-    each DOF (``dofs``, both signs), aggregated over them and the run."""
+    """``displacement_limit`` (``kind``): |u|/limit of each node's translation vector (``nodes``) or
+    of each DOF (``dofs``, both signs), aggregated over them and the run."""
     check_keys(r, path, allowed("response.displacement_limit"), pc, required=("limit",))
     n0 = len(pc.problems)
     how, rho = how_and_rho(r, path, pc)
@@ -235,3 +258,11 @@ def _components(spec: Any, outs: list[Output], several: bool, path: str,
             return None
         out.append(np.array(idx, dtype=int))
     return out
+
+
+# one maker per aggregate type (AGGREGATE_TYPES), all called alike
+_MAKERS: dict[str, Callable[[str, str, dict, str, OutputId, list[Output], ProblemCollector],
+                            Callable[[], Response] | None]] = {
+    "ks": _extremum_maker, "max": _extremum_maker, "min": _extremum_maker,
+    "stress_ratio": _ratio_maker, "buckling_ratio": _ratio_maker, "displacement_limit": _displacement_maker}
+assert set(_MAKERS) == set(AGGREGATE_TYPES)

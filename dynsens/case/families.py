@@ -182,16 +182,9 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
     """The member variables of one family; assigns the selected elements' keys."""
     if not check_keys(fam, path, _FAMILY_KEYS, pc, required=("name", "value", "assign")):
         return []
-    name = fam.get("name")
-    if not isinstance(name, str) or not _IDENT.match(name):
-        pc.add(f"{path}.name", f"expected an identifier (letters, digits, _), found {name!r}")
+    name = _family_name(fam.get("name"), path, taken, pc)
+    if name is None:
         return []
-    if name in RESERVED_NAMES:      # its expressions would read the constant or function
-        pc.add(f"{path}.name", reserved_message(name))
-        return []
-    if name in taken:
-        pc.add(f"{path}.name", f"{name!r} is already a design variable or family")
-    taken.add(name)
     kind = fam.get("type", "bar")
     assign = _assignable(fam.get("assign"), kind, f"{path}.assign", pc)
     shared = _numbers(fam, _NUMBERS, path, pc)
@@ -203,17 +196,7 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
     pool = [(str(el.get("name", f"{el.get('type')}{k}")), el) for k, el in enumerate(elements)
             if isinstance(el, dict) and el.get("type") == kind]
     chosen = _select(fam.get("elements", "all"), pool, kind, f"{path}.elements", pc)
-    overrides = fam.get("members", {}) or {}
-    if not isinstance(overrides, dict):
-        pc.add(f"{path}.members", "expected a mapping element name -> {value, lower, upper, scale}")
-        overrides = {}
-    chosen_names = [n for n, _ in chosen]
-    for el_name, entry in overrides.items():
-        if el_name not in chosen_names:
-            pc.add(f"{path}.members.{el_name}", f"not a member of family {name!r}"
-                                                f"{did_you_mean(el_name, chosen_names)}")
-        else:
-            check_keys(entry, f"{path}.members.{el_name}", _MEMBER_KEYS, pc)
+    overrides = _member_overrides(fam.get("members", {}) or {}, name, [n for n, _ in chosen], path, pc)
     symbol = re.compile(rf"(?<![\w\]]){re.escape(name)}(?![\w\[])")
     dim = model.get("dim", 2) if isinstance(model, dict) else 2
     misfits: dict[str, list[tuple[str, str]]] = {}     # assign key -> (member, why) it cannot be set
@@ -232,27 +215,71 @@ def _expand(fam: Any, path: str, model: Any, taken: set, assigned: Assigned,
             target = _target(el, key, kind, dim, ep)
             if isinstance(target, str):
                 misfits.setdefault(key, []).append((member, target))
-                continue
-            where_set, sub = target
-            old = where_set.get(sub)      # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
-            if sub in where_set and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
-                pc.add(f"{ep}.{key}", f"expected a number or an expression (a placeholder that "
-                                      f"{path}.assign replaces), found {old!r}")
-            where_set[sub] = symbol.sub(member, text)
-            assigned[f"{ep}.{key}"] = (f"{path}.assign.{key}", member)
-        var = {"name": member, **shared}
-        entry = overrides.get(el_name)
-        where = path
-        if isinstance(entry, dict):
-            where = f"{path}.members.{el_name}"
-            var.update(_numbers(entry, _MEMBER_KEYS, where, pc) or {})   # a problem: reported, shared kept
-        out.append(_checked(var, where, pc))
-    for key, misses in misfits.items():       # one problem per assign key, not one per member
+            else:
+                _assign_key(target, symbol.sub(member, text), f"{ep}.{key}", path, pc)
+                assigned[f"{ep}.{key}"] = (f"{path}.assign.{key}", member)
+        out.append(_member_variable(member, shared, overrides.get(el_name), f"{path}.members.{el_name}", path, pc))
+    _report_misfits(misfits, path, pc)
+    return out
+
+
+def _family_name(name: Any, path: str, taken: set, pc: ProblemCollector) -> str | None:
+    """The family's name, now taken; None when it cannot be one (reported)."""
+    if not isinstance(name, str) or not _IDENT.match(name):
+        pc.add(f"{path}.name", f"expected an identifier (letters, digits, _), found {name!r}")
+        return None
+    if name in RESERVED_NAMES:      # its expressions would read the constant or function
+        pc.add(f"{path}.name", reserved_message(name))
+        return None
+    if name in taken:
+        pc.add(f"{path}.name", f"{name!r} is already a design variable or family")
+    taken.add(name)
+    return name
+
+
+def _member_overrides(overrides: Any, name: str, chosen_names: list[str], path: str,
+                      pc: ProblemCollector) -> dict:
+    """``members``: element name -> its own value, bounds or scale; each must name a member."""
+    if not isinstance(overrides, dict):
+        pc.add(f"{path}.members", "expected a mapping element name -> {value, lower, upper, scale}")
+        return {}
+    for el_name, entry in overrides.items():
+        if el_name not in chosen_names:
+            pc.add(f"{path}.members.{el_name}", f"not a member of family {name!r}"
+                                                f"{did_you_mean(el_name, chosen_names)}")
+        else:
+            check_keys(entry, f"{path}.members.{el_name}", _MEMBER_KEYS, pc)
+    return overrides
+
+
+def _assign_key(target: tuple[dict, str], text: str, key_path: str, path: str, pc: ProblemCollector) -> None:
+    """Writes the member's expression ``text`` into its element's key (``key_path``)."""
+    where_set, sub = target
+    old = where_set.get(sub)      # a placeholder (the tower's 'area: 1.0'): replaced, yet of the key's kind
+    if sub in where_set and (isinstance(old, bool) or not isinstance(old, (str, int, float))):
+        pc.add(key_path, f"expected a number or an expression (a placeholder that "
+                         f"{path}.assign replaces), found {old!r}")
+    where_set[sub] = text
+
+
+def _member_variable(member: str, shared: dict, entry: Any, entry_path: str, path: str,
+                     pc: ProblemCollector) -> dict:
+    """The member's design variable: the family's numbers, with the member's own where given."""
+    var = {"name": member, **shared}
+    where = path
+    if isinstance(entry, dict):
+        where = entry_path
+        var.update(_numbers(entry, _MEMBER_KEYS, where, pc) or {})   # a problem: reported, shared kept
+    return _checked(var, where, pc)
+
+
+def _report_misfits(misfits: dict[str, list[tuple[str, str]]], path: str, pc: ProblemCollector) -> None:
+    """One problem per assign key that some members cannot take, not one per member."""
+    for key, misses in misfits.items():
         more = [m for m, _ in misses[1:]]
         pc.add(f"{path}.assign.{key}", f"{misses[0][0]}: {misses[0][1]}"
                + (f"; also for {len(more)} more member{'s' if len(more) > 1 else ''} "
                   f"({', '.join(more[:5])}{', ...' if len(more) > 5 else ''})" if more else ""))
-    return out
 
 
 def _checked(var: dict, path: str, pc: ProblemCollector) -> dict:

@@ -273,6 +273,8 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
 
 def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
                 ) -> tuple[Newmark | None, RunPlan | None, str]:
+    """(scheme, run plan, event location) from the ``integrator``, ``sensitivity`` and ``output``
+    sections; the plan is None after a problem (reported to ``pc``)."""
     ok = check_keys(spec, "integrator", allowed("integrator"), pc, required=("dt", "t_end"))
     if sens is None:
         sens = {}
@@ -283,40 +285,78 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     if not ok:
         return None, None, "interpolate"
     # None: not given (the scheme's own value; a scheme refuses parameters it does not use)
-    beta = read_number(spec["beta"], "integrator.beta", pc) if "beta" in spec else None
-    gamma = read_number(spec["gamma"], "integrator.gamma", pc) if "gamma" in spec else None
+    beta, gamma = _optional_number(spec, "beta", pc), _optional_number(spec, "gamma", pc)
     # a missing dt / t_end is already reported by check_keys
-    dt = read_number(spec["dt"], "integrator.dt", pc, positive=True) if "dt" in spec else None
+    dt = _optional_number(spec, "dt", pc, positive=True)
     t0 = read_number(spec.get("t0", 0.0), "integrator.t0", pc)
-    t_end = read_number(spec["t_end"], "integrator.t_end", pc) if "t_end" in spec else None
-    scheme = None
-    scheme_name = spec.get("scheme", "newmark")
-    if scheme_name not in SCHEMES:
-        pc.add("integrator.scheme", f"unknown scheme {scheme_name!r}{did_you_mean(scheme_name, SCHEMES)} "
-                                    f"(known: {', '.join(SCHEMES)})")
-    elif (beta is not None or "beta" not in spec) and (gamma is not None or "gamma" not in spec):
-        try:
-            alpha = read_number(spec["alpha"], "integrator.alpha", pc) if "alpha" in spec else None
-            rho = read_number(spec["rho_inf"], "integrator.rho_inf", pc) if "rho_inf" in spec else None
-            scheme = make_scheme(str(scheme_name), beta, gamma, alpha=alpha, rho_inf=rho)
-        except ValueError as exc:
-            pc.add("integrator", str(exc))
-    solver = spec.get("solver", {}) or {}
-    newton = NewtonSettings()
-    if check_keys(solver, "integrator.solver", allowed("integrator.solver"), pc):
-        rtol = read_number(solver.get("rtol", newton.rtol), "integrator.solver.rtol", pc, positive=True)
-        atol = read_number(solver.get("atol", newton.atol), "integrator.solver.atol", pc, nonnegative=True)
-        mi = solver.get("max_iterations", newton.max_iterations)
-        if isinstance(mi, bool) or not isinstance(mi, int) or mi < 1:   # YAML true is no count
-            pc.add("integrator.solver.max_iterations", f"expected a positive integer, found {mi!r}")
-            mi = newton.max_iterations
-        if rtol is not None and atol is not None:
-            newton = NewtonSettings(rtol, atol, mi)
+    t_end = _optional_number(spec, "t_end", pc)
+    scheme = _scheme(spec, beta, gamma, pc)
+    newton = _newton(spec.get("solver", {}) or {}, pc)
     if t0 is not None and t_end is not None and t_end <= t0:
         pc.add("integrator.t_end", f"must be greater than t0 = {t0}, found {t_end}")
     elif t0 is not None and t_end is not None and dt is not None and dt > t_end - t0:
         pc.add("integrator.dt", f"expected at most t_end - t0 = {t_end - t0:g} s (a run of at least one full "
                                 f"step), found {dt:g} s")
+    sensitivity = _sensitivity_plan(sens, pc)
+    history = _history_plan(output, pc)
+    cuts = spec.get("max_step_cuts", 6)
+    if isinstance(cuts, bool) or not isinstance(cuts, int) or not 0 <= cuts <= 30:
+        pc.add("integrator.max_step_cuts", f"expected an integer in [0, 30], found {cuts!r}")
+        cuts = 6
+    loc = spec.get("event_location", "interpolate")
+    if loc not in ("interpolate", "step"):
+        pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
+    derivative = derivative_settings(sens, pc)
+    adaptive = adaptive_settings(spec.get("adaptive"), dt, t0, t_end, scheme, pc)
+    if None in (dt, t0, t_end) or pc.problems:
+        return scheme, None, str(loc)
+    assert t0 is not None and t_end is not None and dt is not None  # checked above
+    plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, max_step_cuts=cuts, adaptive=adaptive,
+                   **sensitivity, **history, **derivative)
+    return scheme, plan, str(loc)
+
+
+def _optional_number(spec: dict, key: str, pc: ProblemCollector, *, positive: bool = False) -> float | None:
+    """``integrator.KEY`` read as a number, or None when it is not given (or not one: reported)."""
+    return read_number(spec[key], f"integrator.{key}", pc, positive=positive) if key in spec else None
+
+
+def _scheme(spec: dict, beta: float | None, gamma: float | None, pc: ProblemCollector) -> Newmark | None:
+    """The time-integration scheme ``integrator.scheme`` with its parameters, or None after a problem."""
+    scheme_name = spec.get("scheme", "newmark")
+    if scheme_name not in SCHEMES:
+        pc.add("integrator.scheme", f"unknown scheme {scheme_name!r}{did_you_mean(scheme_name, SCHEMES)} "
+                                    f"(known: {', '.join(SCHEMES)})")
+        return None
+    if (beta is None and "beta" in spec) or (gamma is None and "gamma" in spec):
+        return None                                     # an unreadable beta or gamma: already reported
+    try:
+        alpha = _optional_number(spec, "alpha", pc)
+        rho = _optional_number(spec, "rho_inf", pc)
+        return make_scheme(str(scheme_name), beta, gamma, alpha=alpha, rho_inf=rho)
+    except ValueError as exc:
+        pc.add("integrator", str(exc))
+        return None
+
+
+def _newton(solver: Any, pc: ProblemCollector) -> NewtonSettings:
+    """The Newton–Raphson tolerances ``integrator.solver`` (the defaults after a problem)."""
+    newton = NewtonSettings()
+    if not check_keys(solver, "integrator.solver", allowed("integrator.solver"), pc):
+        return newton
+    rtol = read_number(solver.get("rtol", newton.rtol), "integrator.solver.rtol", pc, positive=True)
+    atol = read_number(solver.get("atol", newton.atol), "integrator.solver.atol", pc, nonnegative=True)
+    mi = solver.get("max_iterations", newton.max_iterations)
+    if isinstance(mi, bool) or not isinstance(mi, int) or mi < 1:   # YAML true is no count
+        pc.add("integrator.solver.max_iterations", f"expected a positive integer, found {mi!r}")
+        mi = newton.max_iterations
+    if rtol is not None and atol is not None:
+        newton = NewtonSettings(rtol, atol, mi)
+    return newton
+
+
+def _sensitivity_plan(sens: dict, pc: ProblemCollector) -> dict[str, Any]:
+    """The run plan's fields from the ``sensitivity`` section: whether, and how the partials are made."""
     enabled = sens.get("enabled", True)
     if not isinstance(enabled, bool):
         pc.add("sensitivity.enabled", f"expected true or false, found {enabled!r}")
@@ -330,6 +370,12 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     matrix = sens.get("matrix", "reuse")
     if matrix not in ("converged", "reuse"):
         pc.add("sensitivity.matrix", f"expected converged or reuse, found {matrix!r}")
+    return dict(sensitivities=bool(enabled), partials=str(partials), partials_step=step,
+                sensitivity_matrix=str(matrix))
+
+
+def _history_plan(output: dict, pc: ProblemCollector) -> dict[str, Any]:
+    """The run plan's fields from the ``output`` section: the state and sensitivity histories kept."""
     hist = output.get("history", ["q", "qd", "qdd"])
     if hist in (None, "none", False):
         hist = []
@@ -341,20 +387,4 @@ def _integrator(spec: Any, sens: Any, output: Any, pc: ProblemCollector
     sh = output.get("sensitivity_history", False)
     if not isinstance(sh, bool):
         pc.add("output.sensitivity_history", f"expected true or false, found {sh!r}")
-    cuts = spec.get("max_step_cuts", 6)
-    if isinstance(cuts, bool) or not isinstance(cuts, int) or not 0 <= cuts <= 30:
-        pc.add("integrator.max_step_cuts", f"expected an integer in [0, 30], found {cuts!r}")
-        cuts = 6
-    loc = spec.get("event_location", "interpolate")
-    if loc not in ("interpolate", "step"):
-        pc.add("integrator.event_location", f"expected interpolate or step, found {loc!r}")
-    derivative = derivative_settings(sens, pc)
-    adaptive = adaptive_settings(spec.get("adaptive"), dt, t0, t_end, scheme, pc)
-    if None in (dt, t0, t_end) or pc.problems:
-        return scheme, None, str(loc)
-    assert t0 is not None and t_end is not None and dt is not None  # checked above
-    plan = RunPlan(t0=t0, t_end=t_end, dt=dt, newton=newton, sensitivities=bool(enabled),
-                   partials=str(partials), partials_step=step, sensitivity_matrix=str(matrix),
-                   history=tuple(hist), sensitivity_history=bool(sh), max_step_cuts=cuts,
-                   adaptive=adaptive, **derivative)
-    return scheme, plan, str(loc)
+    return dict(history=tuple(hist), sensitivity_history=bool(sh))

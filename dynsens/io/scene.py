@@ -26,7 +26,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import h5py
 import numpy as np
@@ -235,68 +235,102 @@ def _members(model: Any, case: Any, raw: dict, state: dict[str, np.ndarray], par
 
 # ------------------------------------------------------------------ mechanisms
 def _mechanism(model: Any, state: dict[str, np.ndarray], params: Any, time: np.ndarray) -> list[Part]:
-    from ..models.multibody.bodies import GROUND, Ctx, Point
-    from ..models.multibody.spec import Reader
-    n = len(time)
-    q = np.real(state["q"])
-    qd = np.real(state.get("qd", np.zeros_like(q)))
+    """The bodies (markers joined to the centre of mass), the joints (with their reaction forces
+    when the multipliers were stored), the cylinders and the springs of a mechanism."""
+    motion = _Motion(state, params, len(time))
+    series = lambda spec: _series(model, spec, time, motion.states, params)
+    parts = [_bodies(model, motion)]
+    joints = _joints(model, motion, "lam" in state, series)
+    if joints is not None:
+        parts.append(joints)
+    # a cylinder's force reads its pressures: without them, its stroke only
+    cylinder_kinds = ("stroke", "force", "pressure_1", "pressure_2") if "p" in state else ("stroke",)
+    for label, elements, kinds in (("cylinders", model.cylinders, cylinder_kinds),
+                                   ("springs", model.springs, ("length", "force"))):
+        if elements:
+            parts.append(_axial(label, elements, kinds, motion, series))
+    return parts
 
-    def track(pt: Any) -> np.ndarray:
+
+class _Motion:
+    """The stored motion of a mechanism: its points' tracks over all instants."""
+
+    def __init__(self, state: dict[str, np.ndarray], params: Any, n: int):
+        self.n = n
+        self.q = np.real(state["q"])
+        self.qd = np.real(state.get("qd", np.zeros_like(self.q)))
+        self.params = params
+        self.states = _states(state, n)
+
+    def track(self, pt: Any) -> np.ndarray:
         """(N, 3) positions of a point fixed in a body, all instants in one batched evaluation (the
         columns of the context are the instants; a fresh context, as its cache is keyed by id)."""
-        ctx = Ctx(q.T, qd.T, np.zeros_like(q.T), params, 0.0)
-        return np.real(np.broadcast_to(pt.kin(ctx)[0], (3, n)).T)
+        from ..models.multibody.bodies import Ctx
+        ctx = Ctx(self.q.T, self.qd.T, np.zeros_like(self.q.T), self.params, 0.0)
+        return np.real(np.broadcast_to(pt.kin(ctx)[0], (3, self.n)).T)
 
-    def com(b: int) -> np.ndarray:
-        return q[:, 7 * b:7 * b + 3]
+    def com(self, b: int) -> np.ndarray:
+        """(N, 3) positions of body b's centre of mass."""
+        return self.q[:, 7 * b:7 * b + 3]
 
-    states = _states(state, n)
+
+def _bodies(model: Any, motion: _Motion) -> Part:
+    """Each body as lines from its centre of mass to its markers (a vertex when it has none);
+    the ground's markers as vertices; cell data ``body`` (the body's index, -1 the ground)."""
+    from ..models.multibody.bodies import GROUND, Point
+    from ..models.multibody.spec import Reader
     pts: list[np.ndarray] = []
     lines: list[tuple[int, int]] = []
     vertices: list[int] = []
     cell_names: list[str] = []
     for body in model.bodies:
         c = len(pts)
-        pts.append(com(body.index))
+        pts.append(motion.com(body.index))
         for m in body.markers:
             lines.append((c, len(pts)))
             cell_names.append(f"{body.name}.{m}")
-            pts.append(track(Point(body.index, Reader.marker_key(body, m))))
+            pts.append(motion.track(Point(body.index, Reader.marker_key(body, m))))
         if not body.markers:
             vertices.append(c)
     for m in model.ground.markers:
         vertices.append(len(pts))
-        pts.append(track(Point(GROUND, Reader.marker_key(model.ground, m))))
+        pts.append(motion.track(Point(GROUND, Reader.marker_key(model.ground, m))))
     cell_names += [f"{b.name}" for b in model.bodies if not b.markers] + [f"ground.{m}" for m in model.ground.markers]
     # which body each cell draws (0, 1, ... in the case's order; -1 the ground), to colour by
     body_of = [b.index for b in model.bodies for _ in b.markers] + \
         [b.index for b in model.bodies if not b.markers] + [-1] * len(model.ground.markers)
-    parts = [Part("bodies", _stack(pts, n), np.array(lines, dtype=int).reshape(-1, 2),
-                  np.array(vertices, dtype=int), cell_names=cell_names,
-                  cell_data={"body": np.broadcast_to(np.array(body_of, dtype=float), (n, len(body_of)))})]
+    n = motion.n
+    return Part("bodies", _stack(pts, n), np.array(lines, dtype=int).reshape(-1, 2),
+                np.array(vertices, dtype=int), cell_names=cell_names,
+                cell_data={"body": np.broadcast_to(np.array(body_of, dtype=float), (n, len(body_of)))})
+
+
+def _joints(model: Any, motion: _Motion, with_reactions: bool, series: Callable[[dict], np.ndarray]
+            ) -> Part | None:
+    """The joints (not the driving constraints) as vertices at their points, with their reaction
+    forces when ``with_reactions``; None for a mechanism without one."""
+    from ..models.multibody.bodies import GROUND
     joints = [jt for jt in model.joints if jt.kind != "driving"]
-    if joints:
-        where = [track(jt.point_2) if jt.point_2 is not None
-                 else com(jt.body_2 if jt.body_2 != GROUND else jt.body_1) for jt in joints]
-        part = Part("joints", _stack(where, n), np.zeros((0, 2), dtype=int), np.arange(len(joints)),
-                    cell_names=[jt.name for jt in joints])
-        if "lam" in state:
-            f = np.stack([_series(model, {"joint": jt.name, "kind": "reaction_force"}, time, states, params)
-                          for jt in joints], axis=1)
-            part.point_data = {"reaction_force": f, "reaction_force_norm": np.linalg.norm(f, axis=2)}
-        parts.append(part)
-    for label, elements, kinds in (("cylinders", model.cylinders, ("stroke", "force", "pressure_1", "pressure_2")),
-                                   ("springs", model.springs, ("length", "force"))):
-        if not elements:
-            continue
-        ends = [p for el in elements for p in (track(el.d.b), track(el.d.a))]
-        need_p = label == "cylinders" and "p" not in state     # a cylinder's force reads its pressures
-        data = {k: np.stack([_series(model, {"element": el.name, "kind": k}, time, states, params)[:, 0]
-                             for el in elements], axis=1)
-                for k in kinds if not (need_p and k != "stroke")}
-        parts.append(Part(label, _stack(ends, n), np.arange(2 * len(elements)).reshape(-1, 2),
-                          cell_data=data, cell_names=[el.name for el in elements]))
-    return parts
+    if not joints:
+        return None
+    where = [motion.track(jt.point_2) if jt.point_2 is not None
+             else motion.com(jt.body_2 if jt.body_2 != GROUND else jt.body_1) for jt in joints]
+    part = Part("joints", _stack(where, motion.n), np.zeros((0, 2), dtype=int), np.arange(len(joints)),
+                cell_names=[jt.name for jt in joints])
+    if with_reactions:
+        f = np.stack([series({"joint": jt.name, "kind": "reaction_force"}) for jt in joints], axis=1)
+        part.point_data = {"reaction_force": f, "reaction_force_norm": np.linalg.norm(f, axis=2)}
+    return part
+
+
+def _axial(label: str, elements: list, kinds: tuple[str, ...], motion: _Motion,
+           series: Callable[[dict], np.ndarray]) -> Part:
+    """Axial elements (cylinders, springs) as lines between their end points, with their
+    quantities ``kinds`` as cell data."""
+    ends = [p for el in elements for p in (motion.track(el.d.b), motion.track(el.d.a))]
+    data = {k: np.stack([series({"element": el.name, "kind": k})[:, 0] for el in elements], axis=1) for k in kinds}
+    return Part(label, _stack(ends, motion.n), np.arange(2 * len(elements)).reshape(-1, 2),
+                cell_data=data, cell_names=[el.name for el in elements])
 
 
 def _stack(points: list[np.ndarray], n: int) -> np.ndarray:

@@ -133,6 +133,15 @@ class ParameterTable:
         or breaks its range rule (> 0, >= 0, a vector not zero); empty when all hold."""
         x = np.real(np.asarray(x, dtype=complex if np.iscomplexobj(x) else float))
         env = dict(zip(self.design_names, x))
+        values, out, bad = self._evaluated(env)
+        out += self._derivative_problems(env, bad)
+        # the rules, each on the entries that have a value (an entry in ``bad`` is reported above)
+        for rule in (self._range_problems, self._nonzero_problems, self._definite_problems, self._wall_problems):
+            out += rule(values, bad, env)
+        return out
+
+    def _evaluated(self, env: dict[str, float]) -> tuple[Array, list[tuple[str, str]], set[int]]:
+        """(the entries' values at ``env``, (path, problem) of those with none, their indices)."""
         values = np.array(self._constants, dtype=float)
         out: list[tuple[str, str]] = []
         bad: set[int] = set()
@@ -150,6 +159,11 @@ class ParameterTable:
                 bad.add(i)
             else:
                 values[i] = result
+        return values, out, bad
+
+    def _derivative_problems(self, env: dict[str, float], bad: set[int]) -> list[tuple[str, str]]:
+        """(path, problem) of each expression with no finite derivative at ``env``; adds it to ``bad``."""
+        out = []
         derivative: dict[str, str | None] = {}
         for i, expr in self._exprs:
             if expr.symbols and i not in bad:
@@ -159,6 +173,11 @@ class ParameterTable:
                 if why:
                     out.append((self._paths[i], why))
                     bad.add(i)
+        return out
+
+    def _range_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Entries that must be > 0 (``positive``) or >= 0 and are not."""
+        out = []
         exprs = dict(self._exprs)
         for i, rule, path in self._rules:
             v = values[i]
@@ -166,9 +185,17 @@ class ParameterTable:
                 where = "".join(f", {n} = {env[n]:.6g}" for n in sorted(exprs[i].symbols))
                 out.append((path, f"expected {'> 0' if rule == 'positive' else '>= 0'}, found {v:.6g} "
                                   f"(expression '{exprs[i].text}'{where})"))
-        for idx, path, what in self._nonzero:
-            if not bad.intersection(idx) and not np.any(values[list(idx)]):
-                out.append((path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}"))
+        return out
+
+    def _nonzero_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Vectors (an axis, a direction) that must not be zero and are."""
+        return [(path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}")
+                for idx, path, what in self._nonzero
+                if not bad.intersection(idx) and not np.any(values[list(idx)])]
+
+    def _definite_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Symmetric matrices (an inertia tensor) that must be positive definite and are not."""
+        out = []
         for matrix, path, what in self._definite:
             if not bad.intersection(i for row in matrix for i in row):
                 A = values[np.array(matrix)]
@@ -176,6 +203,11 @@ class ParameterTable:
                 if lowest <= 0:
                     out.append((path, f"expected a positive definite {what}, found {A.tolist()} "
                                       f"(lowest eigenvalue {lowest:.6g})"))
+        return out
+
+    def _wall_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Hollow sections whose wall is too thick for their outer widths (no hole left)."""
+        out = []
         for wall, widths, path in self._walls:
             if bad.intersection([wall, *widths.values()]):
                 continue

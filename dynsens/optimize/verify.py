@@ -266,35 +266,11 @@ def _check(term: Any, runs: dict[str, _Run], peak_type: bool, tail: float) -> Co
 
 def format_verification(v: Verification) -> str:
     """The verification as a table and plain sentences, for the terminal."""
-    names = [r.name for r in v.runs]
     head = {"case": "case", "refined": f"dt/{v.refine}", "horizon": "horizon", "tail": "no tail"}
     lines = ["verification runs: " + "; ".join(
         f"{head[r.name]}: dt = {r.dt:.4g} s, t_end = {r.t_end:.4g} s ({r.wall_time:.1f} s"
         + (", FAILED" if r.failed else "") + ")" for r in v.runs)]
-    width = max([len(c.label) for c in v.constraints] + [10])
-    lines.append(f"{'constraint':<{width}}  " + "  ".join(f"{head[n]:>12}" for n in names)
-                 + "  change  status")
-    lines.append("(case: the response as optimized; the other runs: its sampled peak, see the README; change: "
-                 "the largest change of the peak against the case's run, in % of the bound's scale)")
-    shown = v.constraints
-    if len(shown) > FULL_TABLE:
-        # a sizing case has one constraint per member group: show those that matter
-        order = sorted(shown, key=lambda c: min([g for g in c.margins.values() if np.isfinite(g)] or [np.inf]))
-        keep = {id(c) for c in shown if c.status != "ok"} | {id(c) for c in order[:5]}
-        shown = [c for c in shown if id(c) in keep]
-    for c in shown:
-        cells = []
-        for n in names:
-            val = c.values.get(n)
-            cells.append(f"{val:>12.6g}" if val is not None and np.isfinite(val) else f"{'-':>12}")
-        ref = c.case_peak
-        later = [c.values[n] for n in ("refined", "horizon") if n in c.values and np.isfinite(c.values[n])]
-        change = max((abs(w - ref) for w in later), default=0.0) / c.divisor if np.isfinite(ref) else 0.0
-        mark = c.status.upper() if c.status != "ok" else "ok"
-        lines.append(f"{c.label:<{width}}  " + "  ".join(cells) + f"  {100 * change:5.1f}%  {mark}"
-                     + (f" ({c.note})" if c.note else ""))
-    if len(shown) < len(v.constraints):
-        lines.append(f"({len(v.constraints) - len(shown)} more constraints hold in every run with larger margins)")
+    lines += _constraint_table(v, head)
     for run, m in v.members.items():
         member, kind, ratio = m.worst()
         lines.append(f"members ({head[run]}): largest ratio {ratio:.4f} ({member}, {kind}) over {m.steps} steps"
@@ -307,6 +283,43 @@ def format_verification(v: Verification) -> str:
                  "The design does NOT pass the verification: a constraint that holds only on the optimizer's "
                  "time grid and window is not a result (see docs/optimization.md).")
     return "\n".join(lines)
+
+
+def _constraint_table(v: Verification, head: dict[str, str]) -> list[str]:
+    """Lines of the table of the constraints' peaks per run (of a long one, those that matter)."""
+    names = [r.name for r in v.runs]
+    width = max([len(c.label) for c in v.constraints] + [10])
+    lines = [f"{'constraint':<{width}}  " + "  ".join(f"{head[n]:>12}" for n in names) + "  change  status",
+             "(case: the response as optimized; the other runs: its sampled peak, see the README; change: "
+             "the largest change of the peak against the case's run, in % of the bound's scale)"]
+    shown = _shown_constraints(v.constraints)
+    for c in shown:
+        cells = [f"{val:>12.6g}" if val is not None and np.isfinite(val) else f"{'-':>12}"
+                 for val in (c.values.get(n) for n in names)]
+        mark = c.status.upper() if c.status != "ok" else "ok"
+        lines.append(f"{c.label:<{width}}  " + "  ".join(cells) + f"  {100 * _peak_change(c):5.1f}%  {mark}"
+                     + (f" ({c.note})" if c.note else ""))
+    if len(shown) < len(v.constraints):
+        lines.append(f"({len(v.constraints) - len(shown)} more constraints hold in every run with larger margins)")
+    return lines
+
+
+def _shown_constraints(constraints: list[ConstraintCheck]) -> list[ConstraintCheck]:
+    """All constraints, or of more than FULL_TABLE (a sizing case has one per member group) those
+    that matter: the ones not ok and the five of the smallest margins."""
+    if len(constraints) <= FULL_TABLE:
+        return constraints
+    order = sorted(constraints, key=lambda c: min([g for g in c.margins.values() if np.isfinite(g)] or [np.inf]))
+    keep = {id(c) for c in constraints if c.status != "ok"} | {id(c) for c in order[:5]}
+    return [c for c in constraints if id(c) in keep]
+
+
+def _peak_change(c: ConstraintCheck) -> float:
+    """The largest change of the peak in the refined and horizon runs against the case's run,
+    as a fraction of the bound's scale (0 when the case has none)."""
+    ref = c.case_peak
+    later = [c.values[n] for n in ("refined", "horizon") if n in c.values and np.isfinite(c.values[n])]
+    return max((abs(w - ref) for w in later), default=0.0) / c.divisor if np.isfinite(ref) else 0.0
 
 
 def excesses(v: Verification, problem: ScaledProblem) -> dict[int, float]:

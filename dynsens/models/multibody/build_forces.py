@@ -3,7 +3,8 @@ torques and rotational spring-dampers, read into force elements (part of
 :func:`.build.build_multibody`; problems collected with their YAML paths)."""
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -24,6 +25,17 @@ def _point(rd: Reader, body: BodyDef, spec: Any, path: str, key: str) -> Point |
     return None if k is None else Point(body.index, k)
 
 
+@dataclass
+class _Elements:
+    """Where the force elements read go: ``forces`` (point forces, torques, rotational
+    spring-dampers), ``cylinders``, ``springs``; ``n_p`` pressures of the cylinders so far."""
+
+    forces: list
+    cylinders: list
+    springs: list
+    n_p: int = 0
+
+
 def read_forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list, springs: list) -> None:
     """Read the ``forces`` list ``spec`` at ``path``: point forces, torques and rotational
     spring-dampers are appended to ``forces``, hydraulic cylinders to ``cylinders``,
@@ -32,7 +44,7 @@ def read_forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list,
         rd.problems.add(path, "expected a list of force elements")
         return
     names: set[str] = set()
-    n_p = 0
+    out = _Elements(forces, cylinders, springs)
     for i, f in enumerate(spec):
         fp = f"{path}[{i}]"
         if not isinstance(f, dict) or f.get("type") not in FORCE_KEYS:
@@ -46,65 +58,97 @@ def read_forces(rd: Reader, spec: Any, path: str, forces: list, cylinders: list,
             rd.problems.add(f"{fp}.name", f"duplicate force name '{name}'")
         names.add(name)
         check_keys(f, fp, FORCE_KEYS[kind], rd.problems)
-        if kind in ("point_force", "torque"):
-            body = rd.body(f.get("body"), f"{fp}.body")
-            frame = f.get("frame", "global")
-            if frame not in ("global", "body"):
-                rd.problems.add(f"{fp}.frame", f"expected 'global' or 'body', found {frame!r}")
-            fn = build_time_function(f.get("function"), f"{fp}.function", rd.table, rd.problems)
-            vkey = "force" if kind == "point_force" else "torque"
-            if vkey not in f:
-                rd.problems.add(f"{fp}.{vkey}", "missing ([x, y, z])")
-            idx = rd.vec3(f.get(vkey), f"{fp}.{vkey}", [0.0, 0.0, 0.0])
-            if body is None or fn is None:
-                continue
-            if body.point_mass and (kind == "torque" or frame == "body"):
-                rd.problems.add(f"{fp}.{'type' if kind == 'torque' else 'frame'}",
-                                f"'{body.name}' is a point mass, which has no orientation and carries no "
-                                "moment: apply a force in global axes at its position")
-                continue
-            if kind == "point_force":
-                pt = _point(rd, body, f.get("point"), f"{fp}.point", f"f:{name}.point")
-                if pt is not None:
-                    forces.append(PointForce(name, pt, idx, frame, fn))  # type: ignore[arg-type]
-            else:
-                forces.append(Torque(name, body.index, idx, frame, fn))  # type: ignore[arg-type]
-            continue
-        b1, b2 = rd.body(f.get("body_1"), f"{fp}.body_1"), rd.body(f.get("body_2"), f"{fp}.body_2")
-        if b1 is None or b2 is None:
-            continue
-        if kind == "rotational_spring_damper":
-            if b1.point_mass or b2.point_mass:
-                rd.problems.add(f"{fp}.body_{1 if b1.point_mass else 2}", "a point mass has no orientation: "
-                                                                          "a rotational spring cannot act on it")
-                continue
-            rot = _rotational(rd, f, fp, name, b1, b2)
-            if rot is not None:
-                forces.append(rot)
-            continue
-        P1 = _point(rd, b1, f.get("point_1"), f"{fp}.point_1", f"f:{name}.p1")
-        P2 = _point(rd, b2, f.get("point_2"), f"{fp}.point_2", f"f:{name}.p2")
-        if P1 is None or P2 is None:
-            continue
-        d = Diff(P2, P1)
-        if kind == "spring_damper":
-            free = f.get("free_length")
-            key = f"{name}.L0"
-            if free is None or free == "initial":
-                g1 = rd.global_point_recipe(b1, P1.key)
-                g2 = rd.global_point_recipe(b2, P2.key)
-                rd.scal.append((key, lambda prm, _a=g1, _b=g2: np.sqrt(np.sum((_b(prm) - _a(prm)) ** 2))))
-            else:
-                il = rd.num(free, f"{fp}.free_length", positive=True)
-                rd.scal.append((key, lambda prm, _i=il: prm.pv[_i]))
-            springs.append(SpringDamper(name, d, rd.num(f.get("stiffness", 0.0), f"{fp}.stiffness"),
-                                        rd.num(f.get("cubic_stiffness", 0.0), f"{fp}.cubic_stiffness"),
-                                        rd.num(f.get("damping", 0.0), f"{fp}.damping"), key))
-            continue
-        cyl = _cylinder(rd, f, fp, name, d, n_p)
-        if cyl is not None:
-            cylinders.append(cyl)
-            n_p += 2
+        _READERS[kind](rd, f, fp, name, kind, out)
+
+
+def _applied(rd: Reader, f: dict, fp: str, name: str, kind: str, out: _Elements) -> None:
+    """A ``point_force`` or a ``torque``: a vector times a time function, in global or body axes."""
+    body = rd.body(f.get("body"), f"{fp}.body")
+    frame = f.get("frame", "global")
+    if frame not in ("global", "body"):
+        rd.problems.add(f"{fp}.frame", f"expected 'global' or 'body', found {frame!r}")
+    fn = build_time_function(f.get("function"), f"{fp}.function", rd.table, rd.problems)
+    vkey = "force" if kind == "point_force" else "torque"
+    if vkey not in f:
+        rd.problems.add(f"{fp}.{vkey}", "missing ([x, y, z])")
+    idx = rd.vec3(f.get(vkey), f"{fp}.{vkey}", [0.0, 0.0, 0.0])
+    if body is None or fn is None:
+        return
+    if body.point_mass and (kind == "torque" or frame == "body"):
+        rd.problems.add(f"{fp}.{'type' if kind == 'torque' else 'frame'}",
+                        f"'{body.name}' is a point mass, which has no orientation and carries no "
+                        "moment: apply a force in global axes at its position")
+        return
+    if kind == "point_force":
+        pt = _point(rd, body, f.get("point"), f"{fp}.point", f"f:{name}.point")
+        if pt is not None:
+            out.forces.append(PointForce(name, pt, idx, frame, fn))  # type: ignore[arg-type]
+    else:
+        out.forces.append(Torque(name, body.index, idx, frame, fn))  # type: ignore[arg-type]
+
+
+def _two_bodies(rd: Reader, f: dict, fp: str) -> tuple[BodyDef, BodyDef] | None:
+    """The bodies ``body_1`` and ``body_2`` an element connects (None after a problem)."""
+    b1, b2 = rd.body(f.get("body_1"), f"{fp}.body_1"), rd.body(f.get("body_2"), f"{fp}.body_2")
+    return None if b1 is None or b2 is None else (b1, b2)
+
+
+def _attachments(rd: Reader, f: dict, fp: str, name: str) -> tuple[BodyDef, Point, BodyDef, Point] | None:
+    """The bodies an axial element connects and its points on them, ``point_1`` and ``point_2``."""
+    bodies = _two_bodies(rd, f, fp)
+    if bodies is None:
+        return None
+    b1, b2 = bodies
+    P1 = _point(rd, b1, f.get("point_1"), f"{fp}.point_1", f"f:{name}.p1")
+    P2 = _point(rd, b2, f.get("point_2"), f"{fp}.point_2", f"f:{name}.p2")
+    return None if P1 is None or P2 is None else (b1, P1, b2, P2)
+
+
+def _rotational_element(rd: Reader, f: dict, fp: str, name: str, kind: str, out: _Elements) -> None:
+    """A ``rotational_spring_damper`` between two rigid bodies."""
+    bodies = _two_bodies(rd, f, fp)
+    if bodies is None:
+        return
+    b1, b2 = bodies
+    if b1.point_mass or b2.point_mass:
+        rd.problems.add(f"{fp}.body_{1 if b1.point_mass else 2}", "a point mass has no orientation: "
+                                                                  "a rotational spring cannot act on it")
+        return
+    rot = _rotational(rd, f, fp, name, b1, b2)
+    if rot is not None:
+        out.forces.append(rot)
+
+
+def _spring(rd: Reader, f: dict, fp: str, name: str, kind: str, out: _Elements) -> None:
+    """A ``spring_damper`` between two points; its free length given or that of the initial pose."""
+    ends = _attachments(rd, f, fp, name)
+    if ends is None:
+        return
+    b1, P1, b2, P2 = ends
+    free = f.get("free_length")
+    key = f"{name}.L0"
+    if free is None or free == "initial":
+        g1 = rd.global_point_recipe(b1, P1.key)
+        g2 = rd.global_point_recipe(b2, P2.key)
+        rd.scal.append((key, lambda prm, _a=g1, _b=g2: np.sqrt(np.sum((_b(prm) - _a(prm)) ** 2))))
+    else:
+        il = rd.num(free, f"{fp}.free_length", positive=True)
+        rd.scal.append((key, lambda prm, _i=il: prm.pv[_i]))
+    out.springs.append(SpringDamper(name, Diff(P2, P1), rd.num(f.get("stiffness", 0.0), f"{fp}.stiffness"),
+                                    rd.num(f.get("cubic_stiffness", 0.0), f"{fp}.cubic_stiffness"),
+                                    rd.num(f.get("damping", 0.0), f"{fp}.damping"), key))
+
+
+def _cylinder_element(rd: Reader, f: dict, fp: str, name: str, kind: str, out: _Elements) -> None:
+    """A ``hydraulic_cylinder`` between two points, with its two chamber pressures as states."""
+    ends = _attachments(rd, f, fp, name)
+    if ends is None:
+        return
+    _, P1, _, P2 = ends
+    cyl = _cylinder(rd, f, fp, name, Diff(P2, P1), out.n_p)
+    if cyl is not None:
+        out.cylinders.append(cyl)
+        out.n_p += 2
 
 
 def _rotational(rd: Reader, f: dict, fp: str, name: str, b1: BodyDef, b2: BodyDef
@@ -164,3 +208,9 @@ def _cylinder(rd: Reader, f: dict, fp: str, name: str, d: Diff, p_index: int) ->
     if pump is None:
         return None
     return HydraulicCylinder(name, d, idx, pump, p_index, initial, p2)
+
+
+# one reader per force type (FORCE_TYPES), all called alike
+_READERS: dict[str, Callable[[Reader, dict, str, str, str, _Elements], None]] = {
+    "point_force": _applied, "torque": _applied, "spring_damper": _spring,
+    "rotational_spring_damper": _rotational_element, "hydraulic_cylinder": _cylinder_element}

@@ -226,34 +226,10 @@ def inertia_blocks(Lp: Array, b: int, Jb: Array, TG: Array) -> tuple[Array, Arra
     return Kpp, Cpp, Mpp
 
 
-@jit
-def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point: Array,
-                  Ts4: Array, side_ptr: Array, side_prim: Array, side_coef: Array, n_cp: int,
-                  prod_eq: Array, cf: Array, eq_w: Array, norm_w: Array, norm_eq: Array,
-                  norm_body: Array, scale: float, w: Array, f: Array, lam: Array, mass: Array,
-                  J: Array, TG: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array,
-                  p_owner: Array, h_L: Array, h_Ld: Array, h_p: Array, rot_prod: Array,
-                  rot_law: Array) -> tuple[Array, Array, Array, Array]:
-    """Exact ∂F_R/∂(z, q, q̇, p): (R_z (n_z, n_z), R_q (n_z, n_q), R_qd (n_z, n_q), R_p (n_z, n_p)).
-
-    Axial elements i act through product ax_prod[i] with ax_law[i] = (L, L̇, P, P_L, P_L̇),
-    ax_Pp[i, :] = ∂P/∂p; pressure row r belongs to element p_owner[r] with ∂h_r/∂L = h_L[r],
-    ∂h_r/∂L̇ = h_Ld[r] and ∂h/∂p = h_p (n_p, n_p).  Rotational spring-damper i acts through
-    products rot_prod[i], rot_prod[i] + 1 with its law rot_law[i] (:func:`.rotational.rotational_law`).
-    """
-    n_b = Lp.shape[1]
-    n_q = 7 * n_b
-    n_lam = lam.shape[0]
-    n_p = h_L.shape[0]
-    n_z = n_q + n_lam + n_p
-    n_prod = ABV.shape[1]
-    # --- constraint rows: J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows
-    rows = np.zeros((3, n_lam, n_q), Lp.dtype)
-    constraint_rows(rows, G, Lp, cf, eq_w, norm_w, prod_eq, norm_eq, norm_body, n_cp)
-    # --- R1_q: geometric stiffness Σ_p w_p ∂²x_p/∂q² (sides' value Jacobians are per body)
-    R1_q = np.zeros((n_q, n_q), Lp.dtype)
-    R1_qd = np.zeros((n_q, n_q), Lp.dtype)
-    R1_qdd = np.zeros((n_q, n_q), Lp.dtype)
+@inline
+def _geometric_stiffness(R1_q: Array, w: Array, n_prod: int, C: Array, is_point: Array, pb: Array,
+                         side_ptr: Array, side_prim: Array, side_coef: Array) -> None:
+    """R1_q += Σ_p w_p ∂²x_p/∂q² over the n_prod products (the sides' value Jacobians are per body)."""
     for p in range(n_prod):
         wp = w[p]
         if wp == 0.0:
@@ -272,7 +248,13 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                     for v in range(7):
                         R1_q[ba + u, bb + v] += c * blk[u, v]
                         R1_q[bb + v, ba + u] += c * blk[u, v]
-    for j in range(pb.shape[0]):                       # ∂²(A s̄)/∂p² · f: 2 Σ_a f_a Ts4[a]
+
+
+@inline
+def _parameter_curvature(R1_q: Array, f: Array, Ts4: Array, pb: Array, lam: Array, norm_eq: Array,
+                         norm_body: Array) -> None:
+    """R1_q += ∂²(A s̄)/∂p² · f (2 Σ_a f_a Ts4[a]) and the Euler-parameter normalisations' 2λ I."""
+    for j in range(pb.shape[0]):
         o = 7 * pb[j] + 3
         for a in range(3):
             fa = f[j, a]
@@ -284,8 +266,12 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
         o = 7 * norm_body[i] + 3
         for k in range(4):
             R1_q[o + k, o + k] += 2.0 * lam[norm_eq[i]]
-    # --- inertia: ∂(M q̈ − Q_v)/∂(q, q̇, q̈), block diagonal per body
-    for b in range(n_b):
+
+
+@inline
+def _inertia(R1_q: Array, R1_qd: Array, R1_qdd: Array, Lp: Array, mass: Array, J: Array, TG: Array) -> None:
+    """∂(M q̈ − Q_v)/∂(q, q̇, q̈), block diagonal per body."""
+    for b in range(Lp.shape[1]):
         Kpp, Cpp, Mpp = inertia_blocks(Lp, b, J[b], TG)
         o = 7 * b
         for a in range(3):
@@ -295,14 +281,16 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 R1_q[o + 3 + k, o + 3 + l] += Kpp[k, l]
                 R1_qd[o + 3 + k, o + 3 + l] += Cpp[k, l]
                 R1_qdd[o + 3 + k, o + 3 + l] += Mpp[k, l]
-    # --- axial force elements: x = d·d, L = √x, L̇ = ẋ/(2L), generalized force ½ P/L ∂x/∂q
-    R1_p = np.zeros((n_q, n_p), Lp.dtype)
-    R3_q = np.zeros((n_p, n_q), Lp.dtype)
-    R3_qd = np.zeros((n_p, n_q), Lp.dtype)
-    n_ax = ax_prod.shape[0]
-    dL = np.empty((n_ax, n_q), Lp.dtype)
-    dLd = np.empty((n_ax, n_q), Lp.dtype)
-    for i in range(n_ax):
+
+
+@inline
+def _axial(R1_q: Array, R1_qd: Array, R1_p: Array, dL: Array, dLd: Array, G: Array, ax_prod: Array,
+           ax_law: Array, ax_Pp: Array) -> None:
+    """Axial force elements: x = d·d, L = √x, L̇ = ẋ/(2L), generalized force ½ P/L ∂x/∂q; their
+    ∂L/∂q, ∂L̇/∂q into dL, dLd."""
+    n_q = R1_q.shape[0]
+    n_p = R1_p.shape[1]
+    for i in range(ax_prod.shape[0]):
         jx = G[ax_prod[i], 0]
         dx = G[ax_prod[i], 1]
         L, Ld, P, P_L, P_Ld = ax_law[i, 0], ax_law[i, 1], ax_law[i, 2], ax_law[i, 3], ax_law[i, 4]
@@ -315,14 +303,26 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                     R1_qd[u, v] += jx[u] * (w_Ld * dL[i, v])
                 for k in range(n_p):
                     R1_p[u, k] += -0.5 * ax_Pp[i, k] / L * jx[u]
-    for r in range(n_p):
+
+
+@inline
+def pressure_rows(R3_q: Array, R3_qd: Array, dL: Array, dLd: Array, p_owner: Array, h_L: Array,
+                  h_Ld: Array) -> None:
+    """∂R3/∂q, ∂R3/∂q̇ of the pressure rows from their owner elements' ∂L/∂q, ∂L̇/∂q (dL, dLd);
+    the columns those of dL (all coordinates, or the owner's bodies in the sparse form)."""
+    for r in range(h_L.shape[0]):
         i = p_owner[r]
         if i >= 0:
-            for n in range(n_q):
+            for n in range(R3_q.shape[1]):
                 R3_q[r, n] -= h_L[r] * dL[i, n] + h_Ld[r] * dLd[i, n]
                 R3_qd[r, n] -= h_Ld[r] * dL[i, n]
-    # --- rotational spring-dampers: weights w_x, w_y of x = u1·u2, y = v1·u2 (their second
-    # derivatives are in the geometric stiffness above)
+
+
+@inline
+def _rotational(R1_q: Array, R1_qd: Array, G: Array, rot_prod: Array, rot_law: Array) -> None:
+    """Rotational spring-dampers: weights w_x, w_y of x = u1·u2, y = v1·u2 (their second
+    derivatives are in the geometric stiffness)."""
+    n_q = R1_q.shape[0]
     for i in range(rot_prod.shape[0]):
         px = rot_prod[i]
         jx, jy = G[px, 0], G[px + 1, 0]
@@ -332,11 +332,60 @@ def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point
                 for v in range(n_q):
                     R1_q[u, v] += jx[u] * rx[v] + jy[u] * ry[v]
                     R1_qd[u, v] += jx[u] * rxd[v] + jy[u] * ryd[v]
-    # --- assemble
-    R_z = np.zeros((n_z, n_z), Lp.dtype)
-    R_q = np.zeros((n_z, n_q), Lp.dtype)
-    R_qd = np.zeros((n_z, n_q), Lp.dtype)
-    R_p = np.zeros((n_z, n_p), Lp.dtype)
+
+
+@jit
+def linearization(Lp: Array, C: Array, ABV: Array, G: Array, pb: Array, is_point: Array,
+                  Ts4: Array, side_ptr: Array, side_prim: Array, side_coef: Array, n_cp: int,
+                  prod_eq: Array, cf: Array, eq_w: Array, norm_w: Array, norm_eq: Array,
+                  norm_body: Array, scale: float, w: Array, f: Array, lam: Array, mass: Array,
+                  J: Array, TG: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array,
+                  p_owner: Array, h_L: Array, h_Ld: Array, h_p: Array, rot_prod: Array,
+                  rot_law: Array) -> tuple[Array, Array, Array, Array]:
+    """Exact ∂F_R/∂(z, q, q̇, p): (R_z (n_z, n_z), R_q (n_z, n_q), R_qd (n_z, n_q), R_p (n_z, n_p)).
+
+    Axial elements i act through product ax_prod[i] with ax_law[i] = (L, L̇, P, P_L, P_L̇),
+    ax_Pp[i, :] = ∂P/∂p; pressure row r belongs to element p_owner[r] with ∂h_r/∂L = h_L[r],
+    ∂h_r/∂L̇ = h_Ld[r] and ∂h/∂p = h_p (n_p, n_p).  Rotational spring-damper i acts through
+    products rot_prod[i], rot_prod[i] + 1 with its law rot_law[i] (:func:`.rotational.rotational_law`).
+    """
+    n_q = 7 * Lp.shape[1]
+    n_lam = lam.shape[0]
+    n_p = h_L.shape[0]
+    n_ax = ax_prod.shape[0]
+    # --- constraint rows: J_Φ, ∂R2/∂q, ∂R2/∂q̇ (o = 0, 1, 2) from the product rows
+    rows = np.zeros((3, n_lam, n_q), Lp.dtype)
+    constraint_rows(rows, G, Lp, cf, eq_w, norm_w, prod_eq, norm_eq, norm_body, n_cp)
+    # --- R1: the products' curvature, inertia, axial and rotational force elements; R3
+    R1_q = np.zeros((n_q, n_q), Lp.dtype)
+    R1_qd = np.zeros((n_q, n_q), Lp.dtype)
+    R1_qdd = np.zeros((n_q, n_q), Lp.dtype)
+    R1_p = np.zeros((n_q, n_p), Lp.dtype)
+    R3_q = np.zeros((n_p, n_q), Lp.dtype)
+    R3_qd = np.zeros((n_p, n_q), Lp.dtype)
+    dL = np.empty((n_ax, n_q), Lp.dtype)
+    dLd = np.empty((n_ax, n_q), Lp.dtype)
+    _geometric_stiffness(R1_q, w, ABV.shape[1], C, is_point, pb, side_ptr, side_prim, side_coef)
+    _parameter_curvature(R1_q, f, Ts4, pb, lam, norm_eq, norm_body)
+    _inertia(R1_q, R1_qd, R1_qdd, Lp, mass, J, TG)
+    _axial(R1_q, R1_qd, R1_p, dL, dLd, G, ax_prod, ax_law, ax_Pp)
+    pressure_rows(R3_q, R3_qd, dL, dLd, p_owner, h_L, h_Ld)
+    _rotational(R1_q, R1_qd, G, rot_prod, rot_law)
+    return _assemble(rows, R1_q, R1_qd, R1_qdd, R1_p, R3_q, R3_qd, h_p, scale)
+
+
+@inline
+def _assemble(rows: Array, R1_q: Array, R1_qd: Array, R1_qdd: Array, R1_p: Array, R3_q: Array,
+              R3_qd: Array, h_p: Array, scale: float) -> tuple[Array, Array, Array, Array]:
+    """(R_z, R_q, R_qd, R_p) from the blocks of R1 (motion), R2 (constraint rows) and R3 (pressures)."""
+    n_q = R1_q.shape[0]
+    n_lam = rows.shape[1]
+    n_p = R1_p.shape[1]
+    n_z = n_q + n_lam + n_p
+    R_z = np.zeros((n_z, n_z), R1_q.dtype)
+    R_q = np.zeros((n_z, n_q), R1_q.dtype)
+    R_qd = np.zeros((n_z, n_q), R1_q.dtype)
+    R_p = np.zeros((n_z, n_p), R1_q.dtype)
     R_z[:n_q, :n_q] = R1_qdd
     R_z[:n_q, n_q:n_q + n_lam] = rows[0].T
     R_z[n_q:n_q + n_lam, :n_q] = scale * rows[0]

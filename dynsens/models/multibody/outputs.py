@@ -176,7 +176,7 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
     if not isinstance(spec, dict):
         problems.add(path, f"expected a mapping such as {{joint: NAME, kind: reaction_force}}, found {spec!r}")
         return None
-    heads = [k for k in ("joint", "body", "marker", "element") if k in spec]
+    heads = [k for k in _RESOLVERS if k in spec]
     if len(heads) != 1:
         problems.add(path, "name exactly one of 'joint', 'body', 'marker', 'element'")
         return None
@@ -186,141 +186,183 @@ def resolve_output(model: "MultibodyModel", spec: Any, path: str,
     if not isinstance(name, str):
         problems.add(f"{path}.{head}", f"expected the name of one {head}, found {name!r}")
         return None
-    fn: Callable[[float, StepState, Any], Any]
-    if head == "joint":
-        joints = {j.name: j for j in model.joints}
-        if name not in joints:
-            problems.add(f"{path}.joint", f"unknown joint {name!r}{did_you_mean(name, joints)} "
-                                          f"(joints: {', '.join(joints)})")
-            return None
-        jt = joints[name]
-        if kind not in JOINT_KINDS:
-            problems.add(f"{path}.kind", f"unknown joint quantity {kind!r}{did_you_mean(kind, JOINT_KINDS)} "
-                                         f"(known: {', '.join(JOINT_KINDS)})")
-            return None
-        # a joint of a dependent set: its minimum-norm multipliers over all its equations
-        split = split_of(model)
-        if split is not None and name not in split.positions:
-            split = None
-        if kind == "multipliers" and split is not None:
-            return Output(lambda t, s, prm, _s=split: _out(_s.joint(jt, t, s.q, s.lam, prm)[0], s.q.ndim == 2),
-                          tuple(f"{name}.{lab}" for lab in split.labels[name]),
-                          batched=True, autonomous=not split_is_timed(model))
-        if kind == "multipliers":
-            rows = np.array(jt.rows)
-            return Output(lambda t, s, prm: s.lam[rows], tuple(f"{name}.{lab}" for lab in jt.labels),
-                          linear=True)
-        if jt.kind == "driving" and kind != "multipliers":
-            problems.add(f"{path}.kind", "a driving constraint has only 'multipliers'")
-            return None
+    return _RESOLVERS[head](model, name, kind, path, problems)
 
-        labels = {"reaction_force": ("Fx", "Fy", "Fz"), "reaction_force_norm": ("F",),
-                  "reaction_moment": ("Mx", "My", "Mz"), "reaction_force_joint_frame": ("Fu", "Fv", "Fw")}
-        labs = tuple(f"{name}.{c}" for c in labels[kind])
-        if kind in ("reaction_force", "reaction_force_norm"):
-            force = _reaction(model, jt) if split is None else _split_reaction(model, split, jt)
-            timed = reaction_is_timed(model, jt) if split is None else split_is_timed(model)
 
-            def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
-                f = force(t, s, prm)
-                return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
-            # t enters only through time-dependent coefficients of the joint's own products
-            return Output(rfn, labs, batched=True, autonomous=not timed)
+def _known_kind(kind: Any, kinds: tuple[str, ...], what: str, path: str, problems: ProblemCollector,
+                listed: bool = True) -> bool:
+    """Whether kind is one of kinds; otherwise reports it under ``path.kind`` (with the list when ``listed``)."""
+    if kind in kinds:
+        return True
+    known = f" (known: {', '.join(kinds)})" if listed else ""
+    problems.add(f"{path}.kind", f"unknown {what} quantity {kind!r}{did_you_mean(kind, kinds)}{known}")
+    return False
 
-        def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
-            f, n, ctx = _joint_load(model, _jt, t, s, prm)
-            if _k == "reaction_moment":
-                return n
-            u, v, w = (d.kin(ctx)[0][:, 0] for d in _jt.frame_1)
-            return np.array([np.sum(u * f), np.sum(v * f), np.sum(w * f)])
-        return Output(fn, labs)
-    if head == "body":
-        body = next((b for b in model.bodies if b.name == name), None)
-        if body is None:
-            names = [b.name for b in model.bodies]
-            problems.add(f"{path}.body", f"unknown body {name!r}{did_you_mean(name, names)} "
-                                         f"(moving bodies: {', '.join(names)})")
-            return None
-        if kind not in BODY_KINDS:
-            problems.add(f"{path}.kind", f"unknown body quantity {kind!r}{did_you_mean(kind, BODY_KINDS)} "
-                                         f"(known: {', '.join(BODY_KINDS)})")
-            return None
-        a = 7 * body.index
 
-        comps = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
-                 "acceleration": ("ax", "ay", "az"), "angle_z": ("angle_z",),
-                 "angular_velocity": ("wx", "wy", "wz"), "angular_velocity_z": ("wz",)}[kind]
-        body_labels = tuple(f"{name}.{c}" for c in comps)
-        if kind in ("position", "velocity", "acceleration"):
-            field = {"position": "q", "velocity": "qd", "acceleration": "qdd"}[kind]
-            return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], body_labels, linear=True)
+_JOINT_LABELS = {"reaction_force": ("Fx", "Fy", "Fz"), "reaction_force_norm": ("F",),
+                 "reaction_moment": ("Mx", "My", "Mz"), "reaction_force_joint_frame": ("Fu", "Fv", "Fw")}
 
-        def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
-            if _k == "angle_z":
-                # (one state, at every step for an event: its scalars, not arrays of one entry)
-                e = s.q[a + 3:a + 7] if s.q.ndim == 1 else s.q[:, a + 3:a + 7].T     # (4,) or (4, B)
-                angle = _angle_z(e[0], e[1], e[2], e[3])
-                return np.array([angle]) if s.q.ndim == 1 else angle[:, None]
-            p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
-            v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
-            v = v if _k == "angular_velocity" else v[2:3]
-            return v.T if s.q.ndim == 2 else v[:, 0]
-        return Output(fn, body_labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
-    if head == "marker":
-        from .spec import Reader
-        if not isinstance(name, str) or "." not in name:
-            problems.add(f"{path}.marker", f"expected 'body.marker', found {name!r}")
-            return None
-        bname, mname = name.split(".", 1)
-        bodies = {b.name: b for b in model.bodies}
-        bodies["ground"] = model.ground
-        if bname not in bodies or mname not in bodies[bname].markers:
-            allm = [f"{b.name}.{m}" for b in bodies.values() for m in b.markers]
-            problems.add(f"{path}.marker", f"unknown marker {name!r}{did_you_mean(name, allm)}")
-            return None
-        if kind not in MARKER_KINDS:
-            problems.add(f"{path}.kind", f"unknown marker quantity {kind!r}{did_you_mean(kind, MARKER_KINDS)}")
-            return None
-        pt = Point(bodies[bname].index, Reader.marker_key(bodies[bname], mname))
-        i = 0 if kind == "position" else 1
-        return Output(lambda t, s, prm: pt.kin(_ctx(s, prm, t))[i][:, 0],
-                      tuple(f"{name}.{c}" for c in ("x", "y", "z")))
-    members = {mb.name: mb for mb in model.members}
-    if name in members:                            # flexible members (:mod:`.members`)
-        from .members import member_output
-        return member_output(model, members[name], kind, path, problems)
-    cyls = {c.name: c for c in model.cylinders}
-    springs = {sp.name: sp for sp in model.springs}
-    if name in cyls:
-        cyl = cyls[name]
-        if kind not in CYL_KINDS:
-            problems.add(f"{path}.kind", f"unknown cylinder quantity {kind!r}{did_you_mean(kind, CYL_KINDS)} "
-                                         f"(known: {', '.join(CYL_KINDS)})")
-            return None
 
-        if kind in ("pressure_1", "pressure_2"):
-            j = cyl.p_index + (kind == "pressure_2")
-            return Output(lambda t, s, prm: s.p[j:j + 1], (f"{name}.{kind}",), linear=True)
-        # the push force depends on the state only (t enters the pressure rates: pump flow)
-        return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
-    if name in springs:
-        spr = springs[name]
-        if kind not in SPRING_KINDS:
-            problems.add(f"{path}.kind", f"unknown spring quantity {kind!r}{did_you_mean(kind, SPRING_KINDS)}")
-            return None
-        return Output(_axial(model, spr, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
-    rots = {f.name: f for f in model.rotational}
-    if name in rots:
-        rot: Any = rots[name]                 # a RotationalSpringDamper (its state(): angle, rate, torque)
-        kinds = ("angle", "angle_rate", "torque")
-        if kind not in kinds:
-            problems.add(f"{path}.kind", f"unknown rotational spring quantity {kind!r}{did_you_mean(kind, kinds)} "
-                                         f"(known: {', '.join(kinds)})")
-            return None
-        level = kinds.index(kind)
-        return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{name}.{kind}",),
-                      {"angle": "rad", "angle_rate": "rad/s", "torque": ""}[kind])
-    allnames = list(dict.fromkeys([*cyls, *springs, *rots, *members]))
+def _joint_output(model: "MultibodyModel", name: str, kind: Any, path: str,
+                  problems: ProblemCollector) -> Output | None:
+    """A joint's reaction or multipliers (JOINT_KINDS)."""
+    joints = {j.name: j for j in model.joints}
+    if name not in joints:
+        problems.add(f"{path}.joint", f"unknown joint {name!r}{did_you_mean(name, joints)} "
+                                      f"(joints: {', '.join(joints)})")
+        return None
+    jt = joints[name]
+    if not _known_kind(kind, JOINT_KINDS, "joint", path, problems):
+        return None
+    # a joint of a dependent set: its minimum-norm multipliers over all its equations
+    split = split_of(model)
+    if split is not None and name not in split.positions:
+        split = None
+    if kind == "multipliers":
+        return _multipliers(model, jt, split)
+    if jt.kind == "driving":
+        problems.add(f"{path}.kind", "a driving constraint has only 'multipliers'")
+        return None
+    labs = tuple(f"{name}.{c}" for c in _JOINT_LABELS[kind])
+    if kind in ("reaction_force", "reaction_force_norm"):
+        force = _reaction(model, jt) if split is None else _split_reaction(model, split, jt)
+        timed = reaction_is_timed(model, jt) if split is None else split_is_timed(model)
+
+        def rfn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
+            f = force(t, s, prm)
+            return f if _k == "reaction_force" else np.sqrt(np.sum(f * f, axis=-1, keepdims=True))
+        # t enters only through time-dependent coefficients of the joint's own products
+        return Output(rfn, labs, batched=True, autonomous=not timed)
+
+    def fn(t: float, s: StepState, prm: Any, _jt: Any = jt, _k: str = kind) -> Any:
+        f, n, ctx = _joint_load(model, _jt, t, s, prm)
+        if _k == "reaction_moment":
+            return n
+        u, v, w = (d.kin(ctx)[0][:, 0] for d in _jt.frame_1)
+        return np.array([np.sum(u * f), np.sum(v * f), np.sum(w * f)])
+    return Output(fn, labs)
+
+
+def _multipliers(model: "MultibodyModel", jt: Any, split: MinimumNormSplit | None) -> Output:
+    """A joint's multipliers: its own λ, or the minimum-norm ones of its dependent set."""
+    name = jt.name
+    if split is not None:
+        return Output(lambda t, s, prm, _s=split: _out(_s.joint(jt, t, s.q, s.lam, prm)[0], s.q.ndim == 2),
+                      tuple(f"{name}.{lab}" for lab in split.labels[name]),
+                      batched=True, autonomous=not split_is_timed(model))
+    rows = np.array(jt.rows)
+    return Output(lambda t, s, prm: s.lam[rows], tuple(f"{name}.{lab}" for lab in jt.labels), linear=True)
+
+
+_BODY_COMPONENTS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"),
+                    "acceleration": ("ax", "ay", "az"), "angle_z": ("angle_z",),
+                    "angular_velocity": ("wx", "wy", "wz"), "angular_velocity_z": ("wz",)}
+
+
+def _body_output(model: "MultibodyModel", name: str, kind: Any, path: str,
+                 problems: ProblemCollector) -> Output | None:
+    """A moving body's motion (BODY_KINDS)."""
+    body = next((b for b in model.bodies if b.name == name), None)
+    if body is None:
+        names = [b.name for b in model.bodies]
+        problems.add(f"{path}.body", f"unknown body {name!r}{did_you_mean(name, names)} "
+                                     f"(moving bodies: {', '.join(names)})")
+        return None
+    if not _known_kind(kind, BODY_KINDS, "body", path, problems):
+        return None
+    a = 7 * body.index
+    body_labels = tuple(f"{name}.{c}" for c in _BODY_COMPONENTS[kind])
+    if kind in ("position", "velocity", "acceleration"):
+        field = {"position": "q", "velocity": "qd", "acceleration": "qdd"}[kind]
+        return Output(lambda t, s, prm: getattr(s, field)[a:a + 3], body_labels, linear=True)
+
+    def fn(t: float, s: StepState, prm: Any, _k: str = kind) -> Any:
+        if _k == "angle_z":
+            # (one state, at every step for an event: its scalars, not arrays of one entry)
+            e = s.q[a + 3:a + 7] if s.q.ndim == 1 else s.q[:, a + 3:a + 7].T     # (4,) or (4, B)
+            angle = _angle_z(e[0], e[1], e[2], e[3])
+            return np.array([angle]) if s.q.ndim == 1 else angle[:, None]
+        p = np.atleast_2d(s.q)[:, a + 3:a + 7].T                     # (4, B)
+        v = angular_velocity(p, np.atleast_2d(s.qd)[:, a + 3:a + 7].T)
+        v = v if _k == "angular_velocity" else v[2:3]
+        return v.T if s.q.ndim == 2 else v[:, 0]
+    return Output(fn, body_labels, "rad" if kind == "angle_z" else "", batched=True, autonomous=True)
+
+
+def _marker_output(model: "MultibodyModel", name: str, kind: Any, path: str,
+                   problems: ProblemCollector) -> Output | None:
+    """A marker's position or velocity (MARKER_KINDS), ``body.marker``."""
+    from .spec import Reader
+    if "." not in name:
+        problems.add(f"{path}.marker", f"expected 'body.marker', found {name!r}")
+        return None
+    bname, mname = name.split(".", 1)
+    bodies = {b.name: b for b in model.bodies}
+    bodies["ground"] = model.ground
+    if bname not in bodies or mname not in bodies[bname].markers:
+        allm = [f"{b.name}.{m}" for b in bodies.values() for m in b.markers]
+        problems.add(f"{path}.marker", f"unknown marker {name!r}{did_you_mean(name, allm)}")
+        return None
+    if not _known_kind(kind, MARKER_KINDS, "marker", path, problems, listed=False):
+        return None
+    pt = Point(bodies[bname].index, Reader.marker_key(bodies[bname], mname))
+    i = 0 if kind == "position" else 1
+    return Output(lambda t, s, prm: pt.kin(_ctx(s, prm, t))[i][:, 0],
+                  tuple(f"{name}.{c}" for c in ("x", "y", "z")))
+
+
+def _cylinder_output(model: "MultibodyModel", cyl: Any, kind: Any, path: str,
+                     problems: ProblemCollector) -> Output | None:
+    """A hydraulic cylinder's stroke, pressures, force or volumes (CYL_KINDS)."""
+    if not _known_kind(kind, CYL_KINDS, "cylinder", path, problems):
+        return None
+    name = cyl.name
+    if kind in ("pressure_1", "pressure_2"):
+        j = cyl.p_index + (kind == "pressure_2")
+        return Output(lambda t, s, prm: s.p[j:j + 1], (f"{name}.{kind}",), linear=True)
+    # the push force depends on the state only (t enters the pressure rates: pump flow)
+    return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
+
+
+def _spring_output(model: "MultibodyModel", spr: Any, kind: Any, path: str,
+                   problems: ProblemCollector) -> Output | None:
+    """A spring's length, length rate or force (SPRING_KINDS)."""
+    if not _known_kind(kind, SPRING_KINDS, "spring", path, problems, listed=False):
+        return None
+    return Output(_axial(model, spr, kind), (f"{spr.name}.{kind}",), batched=True, autonomous=True)
+
+
+_ROT_UNITS = {"angle": "rad", "angle_rate": "rad/s", "torque": ""}
+
+
+def _rotational_output(model: "MultibodyModel", rot: Any, kind: Any, path: str,
+                       problems: ProblemCollector) -> Output | None:
+    """A rotational spring-damper's angle, rate or torque (its state(): angle, rate, torque)."""
+    kinds = tuple(_ROT_UNITS)
+    if not _known_kind(kind, kinds, "rotational spring", path, problems):
+        return None
+    level = kinds.index(kind)
+    return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{rot.name}.{kind}",),
+                  _ROT_UNITS[kind])
+
+
+def _element_output(model: "MultibodyModel", name: str, kind: Any, path: str,
+                    problems: ProblemCollector) -> Output | None:
+    """A force element's quantity: a flexible member's (:mod:`.members`; first, as a bar member is
+    also among the springs), a cylinder's, a spring's or a rotational spring-damper's."""
+    from .members import member_output
+    families = ((model.members, member_output), (model.cylinders, _cylinder_output),
+                (model.springs, _spring_output), (model.rotational, _rotational_output))
+    for elements, resolve in families:
+        el = next((e for e in elements if e.name == name), None)
+        if el is not None:
+            return resolve(model, el, kind, path, problems)
+    allnames = list(dict.fromkeys(e.name for elements, _ in families for e in elements))
     problems.add(f"{path}.element", f"unknown element {name!r}{did_you_mean(name, allnames)} "
                                     f"(elements: {', '.join(allnames) or 'none'})")
     return None
+
+
+# one resolver per spec head (its key in the quantity mapping)
+_RESOLVERS: dict[str, Callable[["MultibodyModel", str, Any, str, ProblemCollector], Output | None]] = {
+    "joint": _joint_output, "body": _body_output, "marker": _marker_output, "element": _element_output}

@@ -81,6 +81,108 @@ def sparse_refusal(other_forces: list[Any]) -> str:
             "sparse pattern; use linear_algebra: dense (or auto)")
 
 
+@cc.inline
+def _block_geometric_stiffness(Bq: Array, w: Array, n_prod: int, C: Array, is_point: Array, side_ptr: Array,
+                               side_prim: Array, side_coef: Array, side_slot: Array, prod_blk: Array) -> None:
+    """Bq += Σ_p w_p ∂²x_p/∂q² on the blocks of each product's bodies."""
+    for p in range(n_prod):
+        wp = w[p]
+        if wp == 0.0:
+            continue
+        for ea in range(side_ptr[p], side_ptr[p + 1]):
+            Ka = clin._prim_jac0(side_prim[ea], C, is_point)
+            for eb in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):
+                Kb = clin._prim_jac0(side_prim[eb], C, is_point)
+                c = wp * side_coef[ea] * side_coef[eb]
+                blk = cc._mm(Ka.T, Kb)
+                k1 = prod_blk[p, side_slot[ea], side_slot[eb]]
+                k2 = prod_blk[p, side_slot[eb], side_slot[ea]]
+                for u in range(7):
+                    for v in range(7):
+                        Bq[k1, u, v] += c * blk[u, v]
+                        Bq[k2, v, u] += c * blk[u, v]
+
+
+@cc.inline
+def _block_parameter_curvature(Bq: Array, f: Array, Ts4: Array, pb: Array, body_blk: Array, lam: Array,
+                               norm_eq: Array, norm_body: Array) -> None:
+    """Bq += ∂²(A s̄)/∂p² · f and the normalisations' 2λ I on the bodies' diagonal blocks."""
+    for j in range(pb.shape[0]):
+        k0 = body_blk[pb[j]]
+        for a in range(3):
+            fa = f[j, a]
+            if fa != 0.0:
+                for k in range(4):
+                    for l in range(4):
+                        Bq[k0, 3 + k, 3 + l] += 2.0 * fa * Ts4[j, a, k, l]
+    for i in range(norm_eq.shape[0]):
+        k0 = body_blk[norm_body[i]]
+        for k in range(4):
+            Bq[k0, 3 + k, 3 + k] += 2.0 * lam[norm_eq[i]]
+
+
+@cc.inline
+def _block_inertia(Bq: Array, Bqd: Array, Bqdd: Array, Lp: Array, body_blk: Array, mass: Array, J: Array,
+                   TG: Array) -> None:
+    """∂(M q̈ − Q_v)/∂(q, q̇, q̈) on the bodies' diagonal blocks."""
+    for b in range(Lp.shape[1]):
+        Kpp, Cpp, Mpp = clin.inertia_blocks(Lp, b, J[b], TG)
+        k0 = body_blk[b]
+        for a in range(3):
+            Bqdd[k0, a, a] += mass[b]
+        for k in range(4):
+            for l in range(4):
+                Bq[k0, 3 + k, 3 + l] += Kpp[k, l]
+                Bqd[k0, 3 + k, 3 + l] += Cpp[k, l]
+                Bqdd[k0, 3 + k, 3 + l] += Mpp[k, l]
+
+
+@cc.inline
+def _block_axial(Bq: Array, Bqd: Array, R1p: Array, dL: Array, dLd: Array, G: Array, prod_nb: Array,
+                 prod_blk: Array, ax_prod: Array, ax_law: Array, ax_Pp: Array) -> None:
+    """Axial force elements on their product's bodies (as the dense ``_axial``); their ∂L/∂q,
+    ∂L̇/∂q on those bodies into dL, dLd."""
+    n_p = R1p.shape[2]
+    for i in range(ax_prod.shape[0]):
+        pp = ax_prod[i]
+        jx = G[pp, 0]
+        L, Ld, P, P_L, P_Ld = ax_law[i, 0], ax_law[i, 1], ax_law[i, 2], ax_law[i, 3], ax_law[i, 4]
+        clin.axial_rates(jx, G[pp, 1], L, Ld, dL[i], dLd[i])
+        w_L, w_Ld = clin.axial_weights(L, P, P_L, P_Ld)
+        for su in range(prod_nb[pp]):
+            for sv in range(prod_nb[pp]):
+                kb = prod_blk[pp, su, sv]
+                for u in range(7):
+                    ju = jx[7 * su + u]
+                    if ju != 0.0:
+                        for v in range(7):
+                            Bq[kb, u, v] += ju * (w_L * dL[i, 7 * sv + v] + w_Ld * dLd[i, 7 * sv + v])
+                            Bqd[kb, u, v] += ju * (w_Ld * dL[i, 7 * sv + v])
+        for u in range(7 * prod_nb[pp]):
+            if jx[u] != 0.0:
+                for k in range(n_p):
+                    R1p[i, u, k] += -0.5 * ax_Pp[i, k] / L * jx[u]
+
+
+@cc.inline
+def _block_rotational(Bq: Array, Bqd: Array, G: Array, prod_nb: Array, prod_blk: Array, rot_prod: Array,
+                      rot_law: Array) -> None:
+    """Rotational spring-dampers on the bodies of their products (as the dense ``_rotational``)."""
+    for i in range(rot_prod.shape[0]):
+        px = rot_prod[i]
+        jx, jy = G[px, 0], G[px + 1, 0]
+        rx, ry, rxd, ryd = clin.rotational_weight_rows(rot_law[i], jx, jy, G[px, 1], G[px + 1, 1])
+        for su in range(prod_nb[px]):
+            for sv in range(prod_nb[px]):
+                kb = prod_blk[px, su, sv]
+                for u in range(7):
+                    ju, yu = jx[7 * su + u], jy[7 * su + u]
+                    if ju != 0.0 or yu != 0.0:
+                        for v in range(7):
+                            Bq[kb, u, v] += ju * rx[7 * sv + v] + yu * ry[7 * sv + v]
+                            Bqd[kb, u, v] += ju * rxd[7 * sv + v] + yu * ryd[7 * sv + v]
+
+
 @cc.jit
 def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: Array, pb: Array,
                         side_ptr: Array, side_prim: Array, side_coef: Array, side_slot: Array,
@@ -100,7 +202,6 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
     product), prod_blk[p, s, s'] (the block of the product's bodies s, s'), body_blk[b] (the
     diagonal block of body b) and eq_slot[p, s] (the slot of product p's body s in its equation).
     """
-    n_b = Lp.shape[1]
     n_lam = lam.shape[0]
     n_p = h_L.shape[0]
     n_prod = ABV.shape[1]
@@ -118,91 +219,20 @@ def block_linearization(Lp: Array, C: Array, ABV: Array, is_point: Array, Ts4: A
     Bq = np.zeros((n_blk, 7, 7), dt)
     Bqd = np.zeros((n_blk, 7, 7), dt)
     Bqdd = np.zeros((n_blk, 7, 7), dt)
-    for p in range(n_prod):
-        wp = w[p]
-        if wp == 0.0:
-            continue
-        for ea in range(side_ptr[p], side_ptr[p + 1]):
-            Ka = clin._prim_jac0(side_prim[ea], C, is_point)
-            for eb in range(side_ptr[n_prod + p], side_ptr[n_prod + p + 1]):
-                Kb = clin._prim_jac0(side_prim[eb], C, is_point)
-                c = wp * side_coef[ea] * side_coef[eb]
-                blk = cc._mm(Ka.T, Kb)
-                k1 = prod_blk[p, side_slot[ea], side_slot[eb]]
-                k2 = prod_blk[p, side_slot[eb], side_slot[ea]]
-                for u in range(7):
-                    for v in range(7):
-                        Bq[k1, u, v] += c * blk[u, v]
-                        Bq[k2, v, u] += c * blk[u, v]
-    for j in range(pb.shape[0]):
-        k0 = body_blk[pb[j]]
-        for a in range(3):
-            fa = f[j, a]
-            if fa != 0.0:
-                for k in range(4):
-                    for l in range(4):
-                        Bq[k0, 3 + k, 3 + l] += 2.0 * fa * Ts4[j, a, k, l]
-    for i in range(norm_eq.shape[0]):
-        k0 = body_blk[norm_body[i]]
-        for k in range(4):
-            Bq[k0, 3 + k, 3 + k] += 2.0 * lam[norm_eq[i]]
-    for b in range(n_b):
-        Kpp, Cpp, Mpp = clin.inertia_blocks(Lp, b, J[b], TG)
-        k0 = body_blk[b]
-        for a in range(3):
-            Bqdd[k0, a, a] += mass[b]
-        for k in range(4):
-            for l in range(4):
-                Bq[k0, 3 + k, 3 + l] += Kpp[k, l]
-                Bqd[k0, 3 + k, 3 + l] += Cpp[k, l]
-                Bqdd[k0, 3 + k, 3 + l] += Mpp[k, l]
-    # --- axial force elements on their product's bodies
+    _block_geometric_stiffness(Bq, w, n_prod, C, is_point, side_ptr, side_prim, side_coef, side_slot, prod_blk)
+    _block_parameter_curvature(Bq, f, Ts4, pb, body_blk, lam, norm_eq, norm_body)
+    _block_inertia(Bq, Bqd, Bqdd, Lp, body_blk, mass, J, TG)
+    # --- axial force elements on their product's bodies; rotational spring-dampers on the bodies
+    # of their products (both products have the same; SparseStructure checks it)
     n_ax = ax_prod.shape[0]
     R1p = np.zeros((n_ax, 7 * PB, n_p), dt)
     dL = np.zeros((n_ax, 7 * PB), dt)
     dLd = np.zeros((n_ax, 7 * PB), dt)
-    for i in range(n_ax):
-        pp = ax_prod[i]
-        jx = G[pp, 0]
-        L, Ld, P, P_L, P_Ld = ax_law[i, 0], ax_law[i, 1], ax_law[i, 2], ax_law[i, 3], ax_law[i, 4]
-        clin.axial_rates(jx, G[pp, 1], L, Ld, dL[i], dLd[i])
-        w_L, w_Ld = clin.axial_weights(L, P, P_L, P_Ld)
-        for su in range(prod_nb[pp]):
-            for sv in range(prod_nb[pp]):
-                kb = prod_blk[pp, su, sv]
-                for u in range(7):
-                    ju = jx[7 * su + u]
-                    if ju != 0.0:
-                        for v in range(7):
-                            Bq[kb, u, v] += ju * (w_L * dL[i, 7 * sv + v] + w_Ld * dLd[i, 7 * sv + v])
-                            Bqd[kb, u, v] += ju * (w_Ld * dL[i, 7 * sv + v])
-        for u in range(7 * prod_nb[pp]):
-            if jx[u] != 0.0:
-                for k in range(n_p):
-                    R1p[i, u, k] += -0.5 * ax_Pp[i, k] / L * jx[u]
-    # --- rotational spring-dampers on the bodies of their products (both products have the same;
-    # SparseStructure checks it)
-    for i in range(rot_prod.shape[0]):
-        px = rot_prod[i]
-        jx, jy = G[px, 0], G[px + 1, 0]
-        rx, ry, rxd, ryd = clin.rotational_weight_rows(rot_law[i], jx, jy, G[px, 1], G[px + 1, 1])
-        for su in range(prod_nb[px]):
-            for sv in range(prod_nb[px]):
-                kb = prod_blk[px, su, sv]
-                for u in range(7):
-                    ju, yu = jx[7 * su + u], jy[7 * su + u]
-                    if ju != 0.0 or yu != 0.0:
-                        for v in range(7):
-                            Bq[kb, u, v] += ju * rx[7 * sv + v] + yu * ry[7 * sv + v]
-                            Bqd[kb, u, v] += ju * rxd[7 * sv + v] + yu * ryd[7 * sv + v]
+    _block_axial(Bq, Bqd, R1p, dL, dLd, G, prod_nb, prod_blk, ax_prod, ax_law, ax_Pp)
+    _block_rotational(Bq, Bqd, G, prod_nb, prod_blk, rot_prod, rot_law)
     R3q = np.zeros((n_p, 7 * PB), dt)
     R3qd = np.zeros((n_p, 7 * PB), dt)
-    for r in range(n_p):
-        i = p_owner[r]
-        if i >= 0:
-            for n in range(7 * PB):
-                R3q[r, n] -= h_L[r] * dL[i, n] + h_Ld[r] * dLd[i, n]
-                R3qd[r, n] -= h_Ld[r] * dL[i, n]
+    clin.pressure_rows(R3q, R3qd, dL, dLd, p_owner, h_L, h_Ld)
     return Jc, Bq, Bqd, Bqdd, R1p, R3q, R3qd
 
 
