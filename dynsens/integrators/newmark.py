@@ -132,14 +132,16 @@ class Newmark:
     def start_transpose(self, aux_bar: Aux, s_bar: StepState) -> StepState:
         """Transpose of :meth:`start` (a0 = q̈0, b0 = ṗ0): ``s_bar`` plus the bars of a0, b0
         moved onto q̈0 and ṗ0."""
-        return s_bar._replace(qdd=s_bar.qdd + aux_bar.a, pd=s_bar.pd + aux_bar.b)
+        q, qd, qdd, lam, p, pd = s_bar
+        return StepState(q, qd, qdd + aux_bar.a, lam, p, pd + aux_bar.b)
 
     def advance_transpose(self, aux_bar: Aux, s_bar: StepState) -> tuple[StepState, Aux]:
         """Transpose of :meth:`advance` (a = a_rest + c_a q̈, b = b_rest + c_a ṗ): ``s_bar`` plus
         c_a times the bars of a, b on q̈, ṗ, and the bars of the prediction's a_rest, b_rest
         (as an :class:`Aux`; the other fields of the prediction :meth:`advance` does not read)."""
         c = self.c_a
-        return s_bar._replace(qdd=s_bar.qdd + c * aux_bar.a, pd=s_bar.pd + c * aux_bar.b), aux_bar
+        q, qd, qdd, lam, p, pd = s_bar     # (a tuple, not _replace: called per step of the sweep)
+        return StepState(q, qd, qdd + c * aux_bar.a, lam, p, pd + c * aux_bar.b), aux_bar
 
     def correct_transpose(self, s_bar: StepState, dt: float
                           ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
@@ -147,8 +149,8 @@ class Newmark:
         q, q̇, p (its a_rest, b_rest the corrector does not read) and of the unknowns
         z = (q̈, λ, ṗ)."""
         c_q, c_qd, c_p = self.coefficients(dt)
-        z_bar = (s_bar.qdd + c_q * s_bar.q + c_qd * s_bar.qd, s_bar.lam, s_bar.pd + c_p * s_bar.p)
-        return (s_bar.q, s_bar.qd, s_bar.p), z_bar
+        q, qd, qdd, lam, p, pd = s_bar
+        return (q, qd, p), (qdd + c_q * q + c_qd * qd, lam, pd + c_p * p)
 
     def predict_transpose(self, pred_bar: Prediction, dt: float, lam_bar: np.ndarray) -> tuple[StepState, Aux]:
         """Transpose of :meth:`predict` for step size dt (s): the bars of the previous state
