@@ -6,8 +6,10 @@ state, linearization and factor); a derivative mode consumes the records — the
 (:mod:`.derivatives.direct`) carries the sensitivities forward, trailing the state by a block
 of steps, the adjoint mode (:mod:`.derivatives.adjoint`) keeps them and sweeps back over them
 once the responses know their weights; the outputs of every grid step go to the responses.
-What a case does not need is decided once in :class:`RunPlan` and never re-tested inside the
-loop's numerics.
+The loop talks to the mode only through the :class:`~.derivatives.mode.DerivativeMode`
+protocol (a run without derivatives has its primal-only mode), so it never asks which mode
+runs (tests/test_mode_free_loop.py).  What a case does not need is decided once in
+:class:`RunPlan` and never re-tested inside the loop's numerics.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import numpy as np
 from .derivatives.adjoint import AdjointMode
 from .derivatives.checkpoints import DEFAULT_MEMORY_BUDGET, RecordStore
 from .derivatives.direct import DirectMode
+from .derivatives.mode import DerivativeMode, PrimalOnlyMode
 from .errors import CaseError
 from .integrators.newmark import Newmark
 from .models.base import Model, StepState
@@ -176,9 +179,10 @@ class GridFeed:
     (the direct mode trails the state by up to ``trail_length`` steps; without derivatives,
     every step goes at once).  Sub-steps of step cuts go to the mode, not to the responses."""
 
-    def __init__(self, mode: DirectMode | AdjointMode | None, responses: ResponseSet, store: RunStore):
+    def __init__(self, mode: DerivativeMode, responses: ResponseSet, store: RunStore):
         self.mode, self.responses, self.store = mode, responses, store
-        self.length = mode.trail_length if mode is not None else 1
+        self.length = mode.trail_length
+        self._take_step, self._catch_up = mode.take_step, mode.catch_up     # (bound once: per step)
         self.marks: list[tuple[int, float, StepState, float, EventHit | None, int]] = []
         self.taken = 0
 
@@ -190,16 +194,15 @@ class GridFeed:
 
     def add(self, i: int, t: float, h: float, records: list[StepRecord], event: EventHit | None) -> None:
         """Grid step i (ending at t, s; size h) made of ``records``, and what the events said."""
-        if self.mode is not None:
-            self.mode.take_step(records)
-            self.taken += len(records)
+        self._take_step(records)
+        self.taken += len(records)
         self.marks.append((i, t, records[-1].reported, h, event, self.taken - 1))
         if event is not None or len(self.marks) >= self.length:
             self.catch_up()
 
     def catch_up(self) -> None:
         """Sensitivities of the records taken so far, then the marked grid steps to the responses."""
-        ds_of = self.mode.catch_up() if self.mode is not None else []
+        ds_of = self._catch_up()
         for i, t, s, h, event, k in self.marks:
             ds = ds_of[k] if k >= 0 else None
             self.store.record_sensitivities(i, ds)
@@ -277,17 +280,19 @@ def step_sequence(plan: RunPlan, scheme: Newmark, counters: Counters) -> StepSeq
     return FixedGrid(plan.t0, plan.t_end, plan.dt, plan.n_steps, plan.step_size)
 
 
-def _mode(method: str, model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
-          partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet, counters: Counters,
-          steps: StepSequence, design_names: tuple[str, ...] = ()) -> DirectMode | AdjointMode | None:
-    """The derivative mode that consumes the step records (None without sensitivities); the
-    adjoint recomputes segments and places its seeds by the steps as they were taken."""
+def derivative_mode(model: Model, scheme: Newmark, solver: StepSolver, stepper: PrimalStepper,
+                    partials: DesignPartials | None, plan: RunPlan, responses: ResponseSet, counters: Counters,
+                    steps: StepSequence, design_names: tuple[str, ...] = ()) -> DerivativeMode:
+    """The derivative mode that consumes the step records, chosen by :func:`choose_method` (no
+    derivatives without design partials); the adjoint recomputes segments and places its seeds
+    by the steps as they were taken."""
     if partials is None:
-        return None
+        return PrimalOnlyMode(model)
+    method, reason = choose_method(plan, responses, partials.m)
     if method == "direct":
-        return DirectMode(model, scheme, solver, partials, counters, design_names)
+        return DirectMode(model, scheme, solver, partials, counters, design_names, reason)
     records = RecordStore(stepper, steps.grid, plan.memory_budget, counters)
-    return AdjointMode(model, scheme, partials, counters, responses.outputs, records, steps.time)
+    return AdjointMode(model, scheme, partials, counters, responses.outputs, records, steps.time, reason)
 
 
 def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
@@ -308,17 +313,14 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     params = partials.params0 if partials is not None else model.parameters(np.asarray(x))
     solver = _solver(model, plan, counters, partials)
     stepper = PrimalStepper(model, scheme, solver, params, plan.max_step_cuts, counters)
-    method, reason = choose_method(plan, responses, m) if partials is not None else ("", "")
     steps = step_sequence(plan, scheme, counters)
-    mode = _mode(method, model, scheme, solver, stepper, partials, plan, responses, counters, steps,
-                 design_names)
+    mode = derivative_mode(model, scheme, solver, stepper, partials, plan, responses, counters, steps,
+                           design_names)
 
     rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
-    ds = mode.start(rec) if mode is not None else None
+    ds = mode.start(rec)
     store = RunStore(plan, model, params, rec.state, m, ds is not None, steps.expected_steps)
-    responses.start(params, partials if method == "direct" else None,
-                    None if method == "direct" else model.stack_parameters([params]),
-                    model.traits.n_z, trace=method == "adjoint")
+    mode.bind_responses(responses, params)
     feed = GridFeed(mode, responses, store)
     feed.start(plan.t0, rec.state, ds)
     counters.output_evaluations += 1
@@ -343,8 +345,7 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
             progress(*steps.progress())
     feed.catch_up()
     responses.close(t, m)                                             # responses, gradients
-    values = responses.finish(dict(zip(design_names, np.asarray(x))), m if sens else 0,
-                              _mass(model, params, partials),
-                              adjoint=mode.gradients if isinstance(mode, AdjointMode) else None)
+    values = mode.finish_responses(responses, dict(zip(design_names, np.asarray(x))), m if sens else 0,
+                                   _mass(model, params, partials))
     return store.result(np.asarray(x), values, counters.as_dict(), _time.perf_counter() - wall0,
-                        status, message, stepper.labels, method, reason)
+                        status, message, stepper.labels, mode.name, mode.reason)

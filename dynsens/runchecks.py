@@ -12,6 +12,7 @@ differences, ``check-gradients``, ``convergence``) gets the same guarantees:
 """
 from __future__ import annotations
 
+import math
 import os
 from typing import TYPE_CHECKING, Any
 
@@ -143,12 +144,13 @@ def stability_limit(model: Any, scheme: Any, t0: float, x: np.ndarray) -> tuple[
     model linearized at its initial state and design ``x``; None when the scheme is unconditionally
     stable or the model has constraints or first-order states (no plain M, K pair).
 
-    Undamped Newmark is stable for ω·dt ≤ Ω_crit = 1/sqrt(γ/2 − β) (central differences: 2).
+    The scheme gives Ω_crit (:meth:`~dynsens.integrators.newmark.Newmark.stability_limit`;
+    undamped Newmark: ω·dt ≤ 1/sqrt(γ/2 − β), central differences 2); this finds ω_max.
     """
     from .models.base import StepState
-    beta, gamma = scheme.beta, scheme.gamma
+    crit = scheme.stability_limit()
     tr = model.traits
-    if not beta < gamma / 2 or tr.n_lam or tr.n_p or tr.n_q > 2000:
+    if math.isinf(crit) or tr.n_lam or tr.n_p or tr.n_q > 2000:
         return None
     params = model.parameters(np.asarray(x, dtype=float))
     q0, qd0, p0 = model.initial_state(params)
@@ -165,7 +167,6 @@ def stability_limit(model: Any, scheme: Any, t0: float, x: np.ndarray) -> tuple[
     if not w2.size or w2.max() <= 0:
         return None
     omega = float(np.sqrt(w2.max()))
-    crit = 1.0 / np.sqrt(gamma / 2 - beta)
     return crit / omega, crit, omega
 
 
@@ -191,7 +192,7 @@ def unstable_scheme_note(model: Any, scheme: Any, plan: RunPlan, x: np.ndarray, 
     why = stability_problem(model, scheme, plan, x)
     if why is not None or not growth:
         return why
-    if scheme.beta < scheme.gamma / 2 and stability_limit(model, scheme, plan.t0, x) is None:
+    if not scheme.unconditionally_stable and stability_limit(model, scheme, plan.t0, x) is None:
         return (f"newmark with beta = {scheme.beta:g} < gamma/2 = {scheme.gamma / 2:g} is only conditionally "
                 "stable (dt <= Omega_crit/omega_max, Omega_crit = 1/sqrt(gamma/2 - beta)), and its limit is not "
                 "computed for a model with constraints or first-order states: reduce dt, or use beta = 1/4 "

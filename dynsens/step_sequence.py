@@ -15,7 +15,9 @@ estimate of Zienkiewicz & Xie (1991), generalized to the α-family:
 Newmark: C_q = β − 1/6, 1/12 for the average-acceleration rule; HHT and generalized-α:
 1/12 + (γ − ½)²/4).  First-order states p follow the γ-rule, whose local error is
 e_p ≈ C_p h² (b_{n+1} − b_n), C_p = 1/12 − (α_m − α_f)²/2 (the trapezoid rule's 1/12 for
-Newmark).  The step is accepted when the weighted RMS norm
+Newmark); the scheme owns these constants
+(:meth:`~dynsens.integrators.newmark.Newmark.error_constants`).  The step is accepted when the
+weighted RMS norm
 ‖e / (atol + rtol·max(|y_n|, |y_{n+1}|))‖ ≤ 1; the next step is
 h·min(GROW, max(SHRINK, SAFETY·err^{−1/3})) (no growth right after a rejection), within
 [dt_min, dt_max].  A rejected step (error too large, or Newton failing: h/4) leaves no record.
@@ -58,19 +60,13 @@ class AdaptiveSettings:
     dt_max: float
 
 
-def error_constants(scheme: Newmark) -> tuple[float, float]:
-    """(C_q, C_p) of the local error estimates of q and p (see the module docstring)."""
-    delta = scheme.alpha_m - scheme.alpha_f
-    return scheme.beta - 1.0 / 6.0 + 0.5 * delta, 1.0 / 12.0 - 0.5 * delta * delta
-
-
 def adaptive_problem(scheme: Newmark) -> str | None:
     """Why adaptive steps cannot serve ``scheme`` (None: they can)."""
     if scheme.order != 2:
         return (f"the {scheme.name} scheme with gamma = {scheme.gamma:g} is first-order accurate: its velocity "
                 "error per step is O(h^2) and the displacement estimate does not measure it; use a "
                 "second-order member (newmark with gamma = 0.5, hht, generalized_alpha)")
-    if abs(error_constants(scheme)[0]) < MIN_COEFFICIENT:
+    if abs(scheme.error_constants()[0]) < MIN_COEFFICIENT:
         return (f"beta = {scheme.beta:g} makes the displacement error estimate "
                 "h^2 (beta - 1/6)(a_n+1 - a_n) vanish (beta = 1/6): use beta = 1/4")
     return None
@@ -200,7 +196,7 @@ class AdaptiveSteps(StepSequence):
                  counters: Any):
         super().__init__(t0, t_end)
         self.settings, self.counters = settings, counters
-        self.constants = error_constants(scheme)
+        self.constants = scheme.error_constants()
         self.h_next = min(max(dt, settings.dt_min), settings.dt_max)
         self.nominal = max(1, int(np.ceil((t_end - t0) / dt - 1e-9)))
         self.done = False

@@ -28,7 +28,7 @@ from scipy.optimize import brentq
 
 import dynsens
 from dynsens.errors import CaseError, StepSizeError
-from dynsens.step_sequence import error_constants, replaying
+from dynsens.step_sequence import replaying
 from helpers import complex_step_gradients, rel_err
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
@@ -55,10 +55,10 @@ def with_plan(case, **changes):
 
 def test_error_estimate_constants_of_the_family():
     # Newmark average acceleration: Zienkiewicz–Xie's 1/12; second-order α-members 1/12 + (γ − ½)²/4
-    assert error_constants(dynsens.integrators.newmark.make_scheme("newmark"))[0] == pytest.approx(1 / 12)
+    assert dynsens.integrators.newmark.make_scheme("newmark").error_constants()[0] == pytest.approx(1 / 12)
     for sc in (dynsens.integrators.newmark.make_scheme("hht", alpha=0.1),
                dynsens.integrators.newmark.make_scheme("generalized_alpha", rho_inf=0.6)):
-        assert error_constants(sc)[0] == pytest.approx(1 / 12 + (sc.gamma - 0.5) ** 2 / 4, rel=1e-14)
+        assert sc.error_constants()[0] == pytest.approx(1 / 12 + (sc.gamma - 0.5) ** 2 / 4, rel=1e-14)
 
 
 def test_error_falls_with_rtol_against_the_closed_form():

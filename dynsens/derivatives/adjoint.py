@@ -9,6 +9,10 @@ column per response:
     z̄ = correctᵀ/advanceᵀ of the state's bar,   μ = −S⁻ᵀ z̄,
     bar of the predicted state += (R_q, R_q̇, R_p)ᵀ μ,   x̄ += ∂_xF_Rᵀ μ,   bar of X_{i−1} = predictᵀ(…)
 
+The scheme's maps (correct, advance, predict, start) are transposed by the scheme itself
+(``Newmark.*_transpose``); this module adds the pseudo load's state part, the solve and the
+design term.
+
 plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  A step whose end state
 the model projected onto its constraints transposes that projection first (its design term
 joins x̄; dynsens/models/multibody/projection.py).  At t0 the initial solve
@@ -23,12 +27,12 @@ the sweep (:mod:`.checkpoints`).
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from ..integrators.newmark import Newmark
-from ..models.base import Model, Output
+from ..integrators.newmark import Aux, Newmark, Prediction
+from ..models.base import Model, Output, StepState
 from ..responses import OutputTrace
 from ..sensitivity import DesignPartials, initial_state_gradient
 from ..solver.linalg import Counters
@@ -38,19 +42,28 @@ from .direct import trail_length
 from .finite import check_adjoint_gradient, check_adjoint_step
 from .output_seeds import OutputSeeds
 
+if TYPE_CHECKING:  # pragma: no cover
+    from ..response_set import ResponseSet
+    from ..responses import ResponseValue
+    from .mode import MassOf
+
 
 # records whose output seeds are taken together (held a little longer during the sweep)
 SEED_BLOCK = 64
 
 
 class AdjointMode:
-    """Keeps the step records of the forward run and sweeps back over them at the end."""
+    """Keeps the step records of the forward run and sweeps back over them at the end (a
+    :class:`~dynsens.derivatives.mode.DerivativeMode`)."""
 
+    name = "adjoint"
     trail_length = 1   # nothing trails: the responses take the values of every step at once
 
     def __init__(self, model: Model, scheme: Newmark, partials: DesignPartials, counters: Counters,
-                 outputs: list[Output], store: RecordStore, grid_time: Callable[[int], float]):
+                 outputs: list[Output], store: RecordStore, grid_time: Callable[[int], float],
+                 reason: str = ""):
         self.model, self.scheme, self.partials, self.counters = model, scheme, partials, counters
+        self.reason = reason           # why the run takes the adjoint
         tr = model.traits
         self.n_q, self.n_lam, self.n_p = tr.n_q, tr.n_lam, tr.n_p
         self.block = trail_length(tr, partials.m)
@@ -59,20 +72,35 @@ class AdjointMode:
         self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
         self._pending = 0
         self._projection_xbar = np.zeros((partials.m, 0))   # x̄ of the steps' projections (sweep)
+        # the scheme's transposed maps, bound once (called per step of the sweep)
+        self._start_transposed = scheme.start_transpose
+        self._advance_transposed = scheme.advance_transpose
+        self._correct_transposed = scheme.correct_transpose
+        self._predict_transposed = scheme.predict_transpose
 
     # ------------------------------------------------------------------ forward: keep records
     def start(self, rec: StepRecord) -> None:
         """The initial record (the gradient of the initial state is taken in the sweep)."""
         self.store.add_initial(rec)
 
+    def bind_responses(self, responses: ResponseSet, params: Any) -> None:
+        """The responses keep the trace of their outputs (their adjoint weights need it) and
+        take no design partials."""
+        responses.start(params, None, self.model.stack_parameters([params]), self.model.traits.n_z, trace=True)
+
+    def finish_responses(self, responses: ResponseSet, design: dict[str, Any], m: int,
+                         mass: MassOf) -> dict[str, ResponseValue]:
+        """The responses' values, and their gradients by the backward sweep (:meth:`gradients`)."""
+        return responses.finish(design, m, mass, adjoint=self.gradients)
+
     def take_step(self, records: list[StepRecord]) -> None:
         """The records of one grid step of the forward run."""
         self.store.add_step(records)
         self._pending += len(records)
 
-    def catch_up(self) -> list[None]:
+    def catch_up(self) -> list[StepState | None]:
         """No sensitivities go forward: the responses take values only."""
-        out: list[None] = [None] * self._pending
+        out: list[StepState | None] = [None] * self._pending
         self._pending = 0
         return out
 
@@ -197,42 +225,27 @@ class AdjointMode:
     def _initial_step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
         """Transpose of the initial solve S0 ∇z0 = −(∂_xF_R + R_q ∇q0 + R_q̇ ∇q̇0 + R_p ∇p0) and
         of the start of the scheme's a0 = q̈0, b0 = ṗ0; leaves the bars of ∇q0, ∇q̇0, ∇p0."""
-        bar[2] += aux[0]
-        bar[5] += aux[1]
+        bar[:] = self._start_transposed(Aux(*aux), StepState(*bar))
         mu = self._solve(rec, np.concatenate([bar[2], bar[3], bar[5]]))
         self._state_transpose(rec.lin, mu, bar[0], bar[1], bar[4])
         return mu
 
     def _step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
         """Transpose of one direct step (predict, pseudo load, solve, correct, advance): the
-        bars of step i become those of step i − 1, in place; returns μ of the step."""
-        sc, h = self.scheme, rec.h
+        bars of step i become those of step i − 1, in place; returns μ of the step.  The
+        scheme's maps are transposed by the scheme (:class:`~dynsens.integrators.newmark.Newmark`),
+        the pseudo load's state part and the solve here."""
+        h = rec.h
         if rec.projection is not None and rec.projection.feedback:   # the projection came last: first here
             bar[0], bar[1], x_part = rec.projection.transpose(bar[0], bar[1], self.partials)
             self._projection_xbar += x_part
-        am, af, beta, gamma = sc.alpha_m, sc.alpha_f, sc.beta, sc.gamma
-        c = (1.0 - af) / (1.0 - am)
-        c_q, c_qd, c_p = sc.coefficients(h)
-        q_b, qd_b, qdd_b, lam_b, p_b, pd_b = bar
-        a_b, b_b = aux
-        # advance: a_i = a_rest + c q̈_i, b_i = b_rest + c ṗ_i
-        qdd_z = qdd_b + c * a_b
-        pd_z = pd_b + c * b_b
-        # correct: q_i = q^pred + c_q q̈_i, q̇_i = q̇^pred + c_q̇ q̈_i, p_i = p^pred + c_p ṗ_i
-        qdd_z = qdd_z + c_q * q_b + c_qd * qd_b
-        pd_z = pd_z + c_p * p_b
-        mu = self._solve(rec, np.concatenate([qdd_z, lam_b, pd_z]))
+        s_bar, rest_bar = self._advance_transposed(Aux(*aux), StepState(*bar))
+        (q_b, qd_b, p_b), z_bar = self._correct_transposed(s_bar, h)
+        mu = self._solve(rec, np.concatenate(z_bar))
         pq, pqd, pp = q_b.copy(), qd_b.copy(), p_b.copy()
         self._state_transpose(rec.lin, mu, pq, pqd, pp)
-        # predict: a_rest = (α_f q̈ − α_m a)/(1 − α_m), b_rest likewise
-        a_rest = a_b + (h * h * beta) * pq + (h * gamma) * pqd
-        b_rest = b_b + (h * gamma) * pp
-        bar[0] = pq
-        bar[1] = h * pq + pqd
-        bar[2] = (af / (1.0 - am)) * a_rest
-        bar[3] = np.zeros_like(lam_b)
-        bar[4] = pp
-        bar[5] = (af / (1.0 - am)) * b_rest
-        aux[0] = (h * h * (0.5 - beta)) * pq + (h * (1.0 - gamma)) * pqd - (am / (1.0 - am)) * a_rest
-        aux[1] = (h * (1.0 - gamma)) * pp - (am / (1.0 - am)) * b_rest
+        s_prev, aux_prev = self._predict_transposed(Prediction(pq, pqd, pp, rest_bar.a, rest_bar.b), h,
+                                                    np.zeros_like(s_bar.lam))
+        bar[:] = s_prev
+        aux[:] = aux_prev
         return mu

@@ -11,7 +11,7 @@ columns, so a step costs one small product instead of a solve.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,11 @@ from ..solver.newton import StepSolver
 from ..stepping import StepRecord, split_unknowns
 from .direct_step import PythonDirectStep, direct_step, run_block, serves
 from .finite import check_block
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..response_set import ResponseSet
+    from ..responses import ResponseValue
+    from .mode import MassOf
 
 TRAIL_STEPS = 128
 TRAIL_BYTES = 32 * 2**20
@@ -50,12 +55,16 @@ def trail_length(traits: Any, m: int) -> int:
 
 
 class DirectMode:
-    """The sensitivity state ∇s (n, m per leaf) carried forward over the step records."""
+    """The sensitivity state ∇s (n, m per leaf) carried forward over the step records (a
+    :class:`~dynsens.derivatives.mode.DerivativeMode`)."""
+
+    name = "direct"
 
     def __init__(self, model: Model, scheme: Newmark, solver: StepSolver, partials: DesignPartials,
-                 counters: Counters, design_names: tuple[str, ...] = ()):
+                 counters: Counters, design_names: tuple[str, ...] = (), reason: str = ""):
         self.model, self.scheme, self.solver, self.partials = model, scheme, solver, partials
         self.counters = counters
+        self.reason = reason               # why the run differentiates directly
         self.design_names = design_names   # named in the message of a non-finite sensitivity
         tr = model.traits
         self.n_q, self.n_lam, self.n_z = tr.n_q, tr.n_lam, tr.n_z
@@ -84,6 +93,15 @@ class DirectMode:
         self.daux = self.scheme.start(self.ds)
         check_block(self.model, [rec], [self.ds], self.ds, None, self.design_names)
         return self.ds
+
+    def bind_responses(self, responses: ResponseSet, params: Any) -> None:
+        """The responses take the design partials: they differentiate their outputs forward."""
+        responses.start(params, self.partials, None, self.n_z)
+
+    def finish_responses(self, responses: ResponseSet, design: dict[str, Any], m: int,
+                         mass: MassOf) -> dict[str, ResponseValue]:
+        """The responses' values and the gradients they accumulated forward."""
+        return responses.finish(design, m, mass)
 
     def take_step(self, records: list[StepRecord]) -> None:
         """Add the records of a grid step to the trail (their sensitivities follow at

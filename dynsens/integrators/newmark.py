@@ -24,10 +24,25 @@ it coincides with the classical HHT scheme.  Second order for γ = ½ + α_f −
 
 All maps are linear in the state, so the same code predicts and corrects the primal
 vectors (n,) and the sensitivity matrices (n, m): the sensitivities are derived from the
-scheme's own step equations.
+scheme's own step equations.  The scheme also gives the transposes of these maps, which the
+discrete adjoint (:mod:`dynsens.derivatives.adjoint`) runs backwards, the constants of its
+local error estimates (:meth:`Newmark.error_constants`, read by the adaptive steps of
+:mod:`dynsens.step_sequence`) and its stability limit (:meth:`Newmark.stability_limit`, read by
+:mod:`dynsens.runchecks`).
+
+Local error (Zienkiewicz & Xie 1991, extended to the α-family): for exact values at the start
+of a step, the displacement update errs by C_q h³ q⃛ with C_q = β − 1/6 + (α_m − α_f)/2
+(β − 1/6 for Newmark, 1/12 + (γ − ½)²/4 for the second-order α-members); the γ-rule of the
+first-order states by C_p h³ p⃛ with C_p = 1/12 − (α_m − α_f)²/2 (the trapezoid rule's 1/12).
+
+Stability for linear undamped problems: Newmark is unconditionally stable for 2β ≥ γ ≥ ½ and
+otherwise stable for ω Δt ≤ Ω_crit = 1/sqrt(γ/2 − β) (Newmark 1959; Hughes, *The Finite Element
+Method*, 1987, §9.1); HHT-α for α ∈ [0, ⅓] (Hilber, Hughes & Taylor 1977) and generalized-α for
+α_m ≤ α_f ≤ ½, β ≥ ¼ + (α_f − α_m)/2 (Chung & Hulbert 1993) are unconditionally stable.
 """
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -108,6 +123,80 @@ class Newmark:
     def advance(self, pred: Prediction, s: StepState) -> Aux:
         """Algorithmic accelerations of the new step."""
         return Aux(*advance_arrays(pred.a_rest, pred.b_rest, s.qdd, s.pd, self.c_a))
+
+    # ------------------------------------------------------------------ transposes (adjoint)
+    # Each is the transpose of the linear map of the same name: for the forward map A and any
+    # u, v, <A u, v> = <u, Aᵀ v> (tests/test_scheme_algebra.py).  Bars are vectors or (n, r)
+    # matrices, one column per response.
+
+    def start_transpose(self, aux_bar: Aux, s_bar: StepState) -> StepState:
+        """Transpose of :meth:`start` (a0 = q̈0, b0 = ṗ0): ``s_bar`` plus the bars of a0, b0
+        moved onto q̈0 and ṗ0."""
+        q, qd, qdd, lam, p, pd = s_bar
+        return StepState(q, qd, qdd + aux_bar.a, lam, p, pd + aux_bar.b)
+
+    def advance_transpose(self, aux_bar: Aux, s_bar: StepState) -> tuple[StepState, Aux]:
+        """Transpose of :meth:`advance` (a = a_rest + c_a q̈, b = b_rest + c_a ṗ): ``s_bar`` plus
+        c_a times the bars of a, b on q̈, ṗ, and the bars of the prediction's a_rest, b_rest
+        (as an :class:`Aux`; the other fields of the prediction :meth:`advance` does not read)."""
+        c = self.c_a
+        q, qd, qdd, lam, p, pd = s_bar     # (a tuple, not _replace: called per step of the sweep)
+        return StepState(q, qd, qdd + c * aux_bar.a, lam, p, pd + c * aux_bar.b), aux_bar
+
+    def correct_transpose(self, s_bar: StepState, dt: float
+                          ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
+        """Transpose of :meth:`correct` for step size dt (s): the bars of the prediction's
+        q, q̇, p (its a_rest, b_rest the corrector does not read) and of the unknowns
+        z = (q̈, λ, ṗ)."""
+        c_q, c_qd, c_p = self.coefficients(dt)
+        q, qd, qdd, lam, p, pd = s_bar
+        return (q, qd, p), (qdd + c_q * q + c_qd * qd, lam, pd + c_p * p)
+
+    def predict_transpose(self, pred_bar: Prediction, dt: float, lam_bar: np.ndarray) -> tuple[StepState, Aux]:
+        """Transpose of :meth:`predict` for step size dt (s): the bars of the previous state
+        and of its algorithmic accelerations.  The predictor does not read λ: its bar is
+        ``lam_bar`` (zeros of λ's shape, passed in since the scheme does not know the sizes)."""
+        beta, gamma, am, af, h = self.beta, self.gamma, self.alpha_m, self.alpha_f, dt
+        pq, pqd, pp = pred_bar.q, pred_bar.qd, pred_bar.p
+        # a_rest = (α_f q̈ − α_m a)/(1 − α_m) is read by q^pred and q̇^pred; b_rest likewise
+        a_rest = pred_bar.a_rest + (h * h * beta) * pq + (h * gamma) * pqd
+        b_rest = pred_bar.b_rest + (h * gamma) * pp
+        s_bar = StepState(pq, h * pq + pqd, (af / (1.0 - am)) * a_rest, lam_bar, pp, (af / (1.0 - am)) * b_rest)
+        aux_bar = Aux((h * h * (0.5 - beta)) * pq + (h * (1.0 - gamma)) * pqd - (am / (1.0 - am)) * a_rest,
+                      (h * (1.0 - gamma)) * pp - (am / (1.0 - am)) * b_rest)
+        return s_bar, aux_bar
+
+    # ------------------------------------------------------------------ error and stability
+    def error_constants(self) -> tuple[float, float]:
+        """(C_q, C_p): the local error of a step is C_q h³ q⃛ in q and C_p h³ p⃛ in p (module
+        docstring); the adaptive steps estimate h q⃛ by the change of the algorithmic
+        accelerations."""
+        delta = self.alpha_m - self.alpha_f
+        return self.beta - 1.0 / 6.0 + 0.5 * delta, 1.0 / 12.0 - 0.5 * delta * delta
+
+    @property
+    def unconditionally_stable(self) -> bool:
+        """Whether the scheme is stable for every step size on linear undamped problems."""
+        return math.isinf(self.stability_limit())
+
+    def stability_limit(self) -> float:
+        """Ω_crit: the scheme is stable on a linear undamped problem for ω Δt ≤ Ω_crit (ω: its
+        highest natural frequency, rad/s); ``inf`` when it is unconditionally stable, 0 when it
+        is stable for no step (Newmark with γ < ½).  Raises ValueError for an α-member outside
+        the unconditionally stable range, whose limit has no closed form here."""
+        beta, gamma, am, af = self.beta, self.gamma, self.alpha_m, self.alpha_f
+        if am == 0.0 and af == 0.0:
+            if gamma < 0.5:
+                return 0.0
+            if not beta < gamma / 2:
+                return math.inf
+            return float(1.0 / np.sqrt(gamma / 2 - beta))
+        if self.order == 2 and am <= af <= 0.5 and beta >= 0.25 + 0.5 * (af - am):
+            return math.inf
+        raise ValueError(f"the {self.name} scheme with alpha_m = {am:g}, alpha_f = {af:g}, beta = {beta:g}, "
+                         f"gamma = {gamma:g} is outside the unconditionally stable range of the alpha family "
+                         "(alpha_m <= alpha_f <= 1/2, beta >= 1/4 + (alpha_f - alpha_m)/2, second order): "
+                         "its stability limit has no closed form here")
 
 
 # The scheme's maps as functions of arrays and numbers: the methods above call them, and so do
