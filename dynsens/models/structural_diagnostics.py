@@ -19,8 +19,8 @@ class StructuralDiagnostics:
 
     n: int
     dof_names: list[str]
-    bar_X: np.ndarray
     loads: list[Any]
+    elements_of: Any
     #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
     equation_sources: list[tuple[str, list[int]]] = []
 
@@ -35,7 +35,8 @@ class StructuralDiagnostics:
         """The larger of the bar nodes' coordinates and the static deflections |f_amp|/K_dd of the
         loads' amplitudes on their DOFs (K: the tangent stiffness at t0)."""
         pv = np.real(params["pv"])
-        scale = float(np.max(np.abs(pv[self.bar_X]))) if np.size(self.bar_X) else 0.0
+        bar_X = self.elements_of("bar").X           # the bars' coordinate indices
+        scale = float(np.max(np.abs(pv[bar_X]))) if np.size(bar_X) else 0.0
         if lin is None or lin.R_q is None or not self.loads:
             return scale
         diag = np.real(lin.R_q.diagonal())
