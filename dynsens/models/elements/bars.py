@@ -26,6 +26,8 @@ class Bars(ElementKind):
     member = True
     output_kinds = ("force", "stress", "strain", "buckling")
     stack_keys: ClassVar[tuple[str, ...]] = ("D0", "L0", "EA", "E", "P_euler")
+    #: the prefix of the derived parameters' keys (a kind derived from bars keeps its own)
+    prefix: ClassVar[str] = ""
 
     def __init__(self) -> None:
         self.names: list[str] = []
@@ -77,48 +79,53 @@ class Bars(ElementKind):
         A, E, rho = pv[self.A], pv[self.E], pv[self.rho]
         half = 0.5 * rho * A * L0
         np.add.at(mass, self.idx, np.repeat(half[:, None], 2 * self.dim, axis=1))
-        out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
+        derived = dict(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
         # Euler load π²EI/(KL)² (force unit); infinite for a bar without 'inertia' (the
         # buckling output refuses such bars)
         KL = pv[self.K] * L0
         has = self.I >= 0
         inertia = np.where(has, pv[np.maximum(self.I, 0)], 1.0)
-        out["P_euler"] = np.where(has, np.pi ** 2 * E * inertia / (KL * KL), np.inf)
+        derived["P_euler"] = np.where(has, np.pi ** 2 * E * inertia / (KL * KL), np.inf)
+        out.update({self.prefix + k: v for k, v in derived.items()})
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
-        return np.sum(params["bar_mass"]) if len(self) else None
+        return np.sum(params[self.prefix + "bar_mass"]) if len(self) else None
 
     def state(self, q: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
         """Bar vectors d (..., n_e, dim), Green–Lagrange strains and axial forces (..., n_e)."""
         qe = extend(q)
         U = qe[..., self.idx].reshape(qe.shape[:-1] + (-1, 2, self.dim))
         du = U[..., 1, :] - U[..., 0, :]
-        D0 = params["D0"]
+        D0 = params[self.prefix + "D0"]
         d = D0 + du
-        L0 = params["L0"]
+        L0 = params[self.prefix + "L0"]
         # (ℓ² − L²) written as 2 D0·Δu + Δu·Δu: no cancellation for small displacements
         strain = (2.0 * np.sum(D0 * du, axis=-1) + np.sum(du * du, axis=-1)) / (2 * L0 * L0)
-        N = params["EA"] * strain
+        N = params[self.prefix + "EA"] * strain
         return {"d": d, "strain": strain, "N": N}
 
     def internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray | None:
         if not len(self):
             return None
         bs = self.state(q, params)
-        fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
+        fe = (bs["N"] / params[self.prefix + "L0"])[..., None] * bs["d"]
         return self.scatter(np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,)))
 
     def tangent(self, q: np.ndarray, params: dict[str, Any], corotated: bool) -> list[Triplets]:
         if not (len(self) and corotated):
             return []
         bs = self.state(q, params)
-        d, N, L0, EA = bs["d"], bs["N"], params["L0"], params["EA"]
-        k_node = (EA / L0 ** 3)[:, None, None] * d[:, :, None] * d[:, None, :] \
+        d, N, L0 = bs["d"], bs["N"], params[self.prefix + "L0"]
+        k_node = (self.axial_stiffness(bs, params) / L0 ** 3)[:, None, None] * d[:, :, None] * d[:, None, :] \
             + (N / L0)[:, None, None] * np.eye(self.dim)
         ke = np.block([[k_node, -k_node], [-k_node, k_node]])
         idx = self.idx
         return [(np.repeat(idx, 2 * self.dim, axis=1).ravel(), np.tile(idx, (1, 2 * self.dim)).ravel(),
                  ke.reshape(len(idx), -1).ravel())]
+
+    def axial_stiffness(self, bs: dict[str, np.ndarray], params: dict[str, Any]) -> np.ndarray:
+        """dN/dε (force unit) at the bars' state ``bs``: EA."""
+        return params[self.prefix + "EA"]
 
     def deformations(self, qe: np.ndarray, params: dict[str, Any], hessian: bool = False
                      ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -137,6 +144,10 @@ class Bars(ElementKind):
     def damped_kind(self) -> DampedKind:
         """The bars' share of Rayleigh's β K on deformation rates (:mod:`..corotated_damping`)."""
         return DampedKind(self.idx, self.scatter, self.deformations)
+
+    def stress(self, bs: dict[str, np.ndarray], params: dict[str, Any]) -> np.ndarray:
+        """Axial stresses (..., n_e) at the bars' state ``bs``: E ε."""
+        return params[self.prefix + "E"] * bs["strain"]
 
     def design_touch(self) -> list[Touch]:
         # inertia and effective length enter outputs only (buckling), not F_R: no rows
@@ -159,5 +170,5 @@ class Bars(ElementKind):
                 return bs["N"][..., index]
             if kind == "buckling":
                 return (-bs["N"] / prm["P_euler"])[..., index]
-            return (prm["E"] * bs["strain"])[..., index]
+            return self.stress(bs, prm)[..., index]
         return bar_out, tuple(f"{self.names[b]}.{kind}" for b in index)
