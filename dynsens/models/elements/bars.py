@@ -24,7 +24,7 @@ class Bars(ElementKind):
     order = 3
     section = "structural.bar"
     member = True
-    output_kinds = ("force", "stress", "strain", "buckling")
+    output_kinds: ClassVar[tuple[str, ...]] = ("force", "stress", "strain", "buckling")
     stack_keys: ClassVar[tuple[str, ...]] = ("D0", "L0", "EA", "E", "P_euler")
     #: the prefix of the derived parameters' keys (a kind derived from bars keeps its own)
     prefix: ClassVar[str] = ""
