@@ -94,6 +94,21 @@ def test_a_switch_without_its_width_or_an_unknown_one_is_one_problem_at_its_key(
         load_case_dict(cable_case(1.0, law=law))
 
 
+def test_a_mass_on_a_spring_and_a_cable_swings_as_the_bilinear_oscillator() -> None:
+    """Released at rest length with velocity v0: taut while u > 0 (stiffness k + EA/L), slack
+    while u < 0 (k alone), so u_max = v0/ω₁ and u_min = −v0/ω₀ with ω₁² = (k + EA/L)/m and
+    ω₀² = k/m (small amplitude: the Green–Lagrange strain is linear to 1e-4 here)."""
+    v0 = 1e-3
+    raw = cable_case(0.0, v0=v0)
+    raw["integrator"] = {"dt": 1e-3, "t_end": 1.0}
+    raw["responses"] = [{"name": "u_max", "type": "max", "quantity": {"dof": "b.x"}},
+                        {"name": "u_min", "type": "min", "quantity": {"dof": "b.x"}}]
+    res = dynsens.run_case(load_case_dict(raw))
+    w1, w0 = np.sqrt(K + E * AREA / L), np.sqrt(K)
+    assert float(res.responses["u_max"].value) == pytest.approx(v0 / w1, rel=2e-3)
+    assert float(res.responses["u_min"].value) == pytest.approx(-v0 / w0, rel=2e-3)
+
+
 def test_output_force_and_stress_of_a_slack_and_a_taut_cable() -> None:
     raw = cable_case(0.0, v0=0.05)
     raw["integrator"] = {"dt": 1e-2, "t_end": 0.6}
