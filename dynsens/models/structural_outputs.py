@@ -95,20 +95,8 @@ class StructuralOutputs:
             problems.add(f"{path}.kind",
                          f"unknown kind {kind!r}{did_you_mean(kind, known)} (known: {', '.join(known)})")
             return None
-        picked: dict[int, list[int]] = {}        # set position -> element indices
-        refused: dict[str, list[str]] = {}       # one problem per kind of element, naming them all
-        for nm in names:
-            k = owner.get(nm)
-            if k is None:
-                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, list(owner))}")
-            elif kind in k.output_kinds:
-                picked.setdefault(self.sets.index(k), []).append(k.names.index(nm))
-            else:
-                refused.setdefault(k.refusal(kind), []).append(nm)
-        for what, which in refused.items():
-            problems.add(f"{path}.kind", f"{what}, not {kind!r}: {', '.join(which[:5])}"
-                                         f"{f' and {len(which) - 5} more' if len(which) > 5 else ''}")
-        if sum(len(v) for v in picked.values()) != len(names):
+        picked = self._pick(names, owner, kind, path, problems)
+        if picked is None:
             return None
         if len({self.sets[j].member for j in picked}) > 1:
             problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
@@ -123,3 +111,22 @@ class StructuralOutputs:
         def joined(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
             return np.concatenate([fn(t, s, prm) for fn, _ in parts], axis=-1)
         return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True)
+
+    def _pick(self, names: list[Any], owner: dict[str, Any], kind: str, path: str,
+              problems: ProblemCollector) -> dict[int, list[int]] | None:
+        """Element indices per set position of the named elements that report ``kind``; None
+        with one problem per unknown name and per kind of element that does not report it."""
+        picked: dict[int, list[int]] = {}        # set position -> element indices
+        refused: dict[str, list[str]] = {}       # one problem per kind of element, naming them all
+        for nm in names:
+            k = owner.get(nm)
+            if k is None:
+                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, list(owner))}")
+            elif kind in k.output_kinds:
+                picked.setdefault(self.sets.index(k), []).append(k.names.index(nm))
+            else:
+                refused.setdefault(k.refusal(kind), []).append(nm)
+        for what, which in refused.items():
+            problems.add(f"{path}.kind", f"{what}, not {kind!r}: {', '.join(which[:5])}"
+                                         f"{f' and {len(which) - 5} more' if len(which) > 5 else ''}")
+        return picked if sum(len(v) for v in picked.values()) == len(names) else None
