@@ -1,20 +1,20 @@
-r"""Structural dynamics models: point masses, springs, dampers and truss bars.
+r"""Structural dynamics models: element sets of registered kinds on scalar DOFs and nodes.
 
 Residual (method.md §1) with z = q̈:
 
 .. math:: F_R = M\ddot q + D\dot q + f_{int}(q) - f_{ext}(t) = 0
 
-* ``M`` is diagonal (point masses and lumped bar masses, ρAL/2 per node and direction);
-* springs between two DOFs (or a DOF and ground) carry f = k₁δ + k₂δ² + k₃δ³ with
-  δ = u_a − u_b (cubic hardening for k₃ > 0, softening for k₃ < 0);
-* viscous dampers f = c δ̇, and Rayleigh damping α M + β K₀ (K₀: the stiffness at q = 0) whose
-  stiffness part acts, for bars and co-rotational beams, on the elements' deformation rates in
-  their turning frames (:mod:`.corotated_damping`);
-* bars (2D or 3D truss elements) are geometrically nonlinear: total Lagrangian with the
-  Green–Lagrange strain ε = (ℓ² − L²)/(2L²), axial force N = E A ε, nodal forces
-  ± N d/L (d the current bar vector); the tangent is (EA/L³) d dᵀ + (N/L) I per node pair.
+* the element kinds (:mod:`.elements`: point masses, springs, dampers, truss bars, cables, plane
+  and space beams) contribute M's diagonal (lumped masses) and consistent masses, D's viscous
+  entries and nonlinear damping forces, f_int and its tangent; the model loops over its element
+  sets, one per kind, in the kinds' fixed order (the order of every sum);
+* Rayleigh damping α M + β K₀ (K₀: the stiffness at q = 0) whose stiffness part acts, for bars
+  and co-rotational beams, on the elements' deformation rates in their turning frames
+  (:mod:`.corotated_damping`); loads value · function(t), and follower loads (:mod:`.follower`).
 
-Elements of one kind are stored as arrays and evaluated together.  Fixed DOFs (supports,
+The model also resolves output quantities (DOF histories; element quantities by the element's
+kind) and answers the run-time diagnostics (the elements and loads acting on a DOF, the size
+of q its data imply).  Elements of one kind are stored as arrays and evaluated together.  Fixed DOFs (supports,
 ``ground``) map to an extra slot that always holds zero.  All code is complex-safe.
 """
 from __future__ import annotations
@@ -24,7 +24,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .base import Model, StepState, Traits
+from ..case_keys import allowed
+from ..errors import ProblemCollector
+from ._keys import check_keys, did_you_mean
+from .base import Linearization, Model, Output, StepState, Traits
 from .parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
@@ -33,9 +36,7 @@ from .dampers import NonlinearDampers
 from .elements import ElementKind, ModelContext
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
-from .structural_diagnostics import StructuralDiagnostics
 from .structural_matrices import StructuralMatrices
-from .structural_outputs import StructuralOutputs
 from .timefunctions import TimeFunction
 
 GROUND = "ground"
@@ -49,9 +50,13 @@ _EMPTY_BEAMS.freeze()
 _EMPTY_FRAMES.freeze()
 
 
-class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnostics, Model):
+class StructuralModel(StructuralMatrices, Model):
     """Assembled structural model; built from a case by :func:`build_structural`.  It knows no
-    element kind by name: it loops over its element sets (:mod:`.elements`), in their order."""
+    element kind by name: it loops over its element sets (:mod:`.elements`), in their order.
+    Its matrices and their assembly are :class:`.structural_matrices.StructuralMatrices`."""
+
+    #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
+    equation_sources: list[tuple[str, list[int]]] = []
 
     def __init__(self, *, dof_names: list[str], table: ParameterTable, sets: list[ElementKind], dim: int,
                  node_coords: dict[str, list[int]], loads: list[tuple[int, int, TimeFunction]],
@@ -345,3 +350,136 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
+
+    # ------------------------------------------------------------------ outputs
+    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}``,
+        ``{node: NAME, kind: ...}`` (the node's free translation DOFs x, y (z)) or
+        ``{element: NAME|[NAMES]|all, kind: ...}``: what each element kind reports (bars force,
+        stress, strain and buckling, the ratio −N/P_E of the compressive axial force to the Euler
+        load π²EI/(KL)², positive in compression, > 1 means buckled; beams force and stress;
+        springs and dampers force)."""
+        if not check_keys(spec, path, allowed("structural.quantity"), problems):
+            return None
+        kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
+        if sum(k in spec for k in ("dof", "node", "element")) > 1:
+            problems.add(path, "give one of 'dof', 'node' or 'element'")
+            return None
+        if "node" in spec:
+            free = self._node_dofs(spec["node"], path, problems)
+            if free is None:
+                return None
+            spec = {"dof": free, "kind": kind}
+        if "dof" in spec:
+            return self._dof_output(spec["dof"], kind, path, problems)
+        if "element" not in spec:
+            problems.add(path, "expected 'dof' or 'element'")
+            return None
+        return self._element_output(spec["element"], kind, path, problems)
+
+    def _node_dofs(self, node: Any, path: str, problems: ProblemCollector) -> list[str] | None:
+        """The free translation DOFs of a node, or None with a problem listed."""
+        if not isinstance(node, str) or node not in self.node_names:
+            problems.add(f"{path}.node", f"unknown node {node!r}{did_you_mean(str(node), self.node_names)}")
+            return None
+        free = [f"{node}.{a}" for a in "xyz"[:self.dim] if f"{node}.{a}" in self.dof_names]
+        if not free:
+            problems.add(f"{path}.node", f"every translation of node {node!r} is fixed")
+            return None
+        return free
+
+    def _dof_output(self, dofs: Any, kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Displacements, velocities or accelerations of named DOFs."""
+        names = dofs if isinstance(dofs, list) else [dofs]
+        if not names:
+            problems.add(f"{path}.dof", "expected a dof name or a non-empty list of dof names, found []")
+            return None
+        field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
+        if kind not in field_of:
+            problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "
+                                         f"(known: {', '.join(field_of)})")
+            return None
+        idx = []
+        for nm in names:
+            if nm not in self.dof_names:
+                problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
+            else:
+                idx.append(self.dof_names.index(nm))
+        if len(idx) != len(names):
+            return None
+        ia = np.array(idx)
+        fld = field_of[kind]
+        unit = ""  # the case's own unit system; a response may name it with 'unit'
+        return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
+                      tuple(f"{n}.{kind}" for n in names), unit, linear=True)
+
+    def _element_output(self, names: Any, kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities of named elements (``all``: the members, bars and beams; else the springs),
+        grouped by their sets, in the sets' order."""
+        if names == "all":
+            members = [nm for k in self.sets if k.member for nm in k.names]
+            names = members if members else [nm for k in self.sets if k.type == "spring" for nm in k.names]
+        names = names if isinstance(names, list) else [names]
+        owner = {nm: k for k in self.sets for nm in k.names}
+        known = list(dict.fromkeys(knd for k in self.sets for knd in k.output_kinds))
+        if kind not in known:
+            problems.add(f"{path}.kind",
+                         f"unknown kind {kind!r}{did_you_mean(kind, known)} (known: {', '.join(known)})")
+            return None
+        picked = self._pick(names, owner, kind, path, problems)
+        if picked is None:
+            return None
+        if len({self.sets[j].member for j in picked}) > 1:
+            problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
+            return None
+        parts = [self.sets[j].output(np.array(idx), kind, path, problems) for j, idx in sorted(picked.items())]
+        if any(p is None for p in parts):
+            return None
+        unit = "-" if kind in ("strain", "buckling") else ""
+        if len(parts) == 1:
+            return Output(parts[0][0], parts[0][1], unit, batched=True, autonomous=True)
+
+        def joined(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            return np.concatenate([fn(t, s, prm) for fn, _ in parts], axis=-1)
+        return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True)
+
+    def _pick(self, names: list[Any], owner: dict[str, Any], kind: str, path: str,
+              problems: ProblemCollector) -> dict[int, list[int]] | None:
+        """Element indices per set position of the named elements that report ``kind``; None
+        with one problem per unknown name and per kind of element that does not report it."""
+        picked: dict[int, list[int]] = {}        # set position -> element indices
+        refused: dict[str, list[str]] = {}       # one problem per kind of element, naming them all
+        for nm in names:
+            k = owner.get(nm)
+            if k is None:
+                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, list(owner))}")
+            elif kind in k.output_kinds:
+                picked.setdefault(self.sets.index(k), []).append(k.names.index(nm))
+            else:
+                refused.setdefault(k.refusal(kind), []).append(nm)
+        for what, which in refused.items():
+            problems.add(f"{path}.kind", f"{what}, not {kind!r}: {', '.join(which[:5])}"
+                                         f"{f' and {len(which) - 5} more' if len(which) > 5 else ''}")
+        return picked if sum(len(v) for v in picked.values()) == len(names) else None
+
+    # ------------------------------------------------------------------ run-time diagnostics
+    def describe_equation(self, k: int) -> str:
+        """DOF k and the elements and loads acting on it, by YAML path and name."""
+        if not 0 <= k < self.n:
+            return Model.describe_equation(self, k)  # type: ignore[arg-type]
+        acting = [entry for entry, dofs in self.equation_sources if k in dofs]
+        return f"DOF '{self.dof_names[k]}'" + (f" (acted on by {', '.join(acting)})" if acting else "")
+
+    def displacement_scale(self, params: dict[str, Any], lin: Linearization | None) -> float:
+        """The larger of the bar nodes' coordinates and the static deflections |f_amp|/K_dd of the
+        loads' amplitudes on their DOFs (K: the tangent stiffness at t0)."""
+        pv = np.real(params["pv"])
+        bar_X = self.bar_X
+        scale = float(np.max(np.abs(pv[bar_X]))) if np.size(bar_X) else 0.0
+        if lin is None or lin.R_q is None or not self.loads:
+            return scale
+        diag = np.real(lin.R_q.diagonal())
+        for dof, amp, _ in self.loads:
+            if dof < self.n and diag[dof] > 0:
+                scale = max(scale, abs(float(pv[amp])) / float(diag[dof]))
+        return scale
