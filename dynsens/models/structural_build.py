@@ -162,6 +162,11 @@ def _read_elements(spec: dict, path: str, ctx: ReadContext, dofs: _Dofs) -> list
             problems.add(f"{ep}.name", f"duplicate element name {name!r}")
         names_seen.add(name)
         cls = kind_class(kind, ctx.dim)
+        if cls is None and kind in element_types():
+            dims = sorted({d for c in load_kinds()[kind] for d in c.dims})
+            problems.add(f"{ep}.type", f"a {kind} element serves models of dim {' or '.join(map(str, dims))}, "
+                                       f"not {ctx.dim}")
+            continue
         if cls is None:
             kinds = element_types()
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
