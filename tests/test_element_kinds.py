@@ -52,8 +52,8 @@ def test_a_type_without_a_kind_for_the_model_dimension_is_one_problem_at_its_key
 
     monkeypatch.setitem(KINDS, "plane_only", [PlaneOnly])
     load_case_dict(chain([{"type": "plane_only"}]))
-    with pytest.raises(dynsens.CaseError, match=r"\(1 problem\):\n  - model\.elements\[6\]\.type: a plane_only element serves models of dim 2, "
-                                                r"not 3"):
+    expected = r"\(1 problem\):\n  - model\.elements\[6\]\.type: a plane_only element serves models of dim 2, not 3"
+    with pytest.raises(dynsens.CaseError, match=expected):
         load_case_dict(chain([{"type": "plane_only"}], dim=3))
 
 
