@@ -274,9 +274,9 @@ def test_the_spring_law_is_the_models(monkeypatch):
     model = case.model
     params = model.parameters(case.x0)
     q = np.linspace(0.0, 0.01, 5)
-    before = copy.deepcopy(model._spring_state(q, params, tangent=False)[0])
-    from dynsens.models import structural
-    monkeypatch.setattr(structural, "spring_law", lambda d, k1, k2, k3: (2 * k1 * d, k1 + 0 * d))
-    after = model._spring_state(q.copy(), params, tangent=False)[0]
+    before = copy.deepcopy(model.springs.state(q, params, tangent=False)[0])
+    from dynsens.models.elements import springs
+    monkeypatch.setattr(springs, "spring_law", lambda d, k1, k2, k3: (2 * k1 * d, k1 + 0 * d))
+    after = model.springs.state(q.copy(), params, tangent=False)[0]
     np.testing.assert_allclose(after, 2 * params["k1"] * (q - np.concatenate([[0.0], q[:-1]])))
     assert not np.allclose(after, before)

@@ -11,6 +11,8 @@ kind (:mod:`.models`), joined here in that order.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .general import GENERAL_SECTIONS
 from .keys import (AGGREGATE_TYPES, BEAM_SECTION_SHAPES, FORCE_TYPES, JOINT_TYPES, KINDS, NO_DEFAULT,
                    RESPONSE_TYPES, STRUCTURAL_ELEMENT_TYPES, TIME_FUNCTION_TYPES, Key, Section)
@@ -24,6 +26,17 @@ def allowed(section: str, *extra: str) -> tuple[str, ...]:
     return tuple(k.name for k in SECTIONS[section].keys) + extra
 
 
+def add_element_section(name: str, section: Section) -> None:
+    """Add the key section of a structural element kind that declares its keys in its own module
+    (:mod:`dynsens.models.elements`): the loaders check against it, the model's ``elements`` list
+    names it and the generated reference lists it."""
+    SECTIONS[name] = section
+    model = SECTIONS["model.structural"]
+    keys = tuple(replace(k, item=tuple(dict.fromkeys([*k.item, name]))) if k.name == "elements"
+                 and isinstance(k.item, tuple) else k for k in model.keys)
+    SECTIONS["model.structural"] = replace(model, keys=keys)
+
+
 def required(section: str) -> tuple[str, ...]:
     """The keys ``section`` requires."""
     return tuple(k.name for k in SECTIONS[section].keys if k.required)
@@ -31,4 +44,4 @@ def required(section: str) -> tuple[str, ...]:
 
 __all__ = ["AGGREGATE_TYPES", "BEAM_SECTION_SHAPES", "FORCE_TYPES", "JOINT_TYPES", "KINDS", "NO_DEFAULT",
            "RESPONSE_TYPES", "SECTIONS", "STRUCTURAL_ELEMENT_TYPES", "TIME_FUNCTION_TYPES", "Key", "Section",
-           "allowed", "required"]
+           "add_element_section", "allowed", "required"]

@@ -298,46 +298,18 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
         problems.add(f"{ep}.nodes", f"expected [node_a, node_b], found {pair!r}")
         return
     sec = el.get("section")
-    if not check_keys(sec, f"{ep}.section", allowed("structural.beam_section"), problems) or not isinstance(sec, dict):
+    shape = _section_shape(sec, ep, problems)
+    if shape is None:
         return
-    shape = sec.get("shape", "properties")
-    if shape not in SHAPES3:
-        problems.add(f"{ep}.section.shape", f"unknown shape {shape!r}{did_you_mean(shape, SHAPES3)}")
-        return
+    assert isinstance(sec, dict)
     needed = SHAPES3[shape]
-    extra = [k for k in sec if k != "shape" and k not in needed]
-    missing = [k for k in needed if k not in sec]
-    if extra or missing:
-        problems.add(f"{ep}.section", f"a {shape} section of a 3D beam takes {', '.join(needed)}"
-                                      + (f"; not {', '.join(extra)}" if extra else "")
-                                      + (f"; missing {', '.join(missing)}" if missing else ""))
-        return
-    mass = el.get("mass", "lumped")
-    if mass not in ("lumped", "consistent"):
-        problems.add(f"{ep}.mass", f"expected lumped or consistent, found {mass!r}")
-    kinematics = el.get("kinematics", "small")
-    if kinematics not in ("small", "corotational"):
-        problems.add(f"{ep}.kinematics", f"expected small or corotational, found {kinematics!r}")
-    elif kinematics == "corotational" and mass == "consistent":
-        problems.add(f"{ep}.mass", "a corotational 3D beam has lumped mass only, so far")
+    mass, kinematics = _mass_and_kinematics(el, ep, problems)
     v = el.get("orientation")
     dofs = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
     if any(p not in node_coords for p in pair):
         return
-    if v is not None and (not isinstance(v, list) or len(v) != 3
-                          or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)
-                          or not np.any(np.asarray(v, float))):
-        problems.add(f"{ep}.orientation", f"expected a non-zero vector [x, y, z], found {v!r}")
+    if not _orientation_ok(v, [(given_coords or {}).get(p) for p in pair], ep, problems):
         return
-    ends = [(given_coords or {}).get(p) for p in pair]
-    if v is not None and all(isinstance(c, list) and len(c) == 3 and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) for x in c) for c in ends):
-        d = np.asarray(ends[1], float) - np.asarray(ends[0], float)
-        w = np.asarray(v, float)
-        if np.linalg.norm(np.cross(d, w)) <= 1e-9 * np.linalg.norm(d) * np.linalg.norm(w):
-            problems.add(f"{ep}.orientation", f"the orientation {v} is parallel to the beam (it sets local y, "
-                                              f"which must cross the beam axis)")
-            return
     beams.names.append(name)
     beams.dofs.append(dofs)
     beams.coords.append(node_coords[pair[0]] + node_coords[pair[1]])
@@ -354,3 +326,58 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
     beams.consistent.append(mass == "consistent")
     beams.corot.append(kinematics == "corotational")
 
+
+def _section_shape(sec: Any, ep: str, problems: ProblemCollector) -> str | None:
+    """The shape of a 3D beam's ``section`` with exactly its dimensions, or None with a problem listed."""
+    if not check_keys(sec, f"{ep}.section", allowed("structural.beam_section"), problems) or not isinstance(sec, dict):
+        return None
+    shape = sec.get("shape", "properties")
+    if shape not in SHAPES3:
+        problems.add(f"{ep}.section.shape", f"unknown shape {shape!r}{did_you_mean(shape, SHAPES3)}")
+        return None
+    needed = SHAPES3[shape]
+    extra = [k for k in sec if k != "shape" and k not in needed]
+    missing = [k for k in needed if k not in sec]
+    if extra or missing:
+        problems.add(f"{ep}.section", f"a {shape} section of a 3D beam takes {', '.join(needed)}"
+                                      + (f"; not {', '.join(extra)}" if extra else "")
+                                      + (f"; missing {', '.join(missing)}" if missing else ""))
+        return None
+    return str(shape)
+
+
+def _mass_and_kinematics(el: dict, ep: str, problems: ProblemCollector) -> tuple[Any, Any]:
+    """The beam's ``mass`` (lumped or consistent) and ``kinematics`` (small or corotational)."""
+    mass = el.get("mass", "lumped")
+    if mass not in ("lumped", "consistent"):
+        problems.add(f"{ep}.mass", f"expected lumped or consistent, found {mass!r}")
+    kinematics = el.get("kinematics", "small")
+    if kinematics not in ("small", "corotational"):
+        problems.add(f"{ep}.kinematics", f"expected small or corotational, found {kinematics!r}")
+    elif kinematics == "corotational" and mass == "consistent":
+        problems.add(f"{ep}.mass", "a corotational 3D beam has lumped mass only, so far")
+    return mass, kinematics
+
+
+def _numbers(v: Any, length: int) -> bool:
+    """Whether v is a list of ``length`` plain numbers (not booleans)."""
+    return isinstance(v, list) and len(v) == length and all(
+        isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)
+
+
+def _orientation_ok(v: Any, ends: list[Any], ep: str, problems: ProblemCollector) -> bool:
+    """Whether the ``orientation`` v (None: the default) is a non-zero vector that crosses the
+    beam axis (checked where both ends' coordinates are numbers); else a problem listed."""
+    if v is None:
+        return True
+    if not _numbers(v, 3) or not np.any(np.asarray(v, float)):
+        problems.add(f"{ep}.orientation", f"expected a non-zero vector [x, y, z], found {v!r}")
+        return False
+    if all(_numbers(c, 3) for c in ends):
+        d = np.asarray(ends[1], float) - np.asarray(ends[0], float)
+        w = np.asarray(v, float)
+        if np.linalg.norm(np.cross(d, w)) <= 1e-9 * np.linalg.norm(d) * np.linalg.norm(w):
+            problems.add(f"{ep}.orientation", f"the orientation {v} is parallel to the beam (it sets local y, "
+                                              f"which must cross the beam axis)")
+            return False
+    return True

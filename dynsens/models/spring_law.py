@@ -1,5 +1,5 @@
 """The law of a structural spring, one definition for every evaluation path: the numpy model
-(:meth:`~dynsens.models.structural.StructuralModel._spring_state`, any batch shape) and the
+(:meth:`~dynsens.models.elements.springs.Springs.state`, any batch shape) and the
 compiled step of spring networks (:mod:`dynsens.models.structural_step`)."""
 from __future__ import annotations
 

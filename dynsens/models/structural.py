@@ -1,42 +1,42 @@
-r"""Structural dynamics models: point masses, springs, dampers and truss bars.
+r"""Structural dynamics models: element sets of registered kinds on scalar DOFs and nodes.
 
 Residual (method.md §1) with z = q̈:
 
 .. math:: F_R = M\ddot q + D\dot q + f_{int}(q) - f_{ext}(t) = 0
 
-* ``M`` is diagonal (point masses and lumped bar masses, ρAL/2 per node and direction);
-* springs between two DOFs (or a DOF and ground) carry f = k₁δ + k₂δ² + k₃δ³ with
-  δ = u_a − u_b (cubic hardening for k₃ > 0, softening for k₃ < 0);
-* viscous dampers f = c δ̇, and Rayleigh damping α M + β K₀ (K₀: the stiffness at q = 0) whose
-  stiffness part acts, for bars and co-rotational beams, on the elements' deformation rates in
-  their turning frames (:mod:`.corotated_damping`);
-* bars (2D or 3D truss elements) are geometrically nonlinear: total Lagrangian with the
-  Green–Lagrange strain ε = (ℓ² − L²)/(2L²), axial force N = E A ε, nodal forces
-  ± N d/L (d the current bar vector); the tangent is (EA/L³) d dᵀ + (N/L) I per node pair.
+* the element kinds (:mod:`.elements`: point masses, springs, dampers, truss bars, cables, plane
+  and space beams) contribute M's diagonal (lumped masses) and consistent masses, D's viscous
+  entries and nonlinear damping forces, f_int and its tangent; the model loops over its element
+  sets, one per kind, in the kinds' fixed order (the order of every sum);
+* Rayleigh damping α M + β K₀ (K₀: the stiffness at q = 0) whose stiffness part acts, for bars
+  and co-rotational beams, on the elements' deformation rates in their turning frames
+  (:mod:`.corotated_damping`); loads value · function(t), and follower loads (:mod:`.follower`).
 
-Elements of one kind are stored as arrays and evaluated together.  Fixed DOFs (supports,
+The model also resolves output quantities (DOF histories; element quantities by the element's
+kind) and answers the run-time diagnostics (the elements and loads acting on a DOF, the size
+of q its data imply).  Elements of one kind are stored as arrays and evaluated together.  Fixed DOFs (supports,
 ``ground``) map to an extra slot that always holds zero.  All code is complex-safe.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from .base import Model, StepState, Traits
+from ..case_keys import allowed
+from ..errors import ProblemCollector
+from ._keys import check_keys, did_you_mean
+from .base import Linearization, Model, Output, StepState, Traits
 from .parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
-from .corotated_damping import CorotatedDamping, DampedKind
+from .corotated_damping import CorotatedDamping
 from .dampers import NonlinearDampers
+from .elements import ElementKind, ModelContext
 from .follower import FollowerLoads
 from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
-from .spring_law import spring_law
-from .structural_diagnostics import StructuralDiagnostics
 from .structural_matrices import StructuralMatrices
-from .structural_outputs import StructuralOutputs
 from .timefunctions import TimeFunction
 
 GROUND = "ground"
@@ -45,105 +45,54 @@ AXES = ("x", "y", "z")
 # the Duffing chain (dense and sparse equal at 100 DOFs, sparse 8 % ahead at 120 and 27 % at
 # 200) and about the same on the tower frame (144 DOFs: equal; BENCHMARKS.md)
 SPARSE_THRESHOLD = 100
+_EMPTY_BEAMS, _EMPTY_FRAMES = BeamSet(), Beam3DSet()      # the beams of the other dimension: none
+_EMPTY_BEAMS.freeze()
+_EMPTY_FRAMES.freeze()
 
 
-@dataclass
-class _Group:
-    """Elements of one kind: connectivity (n_e, k) into the extended DOF vector and parameters."""
+class StructuralModel(StructuralMatrices, Model):
+    """Assembled structural model; built from a case by :func:`build_structural`.  It knows no
+    element kind by name: it loops over its element sets (:mod:`.elements`), in their order.
+    Its matrices and their assembly are :class:`.structural_matrices.StructuralMatrices`."""
 
-    names: list[str] = field(default_factory=list)
-    dofs: list[list[int]] = field(default_factory=list)
-    params: dict[str, list[int]] = field(default_factory=dict)
+    #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
+    equation_sources: list[tuple[str, list[int]]] = []
 
-    def add(self, name: str, dofs: list[int], **params: int) -> None:
-        self.names.append(name)
-        self.dofs.append(dofs)
-        for k, v in params.items():
-            self.params.setdefault(k, []).append(v)
-
-    def freeze(self, width: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        idx = np.array(self.dofs, dtype=int).reshape(-1, width)
-        return idx, {k: np.array(v, dtype=int) for k, v in self.params.items()}
-
-
-class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnostics, Model):
-    """Assembled structural model; built from a case by :func:`build_structural`."""
-
-    def __init__(self, *, dof_names: list[str], table: ParameterTable, mass_terms: list[tuple[int, int]],
-                 springs: _Group, dampers: _Group, bars: _Group, dim: int, node_coords: dict[str, list[int]],
-                 bar_nodes: list[tuple[str, str]], loads: list[tuple[int, int, TimeFunction]],
+    def __init__(self, *, dof_names: list[str], table: ParameterTable, sets: list[ElementKind], dim: int,
+                 node_coords: dict[str, list[int]], loads: list[tuple[int, int, TimeFunction]],
                  initial: tuple[list[tuple[int, int]], list[tuple[int, int]]],
-                 rayleigh: tuple[int, int] | None, sparse: bool | None, spring_nonlinear: bool,
-                 beams: BeamSet | None = None, nl_dampers: NonlinearDampers | None = None,
-                 followers: FollowerLoads | None = None, frames: Beam3DSet | None = None,
-                 rayleigh_corotated: bool = True):
+                 rayleigh: tuple[int, int] | None, sparse: bool | None,
+                 followers: FollowerLoads | None = None, rayleigh_corotated: bool = True):
         self.dof_names = dof_names
         self.table = table
         n = len(dof_names)
         self.n = n
-        self.mass_dof = np.array([d for d, _ in mass_terms], dtype=int)
-        self.mass_idx = np.array([p for _, p in mass_terms], dtype=int)
-        self.spring_dofs, sp_par = springs.freeze(2)
-        self.spring_names = springs.names
-        self.k1, self.k2, self.k3 = (sp_par.get(k, np.zeros(0, int)) for k in ("k1", "k2", "k3"))
-        self.damper_dofs, dp_par = dampers.freeze(2)
-        self.damper_names = dampers.names
-        self.c = dp_par.get("c", np.zeros(0, int))
         self.dim = dim
         self.node_names = list(node_coords)
         self.node_coords = node_coords     # name -> parameter indices of its coordinates (drawing)
-        self.bar_dofs, bar_par = bars.freeze(2 * dim)
-        self.bar_names = bars.names
-        self.bar_A, self.bar_E, self.bar_rho = (bar_par.get(k, np.zeros(0, int)) for k in ("A", "E", "rho"))
-        # second moment of area and effective-length factor (buckling); -1: not given
-        self.bar_I, self.bar_K = (bar_par.get(k, np.zeros(0, int)) for k in ("I", "K"))
-        # undeformed bar vectors from nodal coordinates (parameter indices, may be design-dependent)
-        self.bar_X = np.array([[node_coords[b] + [] for b in pair] for pair in bar_nodes], dtype=int) \
-            .reshape(-1, 2, dim) if bar_nodes else np.zeros((0, 2, dim), int)
+        self.sets = sorted(sets, key=lambda k: k.order)
         self.loads = loads
         self.init_q, self.init_qd = initial
         self.rayleigh = rayleigh
-        self.beams = beams if beams is not None else BeamSet()
-        self.beams.freeze()
-        # consistent-mass beams: a mass M(q) that turns with them (inertia forces per element)
-        self.rotating_mass = bool(self.beams.is_consistent.any())
-        # space-frame beams (dim 3, small rotations): constant K and, when consistent, constant M
-        self.frames = frames if frames is not None else Beam3DSet()
-        self.frames.freeze()
-        self.frame_mass = bool(self.frames.is_consistent.any())
-        self.nl_dampers = nl_dampers if nl_dampers is not None else NonlinearDampers()
-        self.nl_dampers.freeze()
         self.followers = followers if followers is not None else FollowerLoads()
-        nonlinear = bool(len(self.bar_names)) or spring_nonlinear or bool(len(self.beams)) \
-            or bool(len(self.nl_dampers)) or bool(len(self.followers)) or bool(self.frames.is_corot.any())
-        has_damping = bool(len(self.damper_names)) or rayleigh is not None or bool(len(self.nl_dampers)) \
-            or self.rotating_mass       # (the turning mass's inertia forces depend on q̇)
+        nonlinear = any(k.nonlinear() for k in self.sets) or bool(len(self.followers))
+        # consistent-mass plane beams: a mass M(q) that turns with them (inertia forces per element);
+        # consistent space frames (small rotations): a constant M
+        self.rotating_mass = any(k.mass_turns() for k in self.sets)
+        self.frame_mass = any(k.constant_mass() for k in self.sets)
+        has_damping = rayleigh is not None or any(k.damped() for k in self.sets)
         use_sparse = (n > SPARSE_THRESHOLD) if sparse is None else sparse
         self.traits = Traits(n_q=n, linear=not nonlinear, constant_matrices=not nonlinear,
                              has_damping=has_damping, sparse=use_sparse)
-        # element forces -> nodal forces as one matrix product (works with a leading batch axis)
-        self._spring_scatter = self._scatter(self.spring_dofs, np.array([1.0, -1.0]), per_element=True)
-        self._spring_elongation = self._spring_scatter.transposed()  # (n, n_s): δ = q @ it
-        self._bar_scatter = self._scatter(self.bar_dofs, np.ones(2 * dim), per_element=False)
-        self._beam_scatter = self._scatter(self.beams.idx, np.ones(6), per_element=False)
-        self._inertia_scatter = self._scatter(self.beams.idx[self.beams.is_consistent], np.ones(6), per_element=False)
-        self._frame_scatter = self._scatter(self.frames.idx, np.ones(12), per_element=False)
-        self._frame_inertia_scatter = self._scatter(self.frames.idx[self.frames.is_consistent], np.ones(12),
-                                                    per_element=False)
-        self._nl_damper_scatter = self._scatter(self.nl_dampers.idx, np.array([1.0, -1.0]), per_element=True)
+        context = ModelContext(n, dim, self._scatter, not nonlinear)
+        for k in self.sets:
+            k.freeze(context)
+        self.compiled_kinds = all(k.served_compiled() for k in self.sets)   # declared by the kinds
         # Rayleigh's β K on the deformation rates of the elements that turn (K₀ keeps the others)
-        corot_frames = self.frames.idx[self.frames.is_corot]
-        kinds = [DampedKind(self.bar_dofs, self._bar_scatter, self._bar_deformations),
-                 DampedKind(self.beams.idx, self._beam_scatter, self.beams.deformations),
-                 DampedKind(corot_frames, self._scatter(corot_frames, np.ones(12), per_element=False),
-                            self.frames.deformations)]
+        kinds = [d for d in (k.damped_kind() for k in self.sets) if d is not None]
         self.corotated_damping = CorotatedDamping(kinds if rayleigh is not None and rayleigh_corotated else [],
                                                   rayleigh[1] if rayleigh is not None else -1, n)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
-        self._elongation_of: dict[tuple[int, ...], Any] = {}     # columns of selected springs
-        # the spring state of the last residual: Newton linearizes at the state it has just
-        # evaluated, and the tangent needs the same products (kept with q and params themselves)
-        self._last_springs: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
         self._last_loads: tuple[float, Any, np.ndarray] | None = None       # (t, params, f_ext)
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
         self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per _assemble site
@@ -151,6 +100,63 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         self._unions = UnionCache()                              # sparse iteration matrices
         self._diag_mass: tuple[np.ndarray, Any] | None = None    # (mass vector, its sparse diag(M))
         self._pattern_kept: tuple[int, np.ndarray] | None = None  # dense models: see _dense_pattern
+
+    # ------------------------------------------------------------------ the element sets by kind
+    def elements_of(self, type_name: str) -> Any:
+        """The element set of ``type_name`` in this model, or None."""
+        return next((k for k in self.sets if k.type == type_name), None)
+
+    @property
+    def springs(self) -> Any:
+        """The springs' set (:class:`.elements.springs.Springs`)."""
+        return self.elements_of("spring")
+
+    @property
+    def spring_names(self) -> list[str]:
+        return self.springs.names
+
+    @property
+    def spring_dofs(self) -> np.ndarray:
+        return self.springs.dof_idx
+
+    @property
+    def _spring_scatter(self) -> RightProduct:
+        return self.springs.scatter
+
+    @property
+    def damper_names(self) -> list[str]:
+        """Names of the linear viscous dampers."""
+        return self.elements_of("damper").linear_names
+
+    @property
+    def nl_dampers(self) -> NonlinearDampers:
+        return self.elements_of("damper").nl
+
+    @property
+    def bar_names(self) -> list[str]:
+        return self.elements_of("bar").names
+
+    @property
+    def bar_I(self) -> np.ndarray:
+        """Parameter indices of the bars' second moments of area (−1: not given)."""
+        return self.elements_of("bar").I
+
+    @property
+    def bar_X(self) -> np.ndarray:
+        """Parameter indices of the bars' end coordinates (n_e, 2, dim)."""
+        return self.elements_of("bar").X
+
+    @property
+    def beams(self) -> BeamSet:
+        """The plane beams (empty in a 3D model)."""
+        kind = self.elements_of("beam")
+        return kind.set if self.dim == 2 and kind is not None else _EMPTY_BEAMS
+
+    @property
+    def frames(self) -> Beam3DSet:
+        """The space-frame beams (empty in a plane model)."""
+        kind = self.elements_of("beam")
+        return kind.set if self.dim == 3 and kind is not None else _EMPTY_FRAMES
 
     def _scatter(self, dofs: np.ndarray, signs: np.ndarray, per_element: bool) -> RightProduct:
         """The product with the scatter matrix Gᵀ: nodal forces = element values @ Gᵀ.
@@ -173,35 +179,11 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         pv = self.table.evaluate(np.asarray(x))
         out: dict[str, Any] = {"pv": pv}
         mass = np.zeros(self.n + 1, dtype=pv.dtype)
-        np.add.at(mass, self.mass_dof, pv[self.mass_idx])
-        if len(self.bar_names):
-            X = pv[self.bar_X]                       # (n_e, 2, dim)
-            D0 = X[:, 1] - X[:, 0]
-            L0 = np.sqrt(np.sum(D0 * D0, axis=1))
-            A, E, rho = pv[self.bar_A], pv[self.bar_E], pv[self.bar_rho]
-            half = 0.5 * rho * A * L0
-            lumped = np.repeat(half[:, None], 2 * self.dim, axis=1)
-            np.add.at(mass, self.bar_dofs, lumped)
-            out.update(D0=D0, L0=L0, EA=E * A, E=E, A=A, bar_mass=2 * half)
-            # Euler load π²EI/(KL)² (force unit); infinite for a bar without 'inertia' (the
-            # buckling output refuses such bars)
-            KL = pv[self.bar_K] * L0
-            has = self.bar_I >= 0
-            inertia = np.where(has, pv[np.maximum(self.bar_I, 0)], 1.0)
-            out["P_euler"] = np.where(has, np.pi ** 2 * E * inertia / (KL * KL), np.inf)
-        if len(self.beams):
-            self.beams.parameters(pv, out)
-            idx, vals = self.beams.lumped_mass(out)
-            np.add.at(mass, idx, vals)
-        if len(self.frames):
-            self.frames.parameters(pv, out)
-            idx, vals = self.frames.lumped_mass(out)
-            np.add.at(mass, idx, vals)
+        for k in self.sets:
+            k.parameters(pv, out, mass)
         out["mass"] = mass[:self.n]
         if self.rotating_mass or self.frame_mass:
             out["M0"] = self._mass_matrix(out, pv.dtype)
-        if len(self.spring_names):
-            out.update(k1=pv[self.k1], k2=pv[self.k2], k3=pv[self.k3])
         if self.rayleigh is not None:
             # the co-rotated elements' β K acts on their deformation rates instead (residual)
             out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out, corotated=not self.corotated_damping)
@@ -216,12 +198,12 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         """Inertia forces (..., n): M q̈ of the diagonal masses plus the consistent beams'
         M(q)q̈ + velocity terms; params and state leaves may carry leading batch axes."""
         f = params["mass"] * s.qdd
-        if self.rotating_mass:
-            fe = self.beams.inertia(self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
-            f = f + self._inertia_scatter(fe.reshape(fe.shape[:-2] + (-1,)))
-        if self.frame_mass:
-            fe = self.frames.inertia(self._ext(s.qdd), params)
-            f = f + self._frame_inertia_scatter(fe.reshape(fe.shape[:-2] + (-1,)))
+        if self.rotating_mass or self.frame_mass:
+            qe, qde, qdde = self._ext(s.q), self._ext(s.qd), self._ext(s.qdd)
+            for k in self.sets:
+                fk = k.inertia_force(qe, qde, qdde, params)
+                if fk is not None:
+                    f = f + fk
         return f
 
     def initial_state(self, params: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -238,50 +220,6 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
     def _ext(self, v: np.ndarray) -> np.ndarray:
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
         return np.concatenate([v, np.zeros(v.shape[:-1] + (1,), dtype=v.dtype)], axis=-1)
-
-    def _spring_state(self, q: np.ndarray, params: dict[str, Any], springs: np.ndarray | None = None,
-                      tangent: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """Spring forces f (..., n_s) and, with ``tangent``, the tangents df/dδ (else None) of all
-        springs or of the indices ``springs``; params may carry a leading batch axis."""
-        keep = springs is None and tangent
-        if keep:
-            last = self._last_springs
-            if last is not None and last[0] is q and last[1] is params:
-                return last[2], last[3]
-        if springs is None:
-            elongation = self._spring_elongation
-        else:
-            key = tuple(springs.tolist())
-            if key not in self._elongation_of:
-                self._elongation_of[key] = self._spring_elongation.columns(springs)
-            elongation = self._elongation_of[key]
-        delta = elongation(q)                        # δ = u_a − u_b for every spring
-
-        def pick(key: str) -> np.ndarray:
-            return params[key] if springs is None else params[key][..., springs]
-        k1 = pick("k1")
-        if self.traits.linear:
-            return k1 * delta, (k1 + 0 * delta if tangent else None)
-        f, kt = spring_law(delta, k1, pick("k2"), pick("k3"))
-        if not tangent:
-            return f, None
-        if keep:
-            f.flags.writeable = kt.flags.writeable = False     # kept: never changed in place
-            self._last_springs = (q, params, f, kt)
-        return f, kt
-
-    def _bar_state(self, q: np.ndarray, params: dict[str, Any]) -> dict[str, np.ndarray]:
-        """Bar vectors d (..., n_e, dim), Green–Lagrange strains and axial forces (..., n_e)."""
-        qe = self._ext(q)
-        U = qe[..., self.bar_dofs].reshape(qe.shape[:-1] + (-1, 2, self.dim))
-        du = U[..., 1, :] - U[..., 0, :]
-        D0 = params["D0"]
-        d = D0 + du
-        L0 = params["L0"]
-        # (ℓ² − L²) written as 2 D0·Δu + Δu·Δu: no cancellation for small displacements
-        strain = (2.0 * np.sum(D0 * du, axis=-1) + np.sum(du * du, axis=-1)) / (2 * L0 * L0)
-        N = params["EA"] * strain
-        return {"d": d, "strain": strain, "N": N}
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
         """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis.
@@ -307,8 +245,9 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             R = R - self.followers.force(t, self._ext(s.q), params["pv"])[..., :self.n]
         if self.traits.has_damping:
             R = R + params["D"] @ s.qd
-            if len(self.nl_dampers):
-                R = R + self._nl_damper_force(s.qd, params)
+            fv = self._velocity_forces(s.qd, params)
+            if fv is not None:
+                R = R + fv
             R = R + self._corotated_damping_force(s.q, s.qd, params)
         return R
 
@@ -318,56 +257,35 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
             return 0.0
         return self.corotated_damping.force(self._ext(q), self._ext(qd), params)
 
-    def _bar_deformations(self, qe: np.ndarray, params: dict[str, Any], hessian: bool = False
-                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """(B, H, D) of the bars' Green–Lagrange strains ε at qe (..., n+1): B = ∂ε/∂u =
-        [−d, d]/L² (..., n_e, 1, 2·dim), H = [[I, −I], [−I, I]]/L² and D = EA·L (the energy
-        ½ EA L ε²), for :mod:`.corotated_damping`."""
-        bs = self._bar_state(qe[..., :self.n], params)
-        L2 = (params["L0"] ** 2)[..., None]
-        B = (np.concatenate([-bs["d"], bs["d"]], axis=-1) / L2)[..., None, :]
-        H = None
-        if hessian:
-            eye = np.eye(self.dim)
-            H = np.block([[eye, -eye], [-eye, eye]])[None, None] / L2[..., None, None]
-        return B, H, (params["EA"] * params["L0"])[..., None, None]
-
-    def _nl_damper_force(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
-        """Nodal forces (..., n) of the nonlinear viscous dampers (0 without any)."""
-        if not len(self.nl_dampers):
-            return 0.0
-        F, _ = self.nl_dampers.force(self.nl_dampers.velocity(self._ext(qd)), params["pv"])
-        return self._nl_damper_scatter(F)
+    def _velocity_forces(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
+        """Nodal forces (..., n) of the nonlinear dampers, summed in the sets' order; None without any."""
+        f = None
+        for k in self.sets:
+            fk = k.damping_force(qd, params)
+            if fk is not None:
+                f = fk if f is None else f + fk
+        return f
 
     def _internal_force(self, q: np.ndarray, params: dict[str, Any]) -> np.ndarray:
         """f_int(q) (..., n) in force units; params may be stacked along a leading batch axis."""
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
-        if len(self.spring_names):
-            # a single state: the tangent at it is asked for next (Newton), batches need none
-            fs, _ = self._spring_state(q, params, tangent=q.ndim == 1)
-            fs = self._spring_scatter(fs)
+        first = True
+        for k in self.sets:
+            fk = k.internal_force(q, params)
+            if fk is None:
+                continue
             # the first term as it is, where its shape and dtype are the sum's (0 + x is x)
-            f = fs if fs.shape == f.shape and fs.dtype == f.dtype else f + fs
-        if len(self.bar_names):
-            bs = self._bar_state(q, params)
-            fe = (bs["N"] / params["L0"])[..., None] * bs["d"]
-            flat = np.concatenate([-fe, fe], axis=-1).reshape(fe.shape[:-2] + (-1,))
-            f = f + self._bar_scatter(flat)
-        if len(self.beams):
-            fb = self.beams.forces(self._ext(q), params)
-            f = f + self._beam_scatter(fb.reshape(fb.shape[:-2] + (-1,)))
-        if len(self.frames):
-            fb = self.frames.forces(self._ext(q), params)
-            f = f + self._frame_scatter(fb.reshape(fb.shape[:-2] + (-1,)))
+            f = fk if first and fk.shape == f.shape and fk.dtype == f.dtype else f + fk
+            first = False
         return f
 
     def stack_parameters(self, params_list: list[dict[str, Any]]) -> dict[str, Any] | None:
         """Parameter arrays stacked along a leading batch axis, without the damping matrix: the
         outputs, which are evaluated in batches of many sets, do not need it (n² numbers per
         set), and :meth:`residual_batch_steps` stacks it for its own few sets."""
-        keys = [k for k in ("pv", "mass", "D0", "L0", "EA", "E", "k1", "k2", "k3", "P_euler")
-                + BeamSet.STACK_KEYS + Beam3DSet.STACK_KEYS if k in params_list[0]]
+        keys = [k for k in ("pv", "mass") + sum((kind.stack_keys for kind in self.sets), ())
+                if k in params_list[0]]
         return {k: np.stack([p[k] for p in params_list]) for k in keys}
 
     def residual_batch(self, t: float, s: StepState, params_list: list[dict[str, Any]]) -> np.ndarray:
@@ -394,26 +312,25 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         if len(self.followers):
             R = R - np.stack([self.followers.force(t, self._ext(q[i]), st["pv"])[..., :self.n]
                               for i, t in enumerate(ts)])
+        fv = self._velocity_forces(qd, st) if self.traits.has_damping else None
+        fv = 0.0 if fv is None else fv
         if self.traits.has_damping and self.traits.sparse:
             # one sparse product per parameter set, over the K states: (K, B, n)
-            R = R + np.stack([(D @ qd[:, 0, :].T).T for D in st["D"]], axis=1) + self._nl_damper_force(qd, st)
+            R = R + np.stack([(D @ qd[:, 0, :].T).T for D in st["D"]], axis=1) + fv
         elif self.traits.has_damping:
-            R = R + (st["D"] @ qd[..., None])[..., 0] + self._nl_damper_force(qd, st)
+            R = R + (st["D"] @ qd[..., None])[..., 0] + fv
         if self.traits.has_damping:
             R = R + self._corotated_damping_force(q, qd, st)
         return R.transpose(0, 2, 1)
 
     def structural_mass(self, params: dict[str, Any]) -> Any:
-        """Sum of point masses, bar and beam masses ρAL (mass unit of the case); a mass on a
-        node counts once, not once per direction."""
-        total = np.sum(params["pv"][np.unique(self.mass_idx)]) if len(self.mass_idx) else 0.0
-        if len(self.bar_names):
-            total = total + np.sum(params["bar_mass"])
-        if len(self.beams):
-            total = total + np.sum(params["beam_mass"])
-        if len(self.frames):
-            total = total + np.sum(params["frame_mass"])
-        return total
+        """Sum of point masses, bar and beam masses ρAL (mass unit of the case), in the sets' order."""
+        total: Any = None
+        for k in self.sets:
+            m = k.structural_mass(params)
+            if m is not None:
+                total = m if total is None else total + m
+        return 0.0 if total is None else total
 
     def compiled_step(self, newton: bool, refactor: bool) -> Any:
         """The compiled Newton iteration of :mod:`.structural_step`, where it serves this model."""
@@ -421,11 +338,148 @@ class StructuralModel(StructuralMatrices, StructuralOutputs, StructuralDiagnosti
         return step_factory(self, newton, refactor)
 
     def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
-        """Raise ModelError when a co-rotational 3D beam leaves its range (:meth:`Beam3DSet.range_problem`)."""
-        why = self.frames.range_problem(self._ext(s.q), params) if len(self.frames) else None
-        if why:
-            from ..errors import ModelError
-            raise ModelError(f"t = {np.real(t):.6g} s: {why}")
+        """Raise ModelError when an element leaves its range (e.g. :meth:`Beam3DSet.range_problem`)."""
+        qe = None
+        for k in self.sets:
+            if len(k) and type(k).range_problem is not ElementKind.range_problem:
+                qe = self._ext(s.q) if qe is None else qe
+                why = k.range_problem(qe, params)
+                if why:
+                    from ..errors import ModelError
+                    raise ModelError(f"t = {np.real(t):.6g} s: {why}")
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
+
+    # ------------------------------------------------------------------ outputs
+    def output(self, spec: Any, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities: ``{dof: NAME|[NAMES], kind: displacement|velocity|acceleration}``,
+        ``{node: NAME, kind: ...}`` (the node's free translation DOFs x, y (z)) or
+        ``{element: NAME|[NAMES]|all, kind: ...}``: what each element kind reports (bars force,
+        stress, strain and buckling, the ratio −N/P_E of the compressive axial force to the Euler
+        load π²EI/(KL)², positive in compression, > 1 means buckled; beams force and stress;
+        springs and dampers force)."""
+        if not check_keys(spec, path, allowed("structural.quantity"), problems):
+            return None
+        kind = spec.get("kind", "displacement" if "dof" in spec or "node" in spec else "force")
+        if sum(k in spec for k in ("dof", "node", "element")) > 1:
+            problems.add(path, "give one of 'dof', 'node' or 'element'")
+            return None
+        if "node" in spec:
+            free = self._node_dofs(spec["node"], path, problems)
+            if free is None:
+                return None
+            spec = {"dof": free, "kind": kind}
+        if "dof" in spec:
+            return self._dof_output(spec["dof"], kind, path, problems)
+        if "element" not in spec:
+            problems.add(path, "expected 'dof' or 'element'")
+            return None
+        return self._element_output(spec["element"], kind, path, problems)
+
+    def _node_dofs(self, node: Any, path: str, problems: ProblemCollector) -> list[str] | None:
+        """The free translation DOFs of a node, or None with a problem listed."""
+        if not isinstance(node, str) or node not in self.node_names:
+            problems.add(f"{path}.node", f"unknown node {node!r}{did_you_mean(str(node), self.node_names)}")
+            return None
+        free = [f"{node}.{a}" for a in "xyz"[:self.dim] if f"{node}.{a}" in self.dof_names]
+        if not free:
+            problems.add(f"{path}.node", f"every translation of node {node!r} is fixed")
+            return None
+        return free
+
+    def _dof_output(self, dofs: Any, kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Displacements, velocities or accelerations of named DOFs."""
+        names = dofs if isinstance(dofs, list) else [dofs]
+        if not names:
+            problems.add(f"{path}.dof", "expected a dof name or a non-empty list of dof names, found []")
+            return None
+        field_of = {"displacement": "q", "velocity": "qd", "acceleration": "qdd"}
+        if kind not in field_of:
+            problems.add(f"{path}.kind", f"unknown kind {kind!r} for a dof{did_you_mean(kind, field_of)} "
+                                         f"(known: {', '.join(field_of)})")
+            return None
+        idx = []
+        for nm in names:
+            if nm not in self.dof_names:
+                problems.add(f"{path}.dof", f"unknown or fixed dof {nm!r}{did_you_mean(nm, self.dof_names)}")
+            else:
+                idx.append(self.dof_names.index(nm))
+        if len(idx) != len(names):
+            return None
+        ia = np.array(idx)
+        fld = field_of[kind]
+        unit = ""  # the case's own unit system; a response may name it with 'unit'
+        return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
+                      tuple(f"{n}.{kind}" for n in names), unit, linear=True)
+
+    def _element_output(self, names: Any, kind: str, path: str, problems: ProblemCollector) -> Output | None:
+        """Quantities of named elements (``all``: the members, bars and beams; else the springs),
+        grouped by their sets, in the sets' order."""
+        if names == "all":
+            members = [nm for k in self.sets if k.member for nm in k.names]
+            names = members if members else [nm for k in self.sets if k.type == "spring" for nm in k.names]
+        names = names if isinstance(names, list) else [names]
+        owner = {nm: k for k in self.sets for nm in k.names}
+        known = list(dict.fromkeys(knd for k in self.sets for knd in k.output_kinds))
+        if kind not in known:
+            problems.add(f"{path}.kind",
+                         f"unknown kind {kind!r}{did_you_mean(kind, known)} (known: {', '.join(known)})")
+            return None
+        picked = self._pick(names, owner, kind, path, problems)
+        if picked is None:
+            return None
+        if len({self.sets[j].member for j in picked}) > 1:
+            problems.add(f"{path}.element", "mix springs and bars or beams in separate quantities")
+            return None
+        parts = [self.sets[j].output(np.array(idx), kind, path, problems) for j, idx in sorted(picked.items())]
+        if any(p is None for p in parts):
+            return None
+        unit = "-" if kind in ("strain", "buckling") else ""
+        if len(parts) == 1:
+            return Output(parts[0][0], parts[0][1], unit, batched=True, autonomous=True)
+
+        def joined(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
+            return np.concatenate([fn(t, s, prm) for fn, _ in parts], axis=-1)
+        return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True)
+
+    def _pick(self, names: list[Any], owner: dict[str, Any], kind: str, path: str,
+              problems: ProblemCollector) -> dict[int, list[int]] | None:
+        """Element indices per set position of the named elements that report ``kind``; None
+        with one problem per unknown name and per kind of element that does not report it."""
+        picked: dict[int, list[int]] = {}        # set position -> element indices
+        refused: dict[str, list[str]] = {}       # one problem per kind of element, naming them all
+        for nm in names:
+            k = owner.get(nm)
+            if k is None:
+                problems.add(f"{path}.element", f"unknown element {nm!r}{did_you_mean(nm, list(owner))}")
+            elif kind in k.output_kinds:
+                picked.setdefault(self.sets.index(k), []).append(k.names.index(nm))
+            else:
+                refused.setdefault(k.refusal(kind), []).append(nm)
+        for what, which in refused.items():
+            problems.add(f"{path}.kind", f"{what}, not {kind!r}: {', '.join(which[:5])}"
+                                         f"{f' and {len(which) - 5} more' if len(which) > 5 else ''}")
+        return picked if sum(len(v) for v in picked.values()) == len(names) else None
+
+    # ------------------------------------------------------------------ run-time diagnostics
+    def describe_equation(self, k: int) -> str:
+        """DOF k and the elements and loads acting on it, by YAML path and name."""
+        if not 0 <= k < self.n:
+            return Model.describe_equation(self, k)  # type: ignore[arg-type]
+        acting = [entry for entry, dofs in self.equation_sources if k in dofs]
+        return f"DOF '{self.dof_names[k]}'" + (f" (acted on by {', '.join(acting)})" if acting else "")
+
+    def displacement_scale(self, params: dict[str, Any], lin: Linearization | None) -> float:
+        """The larger of the bar nodes' coordinates and the static deflections |f_amp|/K_dd of the
+        loads' amplitudes on their DOFs (K: the tangent stiffness at t0)."""
+        pv = np.real(params["pv"])
+        bar_X = self.bar_X
+        scale = float(np.max(np.abs(pv[bar_X]))) if np.size(bar_X) else 0.0
+        if lin is None or lin.R_q is None or not self.loads:
+            return scale
+        diag = np.real(lin.R_q.diagonal())
+        for dof, amp, _ in self.loads:
+            if dof < self.n and diag[dof] > 0:
+                scale = max(scale, abs(float(pv[amp])) / float(diag[dof]))
+        return scale

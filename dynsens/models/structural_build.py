@@ -1,20 +1,18 @@
 """Build a :class:`~dynsens.models.structural.StructuralModel` from a case's ``model`` mapping
-(``model.type: structural``): nodes and supports, DOFs, elements, loads, initial conditions,
-damping."""
+(``model.type: structural``): nodes and supports, DOFs, elements (each read by the set of its
+kind, :mod:`.elements`), loads, initial conditions, damping."""
 from __future__ import annotations
 
 from typing import Any
 
-from ..case_keys import STRUCTURAL_ELEMENT_TYPES, allowed
+from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .parameters import ParameterTable
-from .beams import BeamSet, parse_beam
-from .beams3d import Beam3DSet, parse_beam_3d
-from .dampers import NonlinearDampers
+from .elements import ElementKind, ReadContext, element_types, kind_class, load_kinds
 from .follower import FollowerLoads
+from .parameters import ParameterTable
 from .registry import register
-from .structural import AXES, GROUND, StructuralModel, _Group
+from .structural import AXES, GROUND, StructuralModel
 from .timefunctions import build_time_function
 
 # ---------------------------------------------------------------------- builder
@@ -31,89 +29,127 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
     if dim not in (2, 3):
         problems.add(f"{path}.dim", f"must be 2 or 3, found {dim!r}")
         dim = 2
-    dof_names: list[str] = []
-    fixed: set[str] = set()
-    scalar = spec.get("dofs", [])
-    if not isinstance(scalar, list) or not all(isinstance(d, str) for d in scalar):
-        problems.add(f"{path}.dofs", f"expected a list of DOF names, found {scalar!r}")
-        scalar = []
-    dof_names += scalar
-    node_coords: dict[str, list[int]] = {}
-    rotating = _beam_nodes(spec.get("elements"))   # nodes that carry rotations (beams)
-    rotations = ["rz"] if dim == 2 else ["rx", "ry", "rz"]
-    nodes = spec.get("nodes", {}) or {}
-    if not isinstance(nodes, dict):
-        problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
-        nodes = {}
-    for name, nd in nodes.items():
-        npath = f"{path}.nodes.{name}"
+    dofs = _Dofs(spec, path, dim, table, problems)
+    ctx = ReadContext(dim, table, problems, dofs.node_coords, dofs.dof, dofs.node_dofs, dofs.beam_dofs,
+                      dofs.given_coords)
+    sets = _read_elements(spec, path, ctx, dofs)
+    loads, followers = _read_loads(spec, path, ctx, dofs)
+    init_lists = _read_initial(spec, path, ctx)
+    rayleigh, corotated = _read_damping(spec, path, table, problems)
+    la = spec.get("linear_algebra", "auto")
+    if la not in ("auto", "dense", "sparse"):
+        problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
+    if dofs.n == 0:
+        problems.add(path, "the model has no free degrees of freedom")
+    massed = {d for k in sets for d in k.dofs()}
+    for i, d in enumerate(dofs.names):
+        if i not in massed:
+            problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
+    try:
+        model = StructuralModel(dof_names=dofs.names, table=table, sets=sets, dim=dim,
+                                node_coords=dofs.node_coords, loads=loads, initial=init_lists, rayleigh=rayleigh,
+                                rayleigh_corotated=corotated is True,
+                                sparse=None if la == "auto" else la == "sparse", followers=followers)
+    except (ValueError, IndexError, TypeError, KeyError):
+        if len(problems.problems) > n_before:
+            return None  # the problems already listed explain why it cannot be assembled
+        raise
+    model.equation_sources = dofs.sources
+    # with problems listed, the model is still returned so that the responses can be checked
+    # against its DOFs and elements; the loader raises before anything runs
+    return model
+
+
+class _Dofs:
+    """The model's DOFs: scalar ones, and those of its nodes (translations; rotations at beam
+    nodes), minus the fixed ones; name lookups that report unknown names."""
+
+    def __init__(self, spec: dict, path: str, dim: int, table: ParameterTable, problems: ProblemCollector):
+        self.dim, self.problems = dim, problems
+        self.names: list[str] = []
+        self.fixed: set[str] = set()
+        scalar = spec.get("dofs", [])
+        if not isinstance(scalar, list) or not all(isinstance(d, str) for d in scalar):
+            problems.add(f"{path}.dofs", f"expected a list of DOF names, found {scalar!r}")
+            scalar = []
+        self.names += scalar
+        self.node_coords: dict[str, list[int]] = {}
+        self.rotating = _beam_nodes(spec.get("elements"))   # nodes that carry rotations (beams)
+        self.rotations = ["rz"] if dim == 2 else ["rx", "ry", "rz"]
+        nodes = spec.get("nodes", {}) or {}
+        if not isinstance(nodes, dict):
+            problems.add(f"{path}.nodes", "expected a mapping node name -> {coords, fixed}")
+            nodes = {}
+        self.given_coords = {k: nd.get("coords") for k, nd in nodes.items() if isinstance(nd, dict)}
+        for name, nd in nodes.items():
+            self._node(name, nd, f"{path}.nodes.{name}", table)
+        if len(set(self.names)) != len(self.names):
+            problems.add(f"{path}.dofs", "DOF names must be unique")
+        self.n = len(self.names)
+        self.index = {d: i for i, d in enumerate(self.names)}
+        # which YAML entries act on each DOF: run-time errors name them (Model.describe_equation)
+        self.sources: list[tuple[str, list[int]]] = []
+
+    def _node(self, name: str, nd: Any, npath: str, table: ParameterTable) -> None:
+        problems, dim = self.problems, self.dim
         if not check_keys(nd, npath, allowed("structural.node"), problems, required=("coords",)):
-            continue
-        node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems, length=dim)
+            return
+        self.node_coords[name] = table.add_many(nd.get("coords", [0] * dim), f"{npath}.coords", problems,
+                                                length=dim)
         fx = nd.get("fixed", [])
-        axes = list(AXES[:dim]) + (rotations if name in rotating else [])
+        axes = list(AXES[:dim]) + (self.rotations if name in self.rotating else [])
         if fx is True or fx == "all":
             fx = axes
         if not isinstance(fx, list) or any(a not in axes for a in fx):
             problems.add(f"{npath}.fixed", f"expected a list of axes from {axes} or 'all', found {fx!r}")
             fx = []
         for a in axes:
-            (fixed.add if a in fx else dof_names.append)(f"{name}.{a}")
-    if len(set(dof_names)) != len(dof_names):
-        problems.add(f"{path}.dofs", "DOF names must be unique")
-    n = len(dof_names)
-    index = {d: i for i, d in enumerate(dof_names)}
+            (self.fixed.add if a in fx else self.names.append)(f"{name}.{a}")
 
-    def dof(name: Any, p: str) -> int:
+    def dof(self, name: Any, p: str) -> int:
+        n = self.n
         if not isinstance(name, str):
-            problems.add(p, f"expected a DOF name, found {name!r}")
+            self.problems.add(p, f"expected a DOF name, found {name!r}")
             return n
-        if name == GROUND or name in fixed:
+        if name == GROUND or name in self.fixed:
             return n
-        if name not in index:
-            problems.add(p, f"unknown dof {name!r}{did_you_mean(name, list(index) + [GROUND])}")
+        if name not in self.index:
+            self.problems.add(p, f"unknown dof {name!r}{did_you_mean(name, list(self.index) + [GROUND])}")
             return n
-        return index[name]
+        return self.index[name]
 
-    def node_dofs(name: Any, p: str) -> list[int]:
-        if not isinstance(name, str) or name not in node_coords:
-            problems.add(p, f"unknown node {name!r}{did_you_mean(name, node_coords)}")
-            return [n] * dim
-        return [dof(f"{name}.{a}", p) for a in AXES[:dim]]
+    def node_dofs(self, name: Any, p: str) -> list[int]:
+        if not isinstance(name, str) or name not in self.node_coords:
+            self.problems.add(p, f"unknown node {name!r}{did_you_mean(name, self.node_coords)}")
+            return [self.n] * self.dim
+        return [self.dof(f"{name}.{a}", p) for a in AXES[:self.dim]]
 
-    def beam_dofs(name: Any, p: str) -> list[int]:
+    def beam_dofs(self, name: Any, p: str) -> list[int]:
         """(x, y, θz) of a plane beam node; (x, y, z, θx, θy, θz) in 3D."""
-        return node_dofs(name, p) + ([dof(f"{name}.{a}", p) for a in rotations] if name in node_coords
-                                     else [n] * len(rotations))
+        return self.node_dofs(name, p) + ([self.dof(f"{name}.{a}", p) for a in self.rotations]
+                                          if name in self.node_coords else [self.n] * len(self.rotations))
 
-    mass_terms: list[tuple[int, int]] = []
-    springs, dampers, bars = _Group(), _Group(), _Group()
-    beams = BeamSet()
-    frames = Beam3DSet()
-    nl_dampers = NonlinearDampers()
-    bar_nodes: list[tuple[str, str]] = []
-    names_seen: set[str] = set()
-    spring_nonlinear = False
-    zero_index = -1
-    elements = spec.get("elements", [])
-    if not isinstance(elements, list):
-        problems.add(f"{path}.elements", "expected a list")
-        elements = []
-    kinds = STRUCTURAL_ELEMENT_TYPES
-    # which YAML entries act on each DOF: run-time errors name them (Model.describe_equation)
-    sources: list[tuple[str, list[int]]] = []
-
-    def touched(entry: dict) -> list[int]:
+    def touched(self, entry: dict) -> list[int]:
         """DOFs an element or load names (silently: its own checks report bad names)."""
         names: list[str] = []
         for key in ("dof", "dofs", "node", "nodes"):
             v = entry.get(key)
             for item in (v if isinstance(v, list) else [v]):
                 if isinstance(item, str):
-                    names += [f"{item}.{a}" for a in (*AXES[:dim], "rx", "ry", "rz")] if key.startswith("node") \
-                        else [item]      # (rotations a node does not carry are not in the index)
-        return [index[d] for d in names if d in index]
+                    names += [f"{item}.{a}" for a in (*AXES[:self.dim], "rx", "ry", "rz")] \
+                        if key.startswith("node") else [item]  # (rotations a node lacks are not in the index)
+        return [self.index[d] for d in names if d in self.index]
 
+
+def _read_elements(spec: dict, path: str, ctx: ReadContext, dofs: _Dofs) -> list[ElementKind]:
+    """Every ``elements[i]`` entry read into the set of its kind (one set per registered kind)."""
+    problems = ctx.problems
+    sets = {cls: cls() for classes in load_kinds().values() for cls in classes if ctx.dim in cls.dims}
+    names_seen: set[str] = set()
+    elements = spec.get("elements", [])
+    if not isinstance(elements, list):
+        problems.add(f"{path}.elements", "expected a list")
+        elements = []
     for k, el in enumerate(elements):
         ep = f"{path}.elements[{k}]"
         if not isinstance(el, dict):
@@ -121,79 +157,29 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             continue
         kind = el.get("type")
         name = str(el.get("name", f"{kind}{k}"))
-        sources.append((f"{ep} ({kind} '{name}')", touched(el)))
+        dofs.sources.append((f"{ep} ({kind} '{name}')", dofs.touched(el)))
         if name in names_seen:
             problems.add(f"{ep}.name", f"duplicate element name {name!r}")
         names_seen.add(name)
-        if kind == "mass":
-            check_keys(el, ep, allowed("structural.mass"), problems, required=("mass",))
-            pi = table.add(el.get("mass"), f"{ep}.mass", problems, positive=True)
-            targets = [dof(el["dof"], f"{ep}.dof")] if "dof" in el else \
-                node_dofs(el.get("node"), f"{ep}.node") if "node" in el else []
-            if not targets:
-                problems.add(ep, "a mass needs 'dof' or 'node'")
-            mass_terms += [(d, pi) for d in targets]
-        elif kind in ("spring", "damper"):
-            keys = allowed(f"structural.{kind}")
-            check_keys(el, ep, keys, problems, required=("dofs", "k" if kind == "spring" else "c"))
-            pair = el.get("dofs", [])
-            if not isinstance(pair, list) or len(pair) not in (1, 2):
-                problems.add(f"{ep}.dofs", f"expected [dof] or [dof_a, dof_b|ground], found {pair!r}")
-                continue
-            n_known = len(problems.problems)
-            ids = [dof(d, f"{ep}.dofs") for d in pair] + ([n] if len(pair) == 1 else [])
-            if ids[0] == ids[1] and len(problems.problems) == n_known:
-                problems.add(f"{ep}.dofs", f"expected a {kind} between two different DOFs (or a DOF and ground), "
-                                           f"found {pair!r}: " + ("it would act on ground (or fixed DOFs) only"
-                                                                  if ids[0] == n else "both ends are one DOF"))
-                continue
-            if kind == "spring":
-                higher = {}
-                for key in ("k2", "k3"):
-                    if key in el:
-                        spring_nonlinear = True
-                        higher[key] = table.add(el[key], f"{ep}.{key}", problems)
-                    else:
-                        if zero_index < 0:
-                            zero_index = table.add(0.0, "", problems)
-                        higher[key] = zero_index
-                springs.add(name, ids, k1=table.add(el.get("k"), f"{ep}.k", problems), **higher)
-            elif "exponent" in el or "regularization" in el:
-                if "exponent" not in el or "regularization" not in el:
-                    problems.add(ep, "a nonlinear damper needs 'exponent' (α) and 'regularization' (velocity ε > 0)")
-                    continue
-                nl_dampers.names.append(name)
-                nl_dampers.dofs.append(ids)
-                nl_dampers.c.append(table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
-                nl_dampers.alpha.append(table.add(el["exponent"], f"{ep}.exponent", problems, positive=True))
-                nl_dampers.eps.append(table.add(el["regularization"], f"{ep}.regularization", problems, positive=True))
-            else:
-                dampers.add(name, ids, c=table.add(el.get("c"), f"{ep}.c", problems, nonnegative=True))
-        elif kind == "bar":
-            check_keys(el, ep, allowed("structural.bar"), problems, required=("nodes", "area", "E"))
-            pair = el.get("nodes", [])
-            if not isinstance(pair, list) or len(pair) != 2:
-                problems.add(f"{ep}.nodes", f"expected [node_a, node_b], found {pair!r}")
-                continue
-            ids = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
-            bars.add(name, ids, A=table.add(el.get("area"), f"{ep}.area", problems, positive=True),
-                     E=table.add(el.get("E"), f"{ep}.E", problems, positive=True),
-                     rho=table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True),
-                     I=table.add(el["inertia"], f"{ep}.inertia", problems, positive=True) if "inertia" in el else -1,
-                     K=table.add(el.get("effective_length_factor", 1.0), f"{ep}.effective_length_factor",
-                                 problems, positive=True))
-            bar_nodes.append((pair[0], pair[1]))
-        elif kind == "beam" and dim == 3:
-            parse_beam_3d(el, ep, name, frames, table, beam_dofs, node_coords, problems,
-                          {k: nd.get("coords") for k, nd in nodes.items() if isinstance(nd, dict)})
-        elif kind == "beam":
-            for key in ("G", "orientation", "kinematics"):
-                if key in el:
-                    problems.add(f"{ep}.{key}", f"'{key}' belongs to 3D beams (dim: 3); a plane beam has none")
-            parse_beam(el, ep, name, beams, table, beam_dofs, node_coords, problems)
-        else:
+        cls = kind_class(kind, ctx.dim)
+        if cls is None and kind in element_types():
+            dims = sorted({d for c in load_kinds()[kind] for d in c.dims})
+            problems.add(f"{ep}.type", f"a {kind} element serves models of dim {' or '.join(map(str, dims))}, "
+                                       f"not {ctx.dim}")
+            continue
+        if cls is None:
+            kinds = element_types()
             problems.add(f"{ep}.type", f"unknown element type {kind!r}{did_you_mean(kind, kinds)} "
                                        f"(known: {', '.join(kinds)})")
+            continue
+        sets[cls].read(el, ep, name, ctx)
+    return list(sets.values())
+
+
+def _read_loads(spec: dict, path: str, ctx: ReadContext, dofs: _Dofs
+                ) -> tuple[list[tuple[int, int, Any]], FollowerLoads]:
+    """The loads: value · function(t) on a DOF or a node direction, or following a node."""
+    problems, table, dim = ctx.problems, ctx.table, ctx.dim
     loads = []
     followers = FollowerLoads()
     load_specs = spec.get("loads", []) or []
@@ -207,27 +193,40 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
         if ld.get("follower", False) is not False and dim == 3:
             problems.add(f"{lp}.follower", "follower loads act in plane models (dim: 2) only, so far")
             continue
-        sources.append((f"{lp} (load)", touched(ld)))
+        dofs.sources.append((f"{lp} (load)", dofs.touched(ld)))
         if ld.get("follower", False) is not False:
-            _follower(ld, lp, rotating, beam_dofs, table, followers, problems)
+            _follower(ld, lp, dofs.rotating, dofs.beam_dofs, table, followers, problems)
             continue
-        if "dof" in ld:
-            target = dof(ld["dof"], f"{lp}.dof")
-        elif "node" in ld:
-            direction = ld.get("direction")
-            directions = list(AXES[:dim]) + (rotations if ld["node"] in rotating else [])
-            if direction not in directions:
-                problems.add(f"{lp}.direction", f"expected one of {directions}, found {direction!r}")
-                continue
-            target = node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)] if direction in AXES else \
-                beam_dofs(ld["node"], f"{lp}.node")[directions.index(direction)]
-        else:
-            problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
+        target = _load_target(ld, lp, dofs)
+        if target is None:
             continue
         amp = table.add(ld.get("value"), f"{lp}.value", problems)
         fn = build_time_function(ld.get("function"), f"{lp}.function", table, problems)
         if fn is not None:
             loads.append((target, amp, fn))
+    return loads, followers
+
+
+def _load_target(ld: dict, lp: str, dofs: _Dofs) -> int | None:
+    """The DOF a load acts on (``dof``, or ``node`` + ``direction``), or None with a problem listed."""
+    if "dof" in ld:
+        return dofs.dof(ld["dof"], f"{lp}.dof")
+    if "node" not in ld:
+        dofs.problems.add(lp, "a load needs 'dof' or 'node' + 'direction'")
+        return None
+    direction = ld.get("direction")
+    directions = list(AXES[:dofs.dim]) + (dofs.rotations if ld["node"] in dofs.rotating else [])
+    if direction not in directions:
+        dofs.problems.add(f"{lp}.direction", f"expected one of {directions}, found {direction!r}")
+        return None
+    return dofs.node_dofs(ld["node"], f"{lp}.node")[AXES.index(direction)] if direction in AXES else \
+        dofs.beam_dofs(ld["node"], f"{lp}.node")[directions.index(direction)]
+
+
+def _read_initial(spec: dict, path: str, ctx: ReadContext
+                  ) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """Initial displacements and velocities: (DOF, parameter index) pairs."""
+    problems = ctx.problems
     init = spec.get("initial", {}) or {}
     init_lists: tuple[list[tuple[int, int]], list[tuple[int, int]]] = ([], [])
     if check_keys(init, f"{path}.initial", allowed("structural.initial"), problems):
@@ -238,8 +237,14 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
                 continue
             for d, v in entries.items():
                 ip = f"{path}.initial.{key}.{d}"
-                di = dof(d, ip)
-                init_lists[j].append((di, table.add(v, ip, problems)))
+                di = ctx.dof(d, ip)
+                init_lists[j].append((di, ctx.table.add(v, ip, problems)))
+    return init_lists
+
+
+def _read_damping(spec: dict, path: str, table: ParameterTable, problems: ProblemCollector
+                  ) -> tuple[tuple[int, int] | None, Any]:
+    """Rayleigh damping: (α, β parameter indices) or None, and whether β K is co-rotated."""
     rayleigh, corotated = None, True
     damping = spec.get("damping")
     if damping is not None and check_keys(damping, f"{path}.damping", allowed("structural.damping"), problems):
@@ -250,31 +255,7 @@ def build_structural(spec: dict, path: str, table: ParameterTable,
             corotated = ry.get("corotated", True)
             if not isinstance(corotated, bool):
                 problems.add(f"{path}.damping.rayleigh.corotated", f"expected true or false, found {corotated!r}")
-    la = spec.get("linear_algebra", "auto")
-    if la not in ("auto", "dense", "sparse"):
-        problems.add(f"{path}.linear_algebra", f"expected auto, dense or sparse, found {la!r}")
-    if n == 0:
-        problems.add(path, "the model has no free degrees of freedom")
-    massed = {d for d, _ in mass_terms} | {d for row in bars.dofs + beams.dofs + frames.dofs for d in row}
-    for i, d in enumerate(dof_names):
-        if i not in massed:
-            problems.add(f"{path}.elements", f"dof {d!r} has no mass (add a mass or a bar density)")
-    try:
-        model = StructuralModel(dof_names=dof_names, table=table, mass_terms=mass_terms, springs=springs,
-                                dampers=dampers, bars=bars, dim=dim, node_coords=node_coords,
-                                bar_nodes=bar_nodes, loads=loads, initial=init_lists, rayleigh=rayleigh,
-                                rayleigh_corotated=corotated is True,
-                                sparse=None if la == "auto" else la == "sparse",
-                                spring_nonlinear=spring_nonlinear, beams=beams, nl_dampers=nl_dampers,
-                                followers=followers, frames=frames)
-    except (ValueError, IndexError, TypeError, KeyError):
-        if len(problems.problems) > n_before:
-            return None  # the problems already listed explain why it cannot be assembled
-        raise
-    model.equation_sources = sources
-    # with problems listed, the model is still returned so that the responses can be checked
-    # against its DOFs and elements; the loader raises before anything runs
-    return model
+    return rayleigh, corotated
 
 
 def _beam_nodes(elements: Any) -> set[str]:

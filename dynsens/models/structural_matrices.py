@@ -17,35 +17,15 @@ from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
 class StructuralMatrices:
     """Assembly of K_t, D, M and the model's :class:`Linearization` (mixin)."""
 
-    # the model's element arrays and caches (set in StructuralModel.__init__)
+    # the model's element sets and caches (set in StructuralModel.__init__)
     n: int
     dim: int
     traits: Any
-    spring_names: list[str]
-    damper_names: list[str]
-    bar_names: list[str]
-    spring_dofs: np.ndarray
-    damper_dofs: np.ndarray
-    bar_dofs: np.ndarray
-    c: np.ndarray
+    sets: list[Any]
     rayleigh: Any
-    beams: Any
-    frames: Any
     followers: Any
-    nl_dampers: Any
     rotating_mass: bool
     frame_mass: bool
-    mass_dof: Any
-    mass_idx: Any
-    k1: np.ndarray
-    k2: np.ndarray
-    k3: np.ndarray
-    bar_A: np.ndarray
-    bar_E: np.ndarray
-    bar_rho: np.ndarray
-    bar_X: np.ndarray
-    bar_I: np.ndarray
-    bar_K: np.ndarray
     loads: list[Any]
     init_q: Any
     init_qd: Any
@@ -56,8 +36,6 @@ class StructuralMatrices:
     _unions: Any
     _diag_mass: tuple[Any, Any] | None
     _pattern_kept: tuple[int, np.ndarray] | None
-    _spring_state: Any
-    _bar_state: Any
     _ext: Any
     corotated_damping: Any
 
@@ -67,57 +45,30 @@ class StructuralMatrices:
         diag = np.arange(self.n)
         qe = self._ext(np.zeros(self.n, dtype=dtype) if q is None else q)
         rows, cols, vals = [diag], [diag], [params["mass"]]
-        if self.rotating_mass:
-            Mb = self.beams.turning_mass(qe, params)["M"]
-            idx = self.beams.idx[self.beams.is_consistent]
-            rows.append(np.repeat(idx, 6, axis=1).ravel())
-            cols.append(np.tile(idx, (1, 6)).ravel())
-            vals.append(Mb.reshape(-1))
-        if self.frame_mass:
-            r, c, v = self.frames.consistent_entries(params)
-            rows, cols, vals = rows + [r], cols + [c], vals + [v]
+        for k in self.sets:
+            for r, c, v in k.mass_entries(qe, params):
+                rows, cols, vals = rows + [r], cols + [c], vals + [v]
         return self._assemble("mass", rows, cols, vals, np.result_type(dtype, *vals))
 
     def _tangent(self, q: np.ndarray, params: dict[str, Any], corotated: bool = True) -> Any:
         """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse); without ``corotated`` that of the
         springs and linear beams only (the part of Rayleigh's β K that does not turn)."""
-        pv = params["pv"]
         rows, cols, vals = [], [], []
-        if len(self.spring_names):
-            _, kt = self._spring_state(q, params)
-            assert kt is not None
-            a, b = self.spring_dofs[:, 0], self.spring_dofs[:, 1]
-            rows += [a, b, a, b]
-            cols += [a, b, b, a]
-            vals += [kt, kt, -kt, -kt]
-        if len(self.bar_names) and corotated:
-            bs = self._bar_state(q, params)
-            d, N, L0, EA = bs["d"], bs["N"], params["L0"], params["EA"]
-            k_node = (EA / L0 ** 3)[:, None, None] * d[:, :, None] * d[:, None, :] \
-                + (N / L0)[:, None, None] * np.eye(self.dim)
-            ke = np.block([[k_node, -k_node], [-k_node, k_node]])
-            idx = self.bar_dofs
-            rows.append(np.repeat(idx, 2 * self.dim, axis=1).ravel())
-            cols.append(np.tile(idx, (1, 2 * self.dim)).ravel())
-            vals.append(ke.reshape(len(idx), -1).ravel())
-        if len(self.beams) and corotated:
-            r, c, v = self.beams.tangent(self._ext(q), params)
-            rows.append(r)
-            cols.append(c)
-            vals.append(v)
-        if len(self.frames):
-            r, c, v = self.frames.tangent(self._ext(q), params, corotated)
-            rows, cols, vals = rows + [r], cols + [c], vals + [v]
-        return self._assemble("tangent" if corotated else "tangent_linear", rows, cols, vals, np.result_type(q, pv))
+        for k in self.sets:
+            for r, c, v in k.tangent(q, params, corotated):
+                rows.append(r)
+                cols.append(c)
+                vals.append(v)
+        return self._assemble("tangent" if corotated else "tangent_linear", rows, cols, vals,
+                              np.result_type(q, params["pv"]))
 
     def _damping(self, params: dict[str, Any], dtype: Any) -> Any:
         rows, cols, vals = [], [], []
-        if len(self.damper_names):
-            c = params["pv"][self.c]
-            a, b = self.damper_dofs[:, 0], self.damper_dofs[:, 1]
-            rows += [a, b, a, b]
-            cols += [a, b, b, a]
-            vals += [c, c, -c, -c]
+        for k in self.sets:
+            for r, c, v in k.damping_entries(params):
+                rows.append(r)
+                cols.append(c)
+                vals.append(v)
         D = self._assemble("damping", rows, cols, vals, np.result_type(dtype, params["pv"]))
         if self.rayleigh is not None:
             pv = params["pv"]
@@ -170,16 +121,12 @@ class StructuralMatrices:
         # the 3D frames' consistent mass is constant (small rotations): kept with the parameters
         Ms = [params["M0"] if self.frame_mass and not self.rotating_mass else self._diagonal_mass(params)]
         Ds = [params["D"]] if self.traits.has_damping else []
-        if len(self.nl_dampers):
-            rows, cols, vals = self.nl_dampers.tangent(self._ext(s.qd), params["pv"])
+        triplets = [t for k in self.sets for t in k.damping_tangent(s.qd, params)]
+        if triplets:
+            rows, cols, vals = (list(x) for x in zip(*triplets))
             Ds.append(self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"])))
         if self.rotating_mass:
-            rows, cols, m_v, c_v, k_v = self.beams.inertia_jacobians(
-                self._ext(s.q), self._ext(s.qd), self._ext(s.qdd), params)
-            dtype = np.result_type(s.q, s.qd, s.qdd, params["pv"])
-            Ms.append(self._assemble("inertia_M", [rows], [cols], [m_v], dtype))
-            Ks.append(self._assemble("inertia_K", [rows], [cols], [k_v], dtype))
-            Ds.append(self._assemble("inertia_C", [rows], [cols], [c_v], dtype))
+            self._turning_mass_terms(s, params, Ms, Ks, Ds)
         if self.corotated_damping.active(params):
             dtype = np.result_type(s.q, s.qd, params["pv"])
             for j, (rows, cols, k_v, c_v) in enumerate(
@@ -191,6 +138,20 @@ class StructuralMatrices:
         if not self.traits.sparse:
             return Linearization(R_z=M, R_q=K, R_qd=D, dense_pattern=self._dense_pattern())
         return SparseLinearization(R_z=M, R_q=K, R_qd=D, unions=self._unions)
+
+    def _turning_mass_terms(self, s: StepState, params: dict[str, Any], Ms: list, Ks: list, Ds: list) -> None:
+        """Append the Jacobians of the turning masses' inertia forces to the blocks' terms."""
+        qe, qde, qdde = self._ext(s.q), self._ext(s.qd), self._ext(s.qdd)
+        dtype = np.result_type(s.q, s.qd, s.qdd, params["pv"])
+        for j, k in enumerate(self.sets):
+            jac = k.inertia_jacobians(qe, qde, qdde, params)
+            if jac is None:
+                continue
+            rows, cols, m_v, c_v, k_v = jac
+            site = "inertia" if j == 0 else f"inertia{j}"
+            Ms.append(self._assemble(f"{site}_M", [rows], [cols], [m_v], dtype))
+            Ks.append(self._assemble(f"{site}_K", [rows], [cols], [k_v], dtype))
+            Ds.append(self._assemble(f"{site}_C", [rows], [cols], [c_v], dtype))
 
     def _dense_pattern(self) -> np.ndarray:
         """Flat (row-major) positions where the dense M, K and D can be nonzero: the diagonal
@@ -240,19 +201,10 @@ class StructuralMatrices:
             for p in np.ravel(params):
                 rows_of_param.setdefault(int(p), set()).update(dof_set)
 
-        for d, p in zip(self.mass_dof, self.mass_idx):
-            touch(p, d)
-        for e, dofs in enumerate(self.spring_dofs):
-            touch([k[e] for k in (self.k1, self.k2, self.k3) if len(k)], dofs)
-        for e, dofs in enumerate(self.damper_dofs):
-            touch(self.c[e], dofs)
-        for e, dofs in enumerate(self.bar_dofs):
-            touch([self.bar_A[e], self.bar_E[e], self.bar_rho[e], *np.ravel(self.bar_X[e])], dofs)
-            # inertia and effective length enter outputs only (buckling), not F_R: no rows
-            touch([p for p in (self.bar_I[e], self.bar_K[e]) if p >= 0], [])
-        for params, dofs in self.beams.design_touch() + self.frames.design_touch() \
-                + self.nl_dampers.design_touch() \
-                + self.followers.design_touch():
+        for k in self.sets:
+            for params, dofs in k.design_touch():
+                touch(params, dofs)
+        for params, dofs in self.followers.design_touch():
             touch(params, dofs)
         for dof, amp, fn in self.loads:
             touch([amp, *fn.idx], dof)

@@ -38,10 +38,10 @@ Array = np.ndarray
 
 def serves(model: "StructuralModel") -> bool:
     """Whether the model is a spring network: masses, springs, viscous and Rayleigh damping and
-    loads only (its only nonlinearity the springs')."""
-    return bool(len(model.spring_names)) and not (
-        len(model.bar_names) or len(model.beams) or len(model.frames) or len(model.nl_dampers)
-        or len(model.followers) or model.rotating_mass or model.frame_mass or model.traits.linear)
+    loads only (its only nonlinearity the springs'): every element set's kind declares that the
+    compiled step serves it (:meth:`.elements.ElementKind.served_compiled`)."""
+    return bool(len(model.spring_names)) and model.compiled_kinds and not (
+        len(model.followers) or model.rotating_mass or model.frame_mass or model.traits.linear)
 
 
 def _entries(A: sp.csc_matrix) -> tuple[Array, Array]:
