@@ -34,7 +34,7 @@ def read_study(path: "str | _os.PathLike[str]") -> "_study.StudyTable":
     return _read(_os.fspath(path))
 
 
-# The public API; everything else (dynsens.models, dynsens.march, ...) may change between versions.
+# The public API; everything else (dynsens.models, dynsens.timeloop.march, ...) may change between versions.
 __all__ = ["Case", "CaseError", "ConvergenceError", "DynsensError", "ModelError", "OptimizeResult", "Result",
            "Simulation", "SimulationResult", "__version__", "check_gradients", "load_case", "load_case_dict",
            "optimize", "read_result", "read_study", "run_case", "simulate"]

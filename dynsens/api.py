@@ -23,14 +23,14 @@ import yaml
 from scipy.optimize import OptimizeResult as _ScipyResult
 
 from .case.load import Case, load_case, load_case_dict
-from .gradcheck import GradientReport
-from .gradcheck import check_gradients as _check_gradients
-from .march import RunResult
+from .derivatives.gradcheck import GradientReport
+from .derivatives.gradcheck import check_gradients as _check_gradients
+from .timeloop.march import RunResult
 from .optimize.verified import optimize_verified as _optimize_verified
 from .optimize.store import read_history as _read_history
-from .responses import ResponseValue
+from .responses.base import ResponseValue
 from .simulation import run_case
-from .stepping import HISTORY_FIELDS
+from .timeloop.stepping import HISTORY_FIELDS
 
 CaseLike = Union[Case, str, Path, Mapping[str, Any]]
 

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .records import RecordedQuantity
+from .timeloop.records import RecordedQuantity
 
 MAX_LEGEND = 12     # curves in a panel named one by one; beyond, the largest (see _largest_named)
 
@@ -141,9 +141,9 @@ def response_markers(case: Any, result: Any) -> list[Marker]:
     """Markers for the responses of ``case`` that read a recorded quantity of ``result``: values
     at a time, at an event or at the end as points; KS, max and min of the quantity itself (not of
     a ratio of it) as levels."""
-    from .responses import ValueAt
-    from .responses_sizing import Aggregate
-    from .records import reads_in_own_unit
+    from .responses.base import ValueAt
+    from .responses.sizing import Aggregate
+    from .timeloop.records import reads_in_own_unit
     by_output: dict[int, list[str]] = {}
     for name, q in result.quantities.items():
         by_output.setdefault(q.output_id, []).append(name)

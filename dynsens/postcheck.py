@@ -7,7 +7,7 @@ by member and step by step,
 * bars: σ/σ_t, −σ/σ_c and −N/P_E (P_E = π²EI/(KL)², bars with ``inertia``);
 * beams (plane and 3D): the extreme-fibre stresses σ = N/A ± M/W at both ends, σ/σ_t and −σ/σ_c;
   the flexural buckling ratio −N/P_E (P_E with the beam's length, the weaker axis of a 3D beam);
-  and the beam-column interaction u of AISC 360-16 Eq. H1-1a/b (:mod:`dynsens.member_stability`).
+  and the beam-column interaction u of AISC 360-16 Eq. H1-1a/b (:mod:`dynsens.responses.member_stability`).
 
 The limits are read from the case's ``stress_ratio`` responses (σ_t, σ_c), ``buckling_ratio`` and
 ``interaction_ratio`` responses (the beams' K, the largest given; F_y and φ, the smallest given),
@@ -23,8 +23,8 @@ import yaml
 
 from .case.load import Case
 from .errors import CaseError, ProblemCollector
-from .expressions import compile_expression
-from .member_stability import MEMBER_COMPONENTS, buckling_scale, interaction_forms
+from .expressions.restricted import compile_expression
+from .responses.member_stability import MEMBER_COMPONENTS, buckling_scale, interaction_forms
 from .models.base import StepState
 from .models.structural import StructuralModel
 from .simulation import run_case

@@ -9,10 +9,10 @@ import numpy as np
 
 from .case.load import Case
 from .errors import CaseError, NonFiniteError
-from .march import RunResult, integrate
-from .records import RecordedQuantity, Recorder, quantities_read_by
-from .runchecks import check_design, check_result, check_run_size, unstable_scheme_note
-from .sensitivity_drift import sensitivity_constraint_residual
+from .timeloop.march import RunResult, integrate
+from .timeloop.records import RecordedQuantity, Recorder, quantities_read_by
+from .timeloop.runchecks import check_design, check_result, check_run_size, unstable_scheme_note
+from .derivatives.constraint_drift import sensitivity_constraint_residual
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ import numpy as np
 
 import dynsens
 from dynsens.executor import make_executor
-from dynsens.gradcheck import check_gradients, to_json
+from dynsens.derivatives.gradcheck import check_gradients, to_json
 
 ROOT = Path(__file__).resolve().parent.parent
 STEPS = [1e-3, 1e-4, 1e-5, 1e-6]

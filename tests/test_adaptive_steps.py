@@ -28,7 +28,7 @@ from scipy.optimize import brentq
 
 import dynsens
 from dynsens.errors import CaseError, StepSizeError
-from dynsens.step_sequence import replaying
+from dynsens.timeloop.step_sequence import replaying
 from helpers import complex_step_gradients, rel_err
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
@@ -285,13 +285,13 @@ def test_storage_grows_with_the_steps_and_a_tiny_first_step_is_no_huge_run():
 
 
 def test_convergence_study_refuses_adaptive_steps():
-    from dynsens.convergence import work_precision
+    from dynsens.analysis.convergence import work_precision
     with pytest.raises(CaseError, match=r"integrator.adaptive: the convergence study varies integrator.dt"):
         work_precision(sdof(1e-5), [1e-3, 5e-4], ["ddm-forward"])
 
 
 def test_check_gradients_replays_the_accepted_steps():
-    from dynsens.gradcheck import check_gradients, to_markdown
+    from dynsens.derivatives.gradcheck import check_gradients, to_markdown
     rep = check_gradients(sdof(1e-6, t_end=2.0), [1e-5], "central", workers=1)
     assert rep.replayed and rep.passes(1e-8), {n: rep.best_rel_diff(n) for n in rep.responses}
     assert "replay the accepted steps" in to_markdown(rep)

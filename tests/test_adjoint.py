@@ -22,7 +22,7 @@ import pytest
 import dynsens
 from conftest import CASES
 from dynsens.errors import CaseError
-from dynsens.responses import Response, ResponseValue
+from dynsens.responses.base import Response, ResponseValue
 from helpers import complex_step_gradients, rel_err
 from scripts_path import hard_step_case  # (puts scripts/ on the path)
 from bench_peers import chain_case

@@ -16,7 +16,7 @@ import dynsens
 from dynsens import CaseError
 from dynsens.case.load import load_case_dict
 from dynsens.errors import ProblemCollector
-from dynsens.member_stability import interaction_forms, interaction_ratio
+from dynsens.responses.member_stability import interaction_forms, interaction_ratio
 from dynsens.models.base import StepState
 from dynsens.postcheck import check_members
 from helpers import assert_gradients_match_complex_step_and_adjoint

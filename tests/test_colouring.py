@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import dynsens
-from dynsens.sensitivity import DesignPartials, colour_columns
+from dynsens.derivatives.partials import DesignPartials, colour_columns
 from helpers import complex_step_gradients, rel_err
 from scripts_path import duffing_chain, truss_impact
 

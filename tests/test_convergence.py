@@ -5,7 +5,7 @@ from click.testing import CliRunner
 import dynsens
 from dynsens.cli.main import cli
 from dynsens.cli import convergence  # noqa: F401  (registers the command)
-from dynsens.convergence import observed_order, work_precision
+from dynsens.analysis.convergence import observed_order, work_precision
 from conftest import CASES
 
 

@@ -21,7 +21,7 @@ from dynsens.integrators.newmark import Aux, make_scheme
 from dynsens.models.base import Linearization, StepState
 from dynsens.solver._jit import enabled
 from dynsens.solver.linalg import Counters, Factor
-from dynsens.stepping import StepRecord
+from dynsens.timeloop.stepping import StepRecord
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 

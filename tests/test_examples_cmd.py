@@ -103,7 +103,7 @@ def test_the_wheel_ships_the_cases_and_its_command_copies_them(tmp_path: Path) -
     zipfile.ZipFile(wheel).extractall(site)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"PYTHONPATH": str(site)}
     out = tmp_path / "copied"
-    res = subprocess.run([sys.executable, "-c", "import dynsens.examples as e; print(e.examples_folder())"],
+    res = subprocess.run([sys.executable, "-c", "import dynsens.io.examples as e; print(e.examples_folder())"],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert Path(res.stdout.strip()) == site / "dynsens" / "example_cases"

@@ -101,7 +101,7 @@ def test_check_gradients_and_convergence_on_dask_equal_this_process(dask_address
     import dynsens.cli.check_gradients  # noqa: F401  (registers the command)
     from dynsens.case.load import load_case
     from dynsens.cli.main import cli
-    from dynsens.convergence import work_precision
+    from dynsens.analysis.convergence import work_precision
     sdof = Path(__file__).resolve().parents[1] / "cases" / "sdof_step.yaml"
     reports = {}
     for how in (["--workers", "1"], ["--scheduler", dask_address]):

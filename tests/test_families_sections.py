@@ -19,7 +19,7 @@ import pytest
 import dynsens
 from dynsens import CaseError
 from dynsens.case.load import load_case_dict
-from dynsens.sensitivity import DesignPartials
+from dynsens.derivatives.partials import DesignPartials
 from helpers import complex_step_gradients
 from test_beams import cantilever, portal_frame
 from test_beams3d import space_frame

@@ -19,8 +19,8 @@ import dynsens.cli.simulate  # noqa: F401
 from conftest import CASES
 from dynsens.cli.main import cli
 from dynsens.cli.options import configure_logging
-from dynsens.gradcheck import check_gradients
-from dynsens.progress import Progress, progress_enabled
+from dynsens.derivatives.gradcheck import check_gradients
+from dynsens.timeloop.progress import Progress, progress_enabled
 
 
 class Tty(io.StringIO):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynsens.expressions import FUNCTIONS, compile_expression
-from dynsens.jets import JET_FUNCTIONS, Jet
+from dynsens.expressions.restricted import FUNCTIONS, compile_expression
+from dynsens.expressions.jets import JET_FUNCTIONS, Jet
 
 EXPRS = ["a*t**2/2 + 0.05*sin(5*t)", "sqrt(1+t**2)*exp(-a*t)", "atan2(sin(t), 2+cos(t))",
          "log(2+t)/(1+t)**1.5", "tanh(t)*asin(0.3*t) + acos(0.2*t) + atan(t)",

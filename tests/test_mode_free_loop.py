@@ -8,7 +8,7 @@ import ast
 import re
 from pathlib import Path
 
-import dynsens.march
+import dynsens.timeloop.march
 
 MODE_WORDS = {"direct", "adjoint"}
 MODE_CLASSES = {"DirectMode", "AdjointMode", "PrimalOnlyMode"}
@@ -46,7 +46,7 @@ def mode_names(function: ast.FunctionDef) -> list[str]:
 
 
 def _integrate() -> ast.FunctionDef:
-    tree = ast.parse(Path(dynsens.march.__file__).read_text(encoding="utf-8"))
+    tree = ast.parse(Path(dynsens.timeloop.march.__file__).read_text(encoding="utf-8"))
     return next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "integrate")
 
 

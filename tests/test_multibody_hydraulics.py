@@ -10,7 +10,7 @@ import yaml
 import dynsens
 from conftest import CASES
 from dynsens.errors import ModelError
-from dynsens.sensitivity import DesignPartials
+from dynsens.derivatives.partials import DesignPartials
 from helpers import complex_step_gradients, rel_err
 
 CASE = CASES / "hydraulic_lever.yaml"

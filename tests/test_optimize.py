@@ -25,7 +25,7 @@ from dynsens.case.load import load_case, load_case_dict
 from dynsens.cli.main import cli
 from dynsens.errors import ConvergenceError, ModelError
 from dynsens.postcheck import check_members
-from dynsens.responses import ResponseValue
+from dynsens.responses.base import ResponseValue
 from helpers import SDOF_DESIGN
 
 REPO = Path(__file__).resolve().parents[1]

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import dynsens
-from dynsens.records import quantities_read_by
+from dynsens.timeloop.records import quantities_read_by
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 plt = pytest.importorskip("matplotlib.pyplot")

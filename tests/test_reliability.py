@@ -24,7 +24,7 @@ import dynsens.cli.simulate  # noqa: F401
 from dynsens.case.load import load_case, load_case_text
 from dynsens.cli.main import cli
 from dynsens.errors import CaseError, DesignError, NonFiniteError
-from dynsens.runchecks import check_result
+from dynsens.timeloop.runchecks import check_result
 from dynsens.simulation import run_case
 from helpers import SDOF_RUN
 
@@ -259,7 +259,7 @@ def test_huge_step_count_refused_with_the_estimate(runner, tmp_path):
 
 
 def test_memory_estimate_refuses_a_run_that_does_not_fit(runner, tmp_path, monkeypatch):
-    import dynsens.runchecks as rc
+    import dynsens.timeloop.runchecks as rc
     monkeypatch.setattr(rc, "available_memory", lambda: 2**20)      # a 1 MiB machine
     simulate_refused(runner, tmp_path, make(lambda r: r["integrator"].__setitem__("dt", 1e-5)),
                      "integrator.dt", "2.000e+04 steps storing histories [q, qd, qdd]", "MiB available",
@@ -400,7 +400,7 @@ def test_runaway_growth_at_a_later_design_names_the_stability_limit():
 
 # ---------------------------------------------------------------- check-gradients: the partials' step
 def test_partials_audit_shows_the_plateau_and_flags_a_variable_without_one(runner, tmp_path):
-    from dynsens.partials_audit import audit_partials
+    from dynsens.derivatives.partials_audit import audit_partials
     # mass = m + 1e12: a relative perturbation of m changes the entry by less than its round-off
     # at every step (no plateau; k's change of the residual drowns in the round-off of M q'' too);
     # c is well scaled and linear: a plateau over most of the sweep

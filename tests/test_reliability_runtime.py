@@ -22,7 +22,7 @@ from test_reliability import make, simulate_refused
 from dynsens.case.load import load_case, load_case_text
 from dynsens.errors import NonFiniteError
 from dynsens.simulation import run_case
-from dynsens.runaway import RUNAWAY_FACTOR
+from dynsens.timeloop.runaway import RUNAWAY_FACTOR
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 
@@ -253,7 +253,7 @@ def test_runaway_monitor_never_trips_on_a_shipped_case_start(name):
 
 def test_a_conditionally_stable_scheme_without_a_computed_limit_is_named_for_growth_only():
     # a mechanism (constraints): no plain stability limit; a runaway still names the scheme
-    from dynsens.runchecks import unstable_scheme_note
+    from dynsens.timeloop.runchecks import unstable_scheme_note
     raw = yaml.safe_load((CASES / "point_pendulum.yaml").read_text())
     raw["integrator"]["beta"] = 0.0
     case = load_case_text(yaml.safe_dump(raw), "pp.yaml")

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import dynsens
-from dynsens.march import integrate
+from dynsens.timeloop.march import integrate
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 

@@ -17,10 +17,10 @@ import pytest
 
 import dynsens
 import dynsens.derivatives.direct as direct
-import dynsens.march as march
+import dynsens.timeloop.march as march
 from conftest import CASES
 from dynsens.models.base import Model, StepState
-from dynsens.sensitivity import DesignPartials
+from dynsens.derivatives.partials import DesignPartials
 
 FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 

@@ -19,7 +19,7 @@ import yaml
 import dynsens
 from dynsens.case.load import load_case
 from dynsens.postcheck import check_members
-from dynsens.sensitivity import colour_columns
+from dynsens.derivatives.partials import colour_columns
 
 ROOT = Path(__file__).resolve().parents[1]
 TOWER = ROOT / "cases" / "tower_sizing.yaml"

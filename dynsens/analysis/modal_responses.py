@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..responses import FinishContext, Response, ResponseValue
+from ..responses.base import FinishContext, Response, ResponseValue
 from .modes import buckling, modes
 
 

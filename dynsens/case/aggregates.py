@@ -1,5 +1,5 @@
 """Case entries of the aggregate responses (``ks``, ``max``, ``min``, ``stress_ratio``,
-``buckling_ratio``, ``displacement_limit``): validated here, built as :class:`dynsens.responses_sizing.Aggregate`.
+``buckling_ratio``, ``displacement_limit``): validated here, built as :class:`dynsens.responses.sizing.Aggregate`.
 
 Every key these responses accept changes the result; any other key is an error.
 """
@@ -11,12 +11,12 @@ import numpy as np
 
 from ..case_keys import AGGREGATE_TYPES, allowed
 from ..errors import ProblemCollector
-from ..expressions import ExpressionError, compile_expression
+from ..expressions.restricted import ExpressionError, compile_expression
 from ..models._keys import check_keys
 from ..models.parameters import finite_float, number_text
 from ..models.base import Output
-from ..responses import Response
-from ..responses_sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
+from ..responses.base import Response
+from ..responses.sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
 from .quantities import component_index
 
 __all__ = ["AGGREGATE_TYPES", "aggregate_maker"]

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from ..errors import ProblemCollector
-from ..expressions import CONSTANTS, ExpressionError, compile_expression
-from ..runchecks import size_problem, stability_problem
+from ..expressions.restricted import CONSTANTS, ExpressionError, compile_expression
+from ..timeloop.runchecks import size_problem, stability_problem
 
 if TYPE_CHECKING:
-    from ..march import RunPlan
+    from ..timeloop.march import RunPlan
     from ..models.base import Model
     from ..models.parameters import ParameterTable
     from .load import DesignVariable

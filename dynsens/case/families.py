@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 from ..case_keys import SECTIONS, allowed
 from ..errors import Problem, ProblemCollector
-from ..expressions import RESERVED_NAMES
+from ..expressions.restricted import RESERVED_NAMES
 from ..models._keys import check_keys, did_you_mean
 from ..models.beams import SHAPES
 from ..models.beams3d import SHAPES3

@@ -18,17 +18,17 @@ import numpy as np
 import yaml
 
 from ..errors import CaseError, ProblemCollector
-from ..expressions import RESERVED_NAMES
+from ..expressions.restricted import RESERVED_NAMES
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
-from ..march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
+from ..timeloop.march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
 from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output
 from ..models.parameters import ParameterTable
 from ..models.registry import build_model
-from ..records import QuantitySpec, Recorder
-from ..response_set import ResponseSet
-from ..sensitivity import METHODS
+from ..timeloop.records import QuantitySpec, Recorder
+from ..responses.response_set import ResponseSet
+from ..derivatives.partials import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
 from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings

@@ -1,7 +1,7 @@
 """Case entries of the member checks that depend on the kind of element: which elements a
 response names and of what kind they are (beams, bars, springs, dampers), and the beam-column
-``interaction_ratio`` (:mod:`dynsens.member_stability`), built as a
-:class:`dynsens.responses_sizing.FormAggregate`.
+``interaction_ratio`` (:mod:`dynsens.responses.member_stability`), built as a
+:class:`dynsens.responses.sizing.FormAggregate`.
 
 A response on an element kind it does not support is one problem, naming the response, the
 kind and its elements, at the response's ``elements`` key (or ``type`` when it names none).
@@ -14,11 +14,11 @@ import numpy as np
 
 from ..case_keys import allowed
 from ..errors import ProblemCollector
-from ..member_stability import MEMBER_COMPONENTS, interaction_forms
+from ..responses.member_stability import MEMBER_COMPONENTS, interaction_forms
 from ..models._keys import check_keys, did_you_mean
 from ..models.base import Model, Output
-from ..responses import Response
-from ..responses_sizing import FormAggregate, FormTerm
+from ..responses.base import Response
+from ..responses.sizing import FormAggregate, FormTerm
 from .aggregates import OutputId, how_and_rho, positive
 
 #: element kinds as messages name them, with the model attributes that list their names

@@ -20,7 +20,7 @@ from ..errors import ProblemCollector
 from ..case_keys import allowed
 from ..models._keys import check_keys
 from ..models.base import Output
-from ..records import RESERVED, QuantitySpec
+from ..timeloop.records import RESERVED, QuantitySpec
 
 QUANTITY_KEYS = allowed("output.quantity")
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")

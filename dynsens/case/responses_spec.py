@@ -11,13 +11,13 @@ import numpy as np
 
 from ..case_keys import RESPONSE_TYPES, allowed
 from ..errors import ProblemCollector
-from ..expressions import RESERVED_NAMES, ExpressionError, compile_expression
-from ..march import RunPlan
+from ..expressions.restricted import RESERVED_NAMES, ExpressionError, compile_expression
+from ..timeloop.march import RunPlan
 from ..models._keys import check_keys, did_you_mean
 from ..models.parameters import finite_float, number_text
 from ..models.base import Model, Output
-from ..responses import EventSpec, EventTime, ExpressionIntegral, Response, TimeIntegral, ValueAt
-from ..responses_final import Combination, StructuralMass
+from ..responses.base import EventSpec, EventTime, ExpressionIntegral, Response, TimeIntegral, ValueAt
+from ..responses.final import Combination, StructuralMass
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
 from .member_checks import beam_names, interaction_maker

@@ -8,7 +8,7 @@ from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ..integrators.newmark import Newmark
 from ..models._keys import check_keys
-from ..step_sequence import AdaptiveSettings, adaptive_problem
+from ..timeloop.step_sequence import AdaptiveSettings, adaptive_problem
 from .responses_spec import read_number
 
 PATH = "integrator.adaptive"

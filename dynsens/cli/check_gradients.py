@@ -8,11 +8,11 @@ from pathlib import Path
 import click
 
 from ..case.load import load_case
-from ..gradcheck import SCHEMES, STEP_RANGE, check_gradients, step_problem, to_json, to_markdown
+from ..derivatives.gradcheck import SCHEMES, STEP_RANGE, check_gradients, step_problem, to_json, to_markdown
 from ..io.paths import atomic_write_text, check_output_path
-from ..partials_audit import audit_json, audit_markdown
-from ..partials_audit import audit_partials as audit_partials_of
-from ..progress import Progress
+from ..derivatives.partials_audit import audit_json, audit_markdown
+from ..derivatives.partials_audit import audit_partials as audit_partials_of
+from ..timeloop.progress import Progress
 from .main import cli
 from .options import (FiniteFloat, case_argument, overwrite_option, parse_float_list, scheduler_option,
                       set_option, verbosity_options, workers_option)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import click
 
 from ..case.load import load_case
-from ..convergence import METHODS, observed_order, report_files, work_precision, write_report
+from ..analysis.convergence import METHODS, observed_order, report_files, work_precision, write_report
 from ..io.paths import check_output_folder
-from ..progress import Progress
+from ..timeloop.progress import Progress
 from .main import cli
 from .options import (DEFAULT_OUTPUT_FOLDER, case_argument, overwrite_option, parse_float_list, scheduler_option,
                       set_option, verbosity_options, workers_option)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from ..examples import copy_examples
+from ..io.examples import copy_examples
 from .main import cli
 from .options import overwrite_option, verbosity_options
 

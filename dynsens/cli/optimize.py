@@ -14,7 +14,7 @@ from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOut
 from ..optimize.verified import optimize_verified
 from ..optimize.verify import Verification, format_verification
 from ..optimize.summary import decision_summary
-from ..progress import Progress
+from ..timeloop.progress import Progress
 from .main import cli
 from .options import (FiniteFloat, case_argument, default_output, overwrite_option, scheduler_option, seed_option,
                       set_option, verbosity_options)

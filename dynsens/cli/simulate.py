@@ -10,7 +10,7 @@ import numpy as np
 
 from ..case.load import load_case
 from ..io.hdf5 import redundant_equations, write_result
-from ..progress import Progress
+from ..timeloop.progress import Progress
 from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli

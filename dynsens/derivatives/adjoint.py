@@ -33,18 +33,18 @@ import numpy as np
 
 from ..integrators.newmark import Aux, Newmark, Prediction
 from ..models.base import Model, Output, StepState
-from ..responses import OutputTrace
-from ..sensitivity import DesignPartials, initial_state_gradient
+from ..responses.base import OutputTrace
+from .partials import DesignPartials, initial_state_gradient
 from ..solver.linalg import Counters
-from ..stepping import StepRecord
+from ..timeloop.stepping import StepRecord
 from .checkpoints import RecordStore
 from .direct import trail_length
 from .finite import check_adjoint_gradient, check_adjoint_step
 from .output_seeds import OutputSeeds
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..response_set import ResponseSet
-    from ..responses import ResponseValue
+    from ..responses.response_set import ResponseSet
+    from ..responses.base import ResponseValue
     from .mode import MassOf
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..solver.linalg import Counters, Factor
-from ..stepping import PrimalStepper, StepRecord
+from ..timeloop.stepping import PrimalStepper, StepRecord
 
 DEFAULT_MEMORY_BUDGET = 2 * 2**30     # bytes (sensitivity.memory_budget default: 2 GiB)
 

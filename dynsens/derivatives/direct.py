@@ -17,16 +17,16 @@ import numpy as np
 
 from ..integrators.newmark import Aux, Newmark
 from ..models.base import Model, StepState
-from ..sensitivity import DesignPartials, initial_state_gradient, pseudo_load
+from .partials import DesignPartials, initial_state_gradient, pseudo_load
 from ..solver.linalg import Counters
 from ..solver.newton import StepSolver
-from ..stepping import StepRecord, split_unknowns
+from ..timeloop.stepping import StepRecord, split_unknowns
 from .direct_step import PythonDirectStep, direct_step, run_block, serves
 from .finite import check_block
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..response_set import ResponseSet
-    from ..responses import ResponseValue
+    from ..responses.response_set import ResponseSet
+    from ..responses.base import ResponseValue
     from .mode import MassOf
 
 TRAIL_STEPS = 128

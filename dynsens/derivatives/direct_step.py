@@ -23,10 +23,10 @@ import numpy as np
 from ..integrators.newmark import (Newmark, advance_arrays, correct_arrays, corrector_coefficients,
                                    predict_arrays)
 from ..models.base import StepState
-from ..sensitivity import pseudo_load_with
+from .partials import pseudo_load_with
 from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
 from ..solver.linalg import Factor
-from ..stepping import StepRecord, split_unknowns
+from ..timeloop.stepping import StepRecord, split_unknowns
 
 
 # ----------------------------------------------------------------------------- step operations

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import NonFiniteError
 from ..models.base import Model, StepState
-from ..stepping import HISTORY_FIELDS, StepRecord, equation_offsets
+from ..timeloop.stepping import HISTORY_FIELDS, StepRecord, equation_offsets
 
 _WHY = ("the design derivative of the model is not finite there (an entry's derivative at this design "
         "or state, e.g. sqrt or a power of a variable at 0); the run is failed, not completed")

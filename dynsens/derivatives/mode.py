@@ -1,6 +1,6 @@
 """What the time loop asks of a derivative mode: the :class:`DerivativeMode` protocol.
 
-The loop (:func:`dynsens.march.integrate`) takes the primal steps and hands their records to
+The loop (:func:`dynsens.timeloop.march.integrate`) takes the primal steps and hands their records to
 one mode object; it never asks which mode runs.  Three modes implement the protocol:
 
 * :class:`~dynsens.derivatives.direct.DirectMode` carries the sensitivities forward, trailing
@@ -31,9 +31,9 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from ..models.base import Model, StepState
-from ..response_set import ResponseSet
-from ..responses import ResponseValue
-from ..stepping import StepRecord
+from ..responses.response_set import ResponseSet
+from ..responses.base import ResponseValue
+from ..timeloop.stepping import StepRecord
 
 #: the mass response's value and gradient, evaluated when a response asks
 MassOf = Callable[[], tuple[Any, np.ndarray | None]]

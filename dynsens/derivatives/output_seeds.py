@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..models.base import Model, Output, StepState
-from ..sensitivity import DesignPartials
+from .partials import DesignPartials
 
 # imaginary step of the state derivatives (complex step: no cancellation, any small size)
 STATE_STEP = 1e-30

@@ -8,7 +8,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from ..models.base import Output
-    from ..responses import OutputTrace
+    from ..responses.base import OutputTrace
 
 
 def grid_weights(trace: OutputTrace, weights: dict[Any, Any], outputs: list[Output]) -> dict[int, np.ndarray]:

@@ -27,8 +27,8 @@ vectors (n,) and the sensitivity matrices (n, m): the sensitivities are derived 
 scheme's own step equations.  The scheme also gives the transposes of these maps, which the
 discrete adjoint (:mod:`dynsens.derivatives.adjoint`) runs backwards, the constants of its
 local error estimates (:meth:`Newmark.error_constants`, read by the adaptive steps of
-:mod:`dynsens.step_sequence`) and its stability limit (:meth:`Newmark.stability_limit`, read by
-:mod:`dynsens.runchecks`).
+:mod:`dynsens.timeloop.step_sequence`) and its stability limit (:meth:`Newmark.stability_limit`, read by
+:mod:`dynsens.timeloop.runchecks`).
 
 Local error (Zienkiewicz & Xie 1991, extended to the α-family): for exact values at the start
 of a step, the displacement update errs by C_q h³ q⃛ with C_q = β − 1/6 + (α_m − α_f)/2

@@ -83,7 +83,7 @@ def write_design(f: h5py.File, names: tuple[str, ...], values: np.ndarray,
 
 
 def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = False) -> None:
-    """Write one simulation result (a :class:`~dynsens.march.RunResult`) atomically."""
+    """Write one simulation result (a :class:`~dynsens.timeloop.march.RunResult`) atomically."""
     missing = [n for n, r in result.responses.items() if r.missing]
     status = result.status if not missing else f"{result.status}; missing responses: {', '.join(missing)}"
     with atomic_h5(path, overwrite) as f:

@@ -14,7 +14,7 @@ from typing import Any, Sequence
 import h5py
 import numpy as np
 
-from ..records import RecordedQuantity
+from ..timeloop.records import RecordedQuantity
 
 # the dimension of each state field's second axis
 STATE_DIMS = {"q": "dof", "qd": "dof", "qdd": "dof", "lam": "multiplier", "p": "pressure", "pd": "pressure"}

@@ -19,7 +19,7 @@ Required (abstract):
    ("semi-analytical").  The returned object is opaque to the integrator.
 3. ``initial_state(params)`` returns ``(q0, qd0, p0)``; its design derivative is taken
    numerically unless the model defines ``initial_state_gradient(params0, partials)``
-   (:mod:`dynsens.sensitivity`).
+   (:mod:`dynsens.derivatives.partials`).
 4. ``residual(t, s, params)`` returns F_R (n_z,) for a :class:`StepState` ``s``.
 5. ``linearize(t, s, params)`` returns the exact partial derivatives of F_R with respect
    to z, q, q̇ and p (:class:`Linearization`); the integrator forms the iteration matrix
@@ -47,7 +47,7 @@ Optional, with defaults here (each method's docstring says what it must return):
     ``displacement_scale`` for the runaway monitor.
 14. Read where a model has them (by ``getattr``, not declared here): ``initial_state_gradient``
     (3.), ``constraint_levels`` and ``kinematics`` (the drift of the sensitivities,
-    :mod:`dynsens.sensitivity_drift`), ``redundant`` and ``multiplier_labels`` (the
+    :mod:`dynsens.derivatives.constraint_drift`), ``redundant`` and ``multiplier_labels`` (the
     multipliers' names in the results).
 
 Invariants the callers keep, and the caches rely on
@@ -87,7 +87,7 @@ The caches that rely on A.-D. (keyed by identity ``is``/``id`` or by bytes):
 * structural models: stacked parameters by list (:mod:`dynsens.models.structural`), the
   compiled spring step's design by set (:mod:`dynsens.models.structural_step`);
 * derivative modes: stacked directions by the block's state list and stacked parameter
-  copies per block length (:mod:`dynsens.sensitivity`), output seeds' stacked copies per
+  copies per block length (:mod:`dynsens.derivatives.partials`), output seeds' stacked copies per
   length (:mod:`dynsens.derivatives.output_seeds`), the direct mode's transition matrices by
   linearization and factorization (:mod:`dynsens.derivatives.direct`), checkpoints' seen
   objects (:mod:`dynsens.derivatives.checkpoints`);
@@ -360,7 +360,7 @@ class Model(ABC):
     def displacement_scale(self, params: Any, lin: Linearization | None) -> float:
         """A size of the coordinates q that the model's data imply (its geometry, the static
         deflection under its loads; 0 when unknown): growth is judged against it as well as
-        against the run's early values (:mod:`dynsens.runaway`).  ``lin``: at t0."""
+        against the run's early values (:mod:`dynsens.timeloop.runaway`).  ``lin``: at t0."""
         return 0.0
 
     def describe_equation(self, k: int) -> str:

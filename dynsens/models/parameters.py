@@ -8,7 +8,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import ProblemCollector
-from ..expressions import Expression, ExpressionError, compile_expression
+from ..expressions.restricted import Expression, ExpressionError, compile_expression
 
 Array = np.ndarray
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io.series import read_series
 from ..plots import Run, plot_runs
-from ..records import RecordedQuantity
+from ..timeloop.records import RecordedQuantity
 from ..io.paths import atomic_path
 
 

@@ -34,7 +34,7 @@ import numpy as np
 from ..case.load import Case
 from ..errors import DynsensError
 from ..postcheck import MemberCheck, check_members, stress_limits
-from ..responses_sizing import Aggregate, MagnitudeAggregate
+from ..responses.sizing import Aggregate, MagnitudeAggregate
 from ..simulation import run_case
 from .problem import FEAS_TOL, OptimizationError, ScaledProblem, build_problem
 

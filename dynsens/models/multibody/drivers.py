@@ -4,7 +4,7 @@ prescribed in time — rheonomic constraints φ(q, t) = 0.
 The prescribed value is either ``offset + rate·t + amplitude·sin(2π·frequency·t + phase)``
 (:class:`.joints.Motion`) or ``expression``: any expression of ``t`` (s) and the design
 variables in the restricted evaluator, with its first and second time derivatives evaluated
-exactly along by second-order jets (:mod:`dynsens.jets`), complex-safe for complex step.
+exactly along by second-order jets (:mod:`dynsens.expressions.jets`), complex-safe for complex step.
 
 ================  ================================================  =====================
 target            equation                                          x(t) is
@@ -27,8 +27,8 @@ from typing import Any
 
 
 from ...case_keys import allowed
-from ...expressions import Expression, ExpressionError, compile_expression
-from ...jets import JET_FUNCTIONS, Jet
+from ...expressions.restricted import Expression, ExpressionError, compile_expression
+from ...expressions.jets import JET_FUNCTIONS, Jet
 from .._keys import check_keys, did_you_mean
 from .bodies import GROUND, Const, Diff, Point
 from .joints import Coef, DotEq, Joint, Motion, Prescribed, const_coef, make_driver

@@ -15,10 +15,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .case.load import Case
-from .executor import Executor, cached_case, make_executor, remember_case
-from .simulation import run_case
-from .step_sequence import replaying
+from ..case.load import Case
+from ..executor import Executor, cached_case, make_executor, remember_case
+from ..simulation import run_case
+from ..timeloop.step_sequence import replaying
 
 SCHEMES = ("forward", "central", "complex")
 #: accepted relative steps h per scheme, [smallest, largest): below 1e-15 a real step moves x by
@@ -137,7 +137,7 @@ def check_gradients(case: Case, steps: list[float], scheme: str = "forward", *,
     _check_steps(steps, scheme)
     x = case.x0 if x is None else np.asarray(x, dtype=float)
     m = x.size
-    from .warmup import warm_case
+    from ..warmup import warm_case
     warm_case(case)  # compile first: no reported wall time includes numba compilation
     t0 = time.perf_counter()
     sa_run = run_case(case, x, sensitivities=True, history=())

@@ -20,7 +20,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .errors import DynsensError
+from ..errors import DynsensError
 
 Number = Any  # float or complex scalar, or numpy scalar/array
 
@@ -311,7 +311,7 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
     ----------
     text : the expression, e.g. ``"0.5*m + 1e-3"``.
     known : allowed symbol names; ``None`` accepts any name.
-    functions : the function table (default :data:`FUNCTIONS`; :data:`dynsens.jets.JET_FUNCTIONS`
+    functions : the function table (default :data:`FUNCTIONS`; :data:`dynsens.expressions.jets.JET_FUNCTIONS`
         evaluates time derivatives along).
 
     Raises

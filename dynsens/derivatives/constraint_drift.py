@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .models.base import StepState
+from ..models.base import StepState
 
 _H = 1e-30
 

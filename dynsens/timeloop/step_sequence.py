@@ -1,7 +1,7 @@
 r"""The step sequence of a run: the fixed grid of ``integrator.dt``, adaptive steps chosen by a
 local error estimate (``integrator.adaptive``), or a replay of the accepted steps of another run.
 
-Every grid step the loop of :func:`dynsens.march.integrate` takes is logged as (t_prev, h, t);
+Every grid step the loop of :func:`dynsens.timeloop.march.integrate` takes is logged as (t_prev, h, t);
 the adjoint's recomputed segments and its output instants read them back from the log, so the
 three sequences look alike to the derivative modes.
 
@@ -33,9 +33,9 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .errors import ConvergenceError, NonFiniteError, StepSizeError
-from .integrators.newmark import Newmark
-from .models.base import StepState
+from ..errors import ConvergenceError, NonFiniteError, StepSizeError
+from ..integrators.newmark import Newmark
+from ..models.base import StepState
 from .stepping import PrimalStepper, StepRecord, Trial
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -125,7 +125,7 @@ class StepSequence:
 
 class FixedGrid(StepSequence):
     """Steps of ``dt`` (the last one shortened to land on t_end); Newton failures cut a step
-    into halves that stay inside it (:class:`~dynsens.stepping.PrimalStepper`)."""
+    into halves that stay inside it (:class:`~dynsens.timeloop.stepping.PrimalStepper`)."""
 
     def __init__(self, t0: float, t_end: float, dt: float, n_steps: int, step_size: Callable[[int], float]):
         super().__init__(t0, t_end)

@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ConvergenceError, NonFiniteError
-from .integrators.newmark import Aux, Newmark, Prediction
-from .models.base import Model, StepState
+from ..errors import ConvergenceError, NonFiniteError
+from ..integrators.newmark import Aux, Newmark, Prediction
+from ..models.base import Model, StepState
 from .runaway import RunawayMonitor
-from .solver.newton import StepOutcome, StepSolver
+from ..solver.newton import StepOutcome, StepSolver
 
 HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .responses import FinishContext, OutputTrace, Response, ResponseValue, Samples
+from .base import FinishContext, OutputTrace, Response, ResponseValue, Samples
 
 KS_WARN_FRACTION = 0.03  # ln(N)/ρ above this share of |KS| is reported as a warning
 
@@ -212,7 +212,7 @@ class FormTerm:
 
 class FormAggregate(Aggregate):
     """Sampled maximum or KS of linear forms g_if of the members' components over forms,
-    members and instants (e.g. the beam-column interaction of :mod:`dynsens.member_stability`,
+    members and instants (e.g. the beam-column interaction of :mod:`dynsens.responses.member_stability`,
     a maximum of linear forms itself)."""
 
     def __init__(self, name: str, term: FormTerm, how: str, unit: str, *, rho: float | None = None):

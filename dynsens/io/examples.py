@@ -9,8 +9,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from .errors import DynsensError
-from .io.paths import OutputExistsError, OutputPathError, atomic_path, check_output_folder
+from ..errors import DynsensError
+from .paths import OutputExistsError, OutputPathError, atomic_path, check_output_folder
 
 
 class ExamplesNotFoundError(DynsensError):
@@ -19,7 +19,7 @@ class ExamplesNotFoundError(DynsensError):
 
 def examples_folder() -> Path:
     """The folder of the shipped example cases: the wheel's package data, else the checkout's cases/."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]     # the dynsens package (this module is in dynsens/io)
     for folder in (here / "example_cases", here.parent / "cases"):
         if folder.is_dir() and any(folder.glob("*.yaml")):
             return folder

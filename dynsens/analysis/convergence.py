@@ -30,11 +30,11 @@ import numpy as np
 
 import yaml
 
-from .case.load import Case, load_case_dict
-from .errors import CaseError, Problem
-from .io.paths import atomic_path, atomic_write_text, safe_stem
-from .executor import cached_case, make_executor, remember_case
-from .simulation import run_case
+from ..case.load import Case, load_case_dict
+from ..errors import CaseError, Problem
+from ..io.paths import atomic_path, atomic_write_text, safe_stem
+from ..executor import cached_case, make_executor, remember_case
+from ..simulation import run_case
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +119,7 @@ def work_precision(case: Case, dts: list[float], methods: list[str], *, workers:
                                  "(--set integrator.adaptive=null), or compare rtols as "
                                  "scripts/adaptive_report.py does")], case.source)
     dts = sorted(dts, reverse=True)
-    from .warmup import warm_case
+    from ..warmup import warm_case
     warm_case(case)  # compile first: no reported wall time includes numba compilation
     remember_case(case)
     m = case.x0.size

@@ -6,7 +6,7 @@ A :class:`Jet` carries a value and its first and second time derivatives,
 ``t`` evaluated on ``Jet(t, 1, 0)`` returns its value and exact derivatives.  Every component
 may be a complex number or a numpy array (a block of times against stacked parameter sets),
 so complex step of a whole run passes through.  :data:`JET_FUNCTIONS` is the evaluator's
-function table with the same names as :data:`dynsens.expressions.FUNCTIONS`; ``abs``,
+function table with the same names as :data:`dynsens.expressions.restricted.FUNCTIONS`; ``abs``,
 ``min``, ``max`` branch on real parts as there.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .expressions import FUNCTIONS
+from .restricted import FUNCTIONS
 
 Number = Any
 

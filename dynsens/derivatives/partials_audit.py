@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .case.load import Case
-from .sensitivity import DEFAULT_STEPS
-from .simulation import run_case
+from ..case.load import Case
+from .partials import DEFAULT_STEPS
+from ..simulation import run_case
 
 AUDIT_STEPS = tuple(10.0 ** -k for k in range(2, 13))
 PLATEAU_TOL = 1e-5

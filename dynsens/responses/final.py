@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import NonFiniteError
-from .expressions import Expression, ExpressionError
-from .responses import FinishContext, Response, ResponseValue
+from ..errors import NonFiniteError
+from ..expressions.restricted import Expression, ExpressionError
+from .base import FinishContext, Response, ResponseValue
 
 
 class StructuralMass(Response):

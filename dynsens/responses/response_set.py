@@ -1,5 +1,5 @@
 r"""The response set of a run: collects the steps in blocks, evaluates the outputs with their
-gradients, detects events and feeds the responses (:mod:`dynsens.responses` defines them and
+gradients, detects events and feeds the responses (:mod:`dynsens.responses.base` defines them and
 the event arithmetic of method.md §5)."""
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from .derivatives.weights import grid_weights
-from .models.base import Output, StepState
-from .responses import (EventHit, EventInstant, EventRecord, EventSpec, FinishContext, OutputTrace, Response,
+from ..derivatives.weights import grid_weights
+from ..models.base import Output, StepState
+from .base import (EventHit, EventInstant, EventRecord, EventSpec, FinishContext, OutputTrace, Response,
                         ResponseValue, Samples)
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .records import Recorder
+    from ..timeloop.records import Recorder
 
 
 class ResponseSet:

@@ -4,7 +4,7 @@ A recorded quantity is any output the case language can name (an element force, 
 body angle, a joint reaction, a marker position ...), stored at every step with its unit and
 label, and, on request, with its total design gradient at every step (∇v = ∂v/∂state·∇state +
 ∂_x v, the same gradient a response reading the quantity receives).  The recorder sees the
-blocks of steps the :class:`~dynsens.responses.ResponseSet` evaluates anyway, so the values
+blocks of steps the :class:`~dynsens.responses.base.ResponseSet` evaluates anyway, so the values
 are on the run's own time grid (the step at which an event fires included).
 """
 from __future__ import annotations
@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .responses import Samples
+from ..responses.base import Samples
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .response_set import ResponseSet
+    from ..responses.response_set import ResponseSet
 
 
 # names the result file uses for its own members (a recorded quantity is a root-level dataset)
@@ -115,8 +115,8 @@ class Recorder:
 def reads_in_own_unit(response: Any) -> bool:
     """Whether ``response``'s value is in the unit of the quantity it reads: a value at a time, or
     a maximum, minimum or KS of the quantity itself (±1 sides), not of a ratio of it."""
-    from .responses import ValueAt
-    from .responses_sizing import Aggregate
+    from ..responses.base import ValueAt
+    from ..responses.sizing import Aggregate
     if isinstance(response, ValueAt):
         return True
     return isinstance(response, Aggregate) and all(np.all(np.abs(t.sides) == 1.0) for t in response.terms)

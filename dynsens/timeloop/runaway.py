@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import NonFiniteError
-from .models.base import Model, StepState
+from ..errors import NonFiniteError
+from ..models.base import Model, StepState
 
 #: growth of |q|∞ and |q̇|∞ beyond their early-run scale at which a run is stopped
 RUNAWAY_FACTOR = 1e6

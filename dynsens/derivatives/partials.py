@@ -19,7 +19,7 @@ from typing import Any, Callable, Literal
 
 import numpy as np
 
-from .models.base import Model, StepState
+from ..models.base import Model, StepState
 
 PartialsMethod = Literal["forward", "central", "complex"]
 METHODS: tuple[str, ...] = ("forward", "central", "complex")

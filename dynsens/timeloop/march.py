@@ -19,18 +19,18 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .derivatives.adjoint import AdjointMode
-from .derivatives.checkpoints import DEFAULT_MEMORY_BUDGET, RecordStore
-from .derivatives.direct import DirectMode
-from .derivatives.mode import DerivativeMode, PrimalOnlyMode
-from .errors import CaseError
-from .integrators.newmark import Newmark
-from .models.base import Model, StepState
-from .response_set import ResponseSet
-from .responses import EventHit, EventTime, ResponseValue
-from .sensitivity import DesignPartials
-from .solver.linalg import Counters
-from .solver.newton import NewtonSettings, StepSolver
+from ..derivatives.adjoint import AdjointMode
+from ..derivatives.checkpoints import DEFAULT_MEMORY_BUDGET, RecordStore
+from ..derivatives.direct import DirectMode
+from ..derivatives.mode import DerivativeMode, PrimalOnlyMode
+from ..errors import CaseError
+from ..integrators.newmark import Newmark
+from ..models.base import Model, StepState
+from ..responses.response_set import ResponseSet
+from ..responses.base import EventHit, EventTime, ResponseValue
+from ..derivatives.partials import DesignPartials
+from ..solver.linalg import Counters
+from ..solver.newton import NewtonSettings, StepSolver
 from .step_sequence import AdaptiveSettings, AdaptiveSteps, FixedGrid, ReplayedSteps, StepSequence
 from .stepping import HISTORY_FIELDS, PrimalStepper, StepRecord
 
@@ -63,7 +63,7 @@ class RunPlan:
     adaptive : adaptive steps (``integrator.adaptive``; dt is the first trial step), or None for
         the fixed grid of dt.
     replay_times : the grid times of another run (t0 first) to step through as they are
-        (:class:`~dynsens.step_sequence.ReplayedSteps`), or None.
+        (:class:`~dynsens.timeloop.step_sequence.ReplayedSteps`), or None.
     """
 
     t0: float

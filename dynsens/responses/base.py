@@ -24,7 +24,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .expressions import Expression
+from ..expressions.restricted import Expression
 
 
 @dataclass

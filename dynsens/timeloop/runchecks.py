@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import DesignError, NonFiniteError, RunSizeError
+from ..errors import DesignError, NonFiniteError, RunSizeError
 
 if TYPE_CHECKING:
-    from .case.load import Case
+    from ..case.load import Case
     from .march import RunPlan, RunResult
-    from .models.base import Traits
+    from ..models.base import Traits
 
 #: steps beyond which a run is refused whatever it stores (~ days of wall time)
 MAX_STEPS = 100_000_000
@@ -147,7 +147,7 @@ def stability_limit(model: Any, scheme: Any, t0: float, x: np.ndarray) -> tuple[
     The scheme gives Ω_crit (:meth:`~dynsens.integrators.newmark.Newmark.stability_limit`;
     undamped Newmark: ω·dt ≤ 1/sqrt(γ/2 − β), central differences 2); this finds ω_max.
     """
-    from .models.base import StepState
+    from ..models.base import StepState
     crit = scheme.stability_limit()
     tr = model.traits
     if math.isinf(crit) or tr.n_lam or tr.n_p or tr.n_q > 2000:

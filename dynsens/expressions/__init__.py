@@ -1,0 +1,1 @@
+"""The case language's restricted expressions and their time jets."""

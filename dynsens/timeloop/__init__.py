@@ -1,0 +1,1 @@
+"""The time loop: the stepper, step sequences, records, run checks and the runaway monitor."""
