@@ -5,7 +5,7 @@ which one is left out of Φ follows the joints' order (J6.v.w in the file's orde
 reversed, J3.v.w for the permutation below).  Before the minimum-norm split the reactions were
 those of the kept equations: reversing the joints moved J1_force_ks from 36.23 N to 47.21 N for
 the same motion.  Now the dependent joints report the minimum-norm multipliers over all their
-equations (README, "Redundant joints"; dynsens/models/multibody/reaction_split.py): the same
+equations (docs/multibody.md, "redundant joints"; dynsens/models/multibody/reaction_split.py): the same
 reaction history in every order (to the Newton tolerance of the motion, which itself differs by
 ~4e-6 m between orders after 1 s), its minimum-norm property checked against an SVD of the full
 constraint Jacobian, and its gradients (direct and adjoint) against central differences.

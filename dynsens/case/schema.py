@@ -124,8 +124,8 @@ def reference_markdown() -> str:
     """docs/case-reference.md: every section and key of the case language."""
     lines = ["# Case-file reference (every accepted key)", "",
              "Generated from `dynsens/case_keys/`, the table the case loader checks keys against, by "
-             "`python -m dynsens.case.schema --write`; do not edit by hand. A tour by example is in the README "
-             "(\"Case-file reference\"); the JSON Schema for editors is [case.schema.json](case.schema.json).", "",
+             "`python -m dynsens.case.schema --write`; do not edit by hand. A tour by example is "
+             "[case-files.md](case-files.md); the JSON Schema for editors is [case.schema.json](case.schema.json).", "",
              "Kinds: *number or expression* is a number or an expression of the design variables "
              "(`+ - * / **`, `sin cos tan asin acos atan atan2 sinh cosh tanh sqrt exp log log10 abs min max "
              "deg rad`, `pi e`). Quantities (the `quantity` of events and responses) are model-specific: "

@@ -48,7 +48,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
     "design": Section("design", "The design variables x.", (
         _k("variables", "list", "one entry per design variable, in the order of x", item="design.variable"),
         _k("families", "list", "families of per-element variables A[element], appended after `variables` "
-           "(see the README, Per-member design variables)", item="design.family"),
+           "(see docs/case-files.md, Per-member design variables)", item="design.family"),
     )),
     "design.family": Section("design.families[i]", "One variable per selected element, named NAME[element].", (
         _req("name", "name", "family name; its members are NAME[element]"),
@@ -98,7 +98,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
     )),
     "integrator.adaptive": Section(
         "integrator.adaptive", "Step sizes chosen by the local error estimate of the Newmark family (see the "
-        "README, Adaptive time steps); the gradient is exact along the accepted steps.", (
+        "docs/case-files.md, Adaptive time steps); the gradient is exact along the accepted steps.", (
             _k("rtol", "number", "relative tolerance of the local error per step (> 0)", default=1e-4),
             _k("atol", "number", "absolute tolerance of the local error per step, in each coordinate's unit (> 0)",
                default=1e-8),

@@ -155,7 +155,7 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         check_output_folder(plots, plot_files(output, plots), overwrite or resume, option="--plots")
     if case.optimization is None:
         raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "
-                                "and constraints (see the README)")
+                                "and constraints (see docs/case-files.md and docs/optimization.md)")
     objective = case.optimization.objective
     n_max = maxiter or case.optimization.maxiter
     bar = Progress(None, f"optimizing {case.name}")

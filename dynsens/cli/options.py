@@ -18,7 +18,7 @@ set_option = click.option("--set", "overrides", multiple=True, metavar="KEY=VALU
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 scheduler_option = click.option("--scheduler", default=None, metavar="ADDRESS",
                                  help="Run the simulations on this Dask distributed scheduler, e.g. "
-                                      "tcp://host:8786 (pip install 'dynsens[dask]'; see the README).")
+                                      "tcp://host:8786 (pip install 'dynsens[dask]'; see docs/parallel.md).")
 
 
 DEFAULT_OUTPUT_FOLDER = "results"

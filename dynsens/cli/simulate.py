@@ -152,8 +152,8 @@ def simulate(case_file: str, output: str | None, overwrite: bool, overrides: tup
                    "order in the file; the motion does not depend on it)")
         dependent = ", ".join(getattr(case.model, "dependent_joints", []))
         click.echo(f"reactions of the dependent joints {dependent}: the minimum-norm "
-                   "multipliers over all their equations, the same for any order of the joints (README, "
-                   "\"Redundant joints\")")
+                   "multipliers over all their equations, the same for any order of the joints (docs/multibody.md, "
+                   "\"redundant joints\")")
     zero = zero_gradient_columns(result, case.design_names)
     if zero:
         click.echo(f"note: the gradient with respect to {', '.join(zero)} is exactly zero for every response "

@@ -135,7 +135,7 @@ def build_problem(case: Case, ref_responses: Mapping[str, float]) -> ScaledProbl
 def _spec(case: Case) -> Any:
     if case.optimization is None:
         raise OptimizationError(f"{case.source} has no 'optimization' section: add one with an objective "
-                                "and constraints (see the README)")
+                                "and constraints (see docs/case-files.md and docs/optimization.md)")
     return case.optimization
 
 

@@ -290,7 +290,7 @@ def _constraint_table(v: Verification, head: dict[str, str]) -> list[str]:
     names = [r.name for r in v.runs]
     width = max([len(c.label) for c in v.constraints] + [10])
     lines = [f"{'constraint':<{width}}  " + "  ".join(f"{head[n]:>12}" for n in names) + "  change  status",
-             "(case: the response as optimized; the other runs: its sampled peak, see the README; change: "
+             "(case: the response as optimized; the other runs: its sampled peak, see docs/optimization.md; change: "
              "the largest change of the peak against the case's run, in % of the bound's scale)"]
     shown = _shown_constraints(v.constraints)
     for c in shown:

@@ -174,7 +174,7 @@ def _rank_check(model: "MultibodyModel", J: Array, labels: list[str], where: str
         f"({n_red} redundant equation{'s' if n_red > 1 else ''}); linearly dependent "
         f"equations: {', '.join(involved)} (joints/conditions: {', '.join(joints)}). "
         "Redundant joint equations are left out when the case is loaded, if they are redundant "
-        "and hold at the case's initial design (README, 'Redundant joints'); these are not (another "
+        "and hold at the case's initial design (docs/multibody.md, 'redundant joints'); these are not (another "
         "design, holds/distances that repeat a joint, or a model built outside a case): drop a "
         "hold/distance, or give a joint fewer equations (e.g. a revolute as a planar_pin).")
 
