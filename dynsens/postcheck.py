@@ -86,6 +86,13 @@ def _response_entries(case: Case, kind: str) -> list[dict]:
             if isinstance(r, dict) and r.get("type") == kind]
 
 
+def has_member_limits(case: Case) -> bool:
+    """Whether the case's responses say what to check members against: a ``stress_ratio``'s
+    limits, or a ``buckling_ratio`` or ``interaction_ratio`` response."""
+    return (any(v is not None for v in stress_limits(case))
+            or bool(_response_entries(case, "buckling_ratio") or _response_entries(case, "interaction_ratio")))
+
+
 def stress_limits(case: Case) -> tuple[float | None, float | None]:
     """(σ_t, σ_c) of the case's ``stress_ratio`` responses (the smallest of each; None: none)."""
     limits: dict[str, list[float]] = {"tension_limit": [], "compression_limit": []}

@@ -325,3 +325,27 @@ def test_space_beam_interaction_adds_both_bending_ratios_as_H1_1_does() -> None:
     assert p >= 0.2 and p >= 2 * m / 9                      # H1-1a governs: u is its value
     assert chk.interaction[0] == pytest.approx(h1_1(p, m), rel=1e-10)
     assert chk.buckling[0] == pytest.approx(P * (K * L) ** 2 / (np.pi ** 2 * E * weak), rel=1e-10)
+
+
+# ------------------------------------------------------------------ verification of a sized beam frame
+def test_the_verification_of_an_optimum_post_checks_beams_and_stores_their_interaction(tmp_path) -> None:
+    """``verify_design`` (the check an optimum must pass at half the step and on a longer window)
+    post-checks the frame's beams as ``check_members`` does, run by run, interaction included,
+    and writes every ratio to the file; it used to skip a model whose members are beams."""
+    import h5py
+
+    from dynsens.optimize.verify import store_verification, verify_design
+    raw = frame_with_stability()
+    raw["optimization"] = {"objective": "mass", "constraints": [{"response": "interaction_ks", "upper": 1.0}]}
+    case = load_case_dict(raw)
+    v = verify_design(case, horizon=None, tail=0.0)
+    assert set(v.members) == {"case", "refined"}
+    chk = check_members(case, result=dynsens.run_case(case, history=("q",)))
+    m = v.members["case"]
+    assert m.names == chk.names and "col_a" in m.names
+    for kind in ("tension", "compression", "buckling", "interaction"):
+        np.testing.assert_array_equal(getattr(m, kind), getattr(chk, kind))
+    assert np.isfinite(v.members["refined"].interaction[1:]).all()
+    store_verification(tmp_path / "v.h5", v)
+    with h5py.File(tmp_path / "v.h5") as f:
+        np.testing.assert_array_equal(f["verification/members/case/interaction"][()], chk.interaction)

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..case.load import Case
 from ..errors import DynsensError
-from ..postcheck import MemberCheck, check_members, stress_limits
+from ..postcheck import MemberCheck, check_members, has_member_limits
 from ..responses.sizing import Aggregate, MagnitudeAggregate
 from ..simulation import run_case
 from .problem import FEAS_TOL, OptimizationError, ScaledProblem, build_problem
@@ -118,8 +118,15 @@ def peak_type_responses(case: Case) -> set[str]:
 
 
 def _has_members(case: Case) -> bool:
+    """Whether the case has members to post-check (bars or beams) and limits to check them by:
+    a stress ratio's limits, or a buckling or interaction ratio among its responses."""
     from ..models.structural import StructuralModel
-    return isinstance(case.model, StructuralModel) and bool(case.model.bar_names)
+    model = case.model
+    if not isinstance(model, StructuralModel):
+        return False
+    if not (model.bar_names or len(model.beams.names) or len(model.frames.names)):
+        return False
+    return has_member_limits(case)
 
 
 @dataclass
@@ -176,7 +183,7 @@ def verify_design(case: Case, x: Any = None, *, refine: int = 2, horizon: float 
     if not 0.0 <= tail < 1.0:
         raise OptimizationError(f"the verification's tail must lie in [0, 1), found {tail}")
     x = case.x0 if x is None else np.asarray(x, dtype=float)
-    members = _has_members(case) and any(stress_limits(case))
+    members = _has_members(case)
     base = _run(case, x, "case", members)
     if base.info.failed:
         raise OptimizationError(f"the design cannot be verified: its own run failed: {base.info.message}")
@@ -340,7 +347,7 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
     Attributes: ``passed``, ``refine``, ``warnings`` (JSON), ``x``; datasets ``runs/{name, dt,
     t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
     ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
-    applicable), ``members/<run>/{tension, compression, buckling}`` (per member, the largest ratio
+    applicable), ``members/<run>/{tension, compression, buckling, interaction}`` (per member, the largest ratio
     over the stored steps) with attribute ``names``; ``rounds/{bounds, f, passed, x, nit, n_sim,
     wall_time}``, one row per round, when the bounds were tightened.
     """
@@ -372,7 +379,7 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
             mg = g.create_group(f"members/{run}")
             mg.attrs["names"] = np.array(m.names, dtype=text)
             mg.attrs["steps"] = m.steps
-            for kind in ("tension", "compression", "buckling"):
+            for kind in ("tension", "compression", "buckling", "interaction"):
                 mg.create_dataset(kind, data=np.asarray(getattr(m, kind), dtype=float))
         if rounds:
             rg = g.create_group("rounds")
