@@ -89,8 +89,9 @@ def test_scipy_optimize_driver_reaches_the_dynsens_optimum(tmp_path: Path) -> No
 
 
 def readme_openmdao_block() -> str:
-    text = (REPO / "README.md").read_text(encoding="utf-8")
-    section = text.split("### Using dynsens from OpenMDAO", 1)[1]
+    """The Python block of the docs' OpenMDAO section (docs/python-api.md; was in the README)."""
+    text = (REPO / "docs" / "python-api.md").read_text(encoding="utf-8")
+    section = text.split("## Using dynsens from OpenMDAO", 1)[1]
     return section.split("```python\n", 1)[1].split("```", 1)[0]
 
 
@@ -109,10 +110,10 @@ def test_example_couples_two_load_cases_with_a_cost_model(capsys, monkeypatch) -
     # both components saw the same areas
     for n in NAMES:
         assert prob.get_val(f"nominal.{n}")[0] == prob.get_val(f"severe.{n}")[0]
-    # the README's block is the same model: it reaches the same design
+    # the docs' block is the same model: it reaches the same design
     monkeypatch.chdir(REPO)
     readme: dict = {}
-    exec(compile(readme_openmdao_block(), "README.md", "exec"), readme)
+    exec(compile(readme_openmdao_block(), "docs/python-api.md", "exec"), readme)
     np.testing.assert_allclose([readme["prob"].get_val(f"areas.{n}")[0] for n in NAMES], x, rtol=1e-8)
 
 

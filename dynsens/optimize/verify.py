@@ -347,8 +347,8 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
     Attributes: ``passed``, ``refine``, ``warnings`` (JSON), ``x``; datasets ``runs/{name, dt,
     t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
     ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
-    applicable), ``members/<run>/{tension, compression, buckling, interaction}`` (per member, the largest ratio
-    over the stored steps) with attribute ``names``; ``rounds/{bounds, f, passed, x, nit, n_sim,
+    applicable), ``members/<run>/{tension, compression, buckling}`` and ``interaction`` where a
+    beam has one (per member, the largest ratio over the stored steps) with attribute ``names``; ``rounds/{bounds, f, passed, x, nit, n_sim,
     wall_time}``, one row per round, when the bounds were tightened.
     """
     import json
@@ -379,8 +379,10 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
             mg = g.create_group(f"members/{run}")
             mg.attrs["names"] = np.array(m.names, dtype=text)
             mg.attrs["steps"] = m.steps
-            for kind in ("tension", "compression", "buckling", "interaction"):
+            for kind in ("tension", "compression", "buckling"):
                 mg.create_dataset(kind, data=np.asarray(getattr(m, kind), dtype=float))
+            if np.isfinite(m.interaction).any():       # only beams with a yield stress have one
+                mg.create_dataset("interaction", data=np.asarray(m.interaction, dtype=float))
         if rounds:
             rg = g.create_group("rounds")
             rg.create_dataset("bounds", data=np.array([row["bounds"] for row in rounds], dtype=float))
