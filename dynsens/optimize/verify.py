@@ -348,8 +348,9 @@ def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] 
     t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
     ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
     applicable), ``members/<run>/{tension, compression, buckling}`` and ``interaction`` where a
-    beam has one (per member, the largest ratio over the stored steps) with attribute ``names``; ``rounds/{bounds, f, passed, x, nit, n_sim,
-    wall_time}``, one row per round, when the bounds were tightened.
+    beam has one (per member, the largest ratio over the stored steps) with attribute ``names``;
+    ``rounds/{bounds, f, passed, x, nit, n_sim, wall_time}``, one row per round, when the bounds
+    were tightened.
     """
     import json
 
