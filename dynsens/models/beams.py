@@ -333,10 +333,17 @@ def parse_beam(el: dict, ep: str, name: str, beams: BeamSet, table: ParameterTab
     beams.coords.append(node_coords[pair[0]] + node_coords[pair[1]])
     beams.E.append(table.add(el.get("E"), f"{ep}.E", problems, positive=True))
     beams.rho.append(table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
+    append_section(beams, shape, needed, sec, ep, table, problems, mass == "consistent")
+
+
+def append_section(beams: Any, shape: str, needed: tuple[str, ...], sec: dict, ep: str, table: ParameterTable,
+                   problems: ProblemCollector, consistent: bool) -> None:
+    """Append a beam's section to ``beams`` (plane or 3D set): its shape, its dimensions as
+    parameters (a hollow section's wall checked against its outer size) and its mass kind."""
     beams.shape.append(shape)
     dims = [table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed]
     beams.dims.append(dims)
     if shape in HOLLOW:
         table.require_wall(dims[needed.index("t")], {k: i for k, i in zip(needed, dims) if k != "t"},
                            f"{ep}.section.t")
-    beams.consistent.append(mass == "consistent")
+    beams.consistent.append(consistent)

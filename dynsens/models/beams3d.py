@@ -42,7 +42,7 @@ import numpy as np
 from ..case_keys import allowed
 from ..errors import ProblemCollector
 from ._keys import check_keys, did_you_mean
-from .beams import HOLLOW
+from .beams import append_section
 from .beams3d_corot import deformations, element_forces, local_deformations, local_forces
 from .parameters import ParameterTable
 
@@ -317,13 +317,7 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
     beams.E.append(table.add(el.get("E"), f"{ep}.E", problems, positive=True))
     beams.G.append(table.add(el.get("G"), f"{ep}.G", problems, positive=True))
     beams.rho.append(table.add(el.get("density", 0.0), f"{ep}.density", problems, nonnegative=True))
-    beams.shape.append(shape)
-    dims = [table.add(sec[k], f"{ep}.section.{k}", problems, positive=True) for k in needed]
-    beams.dims.append(dims)
-    if shape in HOLLOW:
-        table.require_wall(dims[needed.index("t")], {k: i for k, i in zip(needed, dims) if k != "t"},
-                           f"{ep}.section.t")
-    beams.consistent.append(mass == "consistent")
+    append_section(beams, shape, needed, sec, ep, table, problems, mass == "consistent")
     beams.corot.append(kinematics == "corotational")
 
 
