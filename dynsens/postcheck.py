@@ -26,7 +26,7 @@ from .errors import CaseError, ProblemCollector
 from .expressions.restricted import compile_expression
 from .responses.member_stability import MEMBER_COMPONENTS, buckling_scale, interaction_forms
 from .models.base import StepState
-from .models.structural import StructuralModel
+from .models.structural.model import StructuralModel
 from .simulation import run_case
 
 KINDS = ("tension", "compression", "buckling", "interaction")

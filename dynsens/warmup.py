@@ -3,7 +3,7 @@
 The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on its first use on a
 machine, real and complex separately, and so is the compiled step
 that calls it (``models/multibody/compiled_step.py``; one signature for every mechanism)
-and the compiled step of spring networks (``models/structural_step_kernels.py``; one signature
+and the compiled step of spring networks (``models/structural/step_kernels.py``; one signature
 for every network), and the compiled block of sensitivity steps (``derivatives/direct_step.py``; one
 signature for every dense model); all are cached on disk beside the package.  ``make setup`` runs this module
 so that a user's first ``dynsens simulate`` takes as long as the second, and so that no reported
@@ -29,8 +29,8 @@ import yaml
 
 from .case.load import Case, load_case, load_case_dict
 from .models.multibody.model import MultibodyModel
-from .models.structural import StructuralModel
-from .models.structural_step import serves
+from .models.structural.model import StructuralModel
+from .models.structural.step import serves
 from .simulation import run_case
 
 # the shipped mechanisms (together they use every joint, force law and driver the kernel knows,

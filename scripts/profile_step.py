@@ -11,7 +11,7 @@ split by entry points, with inclusive times:
   correctors, responses, sensitivity recursion bookkeeping);
 * compiled step — a step's Newton iterations when they run compiled (a mechanism's,
   ``dynsens/models/multibody/compiled_step.py``, or a spring network's,
-  ``dynsens/models/structural_step.py``: model arithmetic and the factorization inside one
+  ``dynsens/models/structural/step.py``: model arithmetic and the factorization inside one
   call, with the step's Python set-up and the conversion of its results, the linearization the
   sensitivities read included); not part of the model-arithmetic column.
 
@@ -38,7 +38,7 @@ import yardstick_chain as ys  # noqa: E402
 LINALG = (os.path.join("dynsens", "solver", "linalg.py"), os.path.join("dynsens", "solver", "banded.py"))
 MODELS = os.path.join("dynsens", "models") + os.sep
 COMPILED_STEP = (os.path.join("dynsens", "models", "multibody", "compiled_step.py"),
-                 os.path.join("dynsens", "models", "structural_step.py"))
+                 os.path.join("dynsens", "models", "structural", "step.py"))
 
 
 def _inside(filename: str, where: tuple[str, ...] | str) -> bool:

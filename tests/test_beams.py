@@ -19,7 +19,7 @@ import dynsens
 from dynsens import CaseError
 from dynsens.case.load import load_case_dict
 from dynsens.models.base import StepState, as_dense
-from dynsens.models.beams import section_properties
+from dynsens.models.structural.beams import section_properties
 from helpers import complex_step_gradients, complex_step_jacobians
 
 E, RHO = 210000.0, 7.85e-9                 # MPa, t/mm³

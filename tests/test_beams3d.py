@@ -22,7 +22,7 @@ from dynsens import CaseError
 from dynsens.case.load import load_case_dict
 from dynsens.errors import ProblemCollector
 from dynsens.models.base import StepState, as_dense
-from dynsens.models.beams3d import section_properties_3d
+from dynsens.models.structural.beams3d import section_properties_3d
 from helpers import assert_gradients_match_complex_step_and_adjoint, complex_step_gradients
 
 E, G, RHO = 210000.0, 81000.0, 7.85e-9       # MPa, MPa, t/mm³

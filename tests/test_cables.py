@@ -1,4 +1,4 @@
-"""Tension-only cables (dynsens/models/elements/cables.py): a cable is a Green–Lagrange bar whose
+"""Tension-only cables (dynsens/models/structural/elements/cables.py): a cable is a Green–Lagrange bar whose
 axial force is EA·max(ε, 0) (exact switch) or EA·½(ε + √(ε² + w²)) (smooth switch, width w).
 
 Closed forms on a node held by a spring k to ground and a cable of length L to a support, loaded
@@ -16,7 +16,7 @@ import pytest
 import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.models.base import StepState, as_dense
-from dynsens.models.elements.cables import switch
+from dynsens.models.structural.elements.cables import switch
 from helpers import assert_gradients_match_complex_step_and_adjoint
 
 L, E, AREA, K = 1.0, 1.0e4, 0.01, 10.0          # consistent units (EA = 100, k = 10)

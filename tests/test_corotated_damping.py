@@ -1,7 +1,7 @@
 """Stiffness-proportional Rayleigh damping on co-rotational members (issue 38, first bullet).
 
 Contract: β K acts on the element's deformation rates in its co-rotated frame
-(:mod:`dynsens.models.corotated_damping`), for bars, plane beams and co-rotational 3D beams:
+(:mod:`dynsens.models.structural.corotated_damping`), for bars, plane beams and co-rotational 3D beams:
 - a member turning rigidly feels no damping force (before this change, D_R = α M + β K₀ acted
   on the total rates in global axes and resisted rigid rotation: these tests failed);
 - at q = 0 it equals the former β K₀ q̇ exactly, and `corotated: false` keeps the former term;
@@ -19,7 +19,7 @@ import pytest
 import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.models.base import StepState, as_dense
-from dynsens.models.beams import section_properties
+from dynsens.models.structural.beams import section_properties
 from helpers import assert_gradients_match_complex_step_and_adjoint, complex_step_jacobians
 from test_beams import E, L, RHO, TUBE, cantilever, static_solution, tip
 

@@ -1,4 +1,4 @@
-"""The structural element kinds' registry and protocol (dynsens/models/elements/kind.py): every
+"""The structural element kinds' registry and protocol (dynsens/models/structural/elements/kind.py): every
 registered type has its key section in the case's key table and in the model's ``elements``
 list; a type the model's dimension has no kind for is one problem at its key; whether the
 compiled step serves a model is what its kinds declare."""
@@ -9,8 +9,8 @@ import pytest
 import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.case_keys import SECTIONS
-from dynsens.models.elements import KINDS, ElementKind, load_kinds
-from dynsens.models.structural_step import serves
+from dynsens.models.structural.elements import KINDS, ElementKind, load_kinds
+from dynsens.models.structural.step import serves
 
 
 def chain(extra: list | None = None, dim: int = 2) -> dict:

@@ -29,7 +29,7 @@ def test_an_imported_module_whose_functions_never_ran_is_reported() -> None:
 def test_a_module_never_imported_is_reported_and_compiled_functions_count() -> None:
     assert WITHOUT_FUNCTIONS, "expected modules without functions (e.g. package __init__ files)"
     data_only = WITHOUT_FUNCTIONS[0]
-    kernel = "dynsens/models/structural_step_kernels.py"
+    kernel = "dynsens/models/structural/step_kernels.py"
     rec = {"ran": [m for m in WITH_FUNCTIONS if m != kernel], "compiled": [kernel],
            "imported": [m for m in ALL if m != data_only]}
     assert check.unexercised([rec]) == [f"{data_only} (never imported)"]

@@ -226,7 +226,7 @@ def test_growth_from_rest_is_not_a_runaway(function, model_scale, monkeypatch):
     # the load switches on between grid points) by powers of t, orders of magnitude within a
     # few steps, which is not growth without bound; also without the model's own scale
     if not model_scale:
-        from dynsens.models.structural import StructuralModel
+        from dynsens.models.structural.model import StructuralModel
         monkeypatch.setattr(StructuralModel, "displacement_scale", lambda self, params, lin: 0.0)
     def mutate(r):
         _no_event(r)

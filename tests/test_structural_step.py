@@ -1,7 +1,7 @@
 """The compiled Newton iteration of a spring network's step against the same iteration as Python.
 
 Both run :func:`dynsens.solver.newton_core.newton_iterations`; compiled, its step operations are
-the overloads of :mod:`dynsens.models.structural_step_kernels`, with the spring law's one definition and
+the overloads of :mod:`dynsens.models.structural.step_kernels`, with the spring law's one definition and
 a tridiagonal LU that repeats LAPACK's operations.  The runs agree bit for bit: responses,
 direct and adjoint gradients, histories, counters, and the errors of a step that fails.  The
 tridiagonal LU is compared with scipy's LAPACK on random systems, pivoting and zero pivots
@@ -25,8 +25,9 @@ from make_cases import duffing_chain
 from dynsens.errors import ConvergenceError
 from dynsens.integrators.newmark import Prediction
 from dynsens.models.base import StepState
-from dynsens.models import structural_step, structural_step_kernels
-from dynsens.models.structural import StructuralModel
+from dynsens.models.structural import step as structural_step
+from dynsens.models.structural import step_kernels as structural_step_kernels
+from dynsens.models.structural.model import StructuralModel
 from dynsens.solver import _jit
 from dynsens.solver.linalg import Counters
 from dynsens.solver.newton import NewtonSettings, StepSolver
@@ -259,7 +260,7 @@ def test_the_cache_key_follows_every_source_compiled_into_the_step(monkeypatch):
     factor's tests selects another cache entry."""
     stamp = structural_step_kernels._stamp()
     original = Path.read_bytes
-    for edited in ("spring_law.py", "tridiagonal.py", "structural_step_kernels.py", "newton_core.py", "linalg.py",
+    for edited in ("spring_law.py", "tridiagonal.py", "step_kernels.py", "newton_core.py", "linalg.py",
                    "newmark.py"):
         with monkeypatch.context() as m:
             m.setattr(Path, "read_bytes", lambda self, f=edited: original(self) + (b"#" if self.name == f else b""))
@@ -275,7 +276,7 @@ def test_the_spring_law_is_the_models(monkeypatch):
     params = model.parameters(case.x0)
     q = np.linspace(0.0, 0.01, 5)
     before = copy.deepcopy(model.springs.state(q, params, tangent=False)[0])
-    from dynsens.models.elements import springs
+    from dynsens.models.structural.elements import springs
     monkeypatch.setattr(springs, "spring_law", lambda d, k1, k2, k3: (2 * k1 * d, k1 + 0 * d))
     after = model.springs.state(q.copy(), params, tangent=False)[0]
     np.testing.assert_allclose(after, 2 * params["k1"] * (q - np.concatenate([[0.0], q[:-1]])))

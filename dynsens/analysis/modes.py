@@ -97,7 +97,7 @@ class Buckling:
 
 
 def _structural(case: Subject) -> Any:
-    from ..models.structural import StructuralModel
+    from ..models.structural.model import StructuralModel
     if not isinstance(case.model, StructuralModel):
         raise AnalysisError(f"{case.source}: modes and buckling need a structural model (model.type: structural); "
                             "a mechanism's modes would need its constraints eliminated, which dynsens does not do")

@@ -36,8 +36,8 @@ from ..case_keys import SECTIONS, allowed
 from ..errors import Problem, ProblemCollector
 from ..expressions.restricted import RESERVED_NAMES
 from ..models._keys import check_keys, did_you_mean
-from ..models.beams import SHAPES
-from ..models.beams3d import SHAPES3
+from ..models.structural.beams import SHAPES
+from ..models.structural.beams3d import SHAPES3
 from .checks import reserved_message
 from .responses_spec import read_number
 

@@ -140,7 +140,7 @@ def _modal(r: dict, p: str, name: str, kind: str, unit: str, model: Model | None
            design_names: tuple[str, ...], pc: ProblemCollector) -> Callable[[], Response] | None:
     """``type: frequency`` / ``type: buckling_factor`` (:mod:`dynsens.analysis.modal_responses`)."""
     from ..analysis.modal_responses import ModalResponse, ModelSubject
-    from ..models.structural import StructuralModel
+    from ..models.structural.model import StructuralModel
     check_keys(r, p, allowed(f"response.{kind}"), pc)
     n0 = len(pc.problems)
     count = r.get("modes", 1)

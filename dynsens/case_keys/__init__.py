@@ -28,7 +28,7 @@ def allowed(section: str, *extra: str) -> tuple[str, ...]:
 
 def add_element_section(name: str, section: Section) -> None:
     """Add the key section of a structural element kind that declares its keys in its own module
-    (:mod:`dynsens.models.elements`): the loaders check against it, the model's ``elements`` list
+    (:mod:`dynsens.models.structural.elements`): the loaders check against it, the model's ``elements`` list
     names it and the generated reference lists it."""
     SECTIONS[name] = section
     model = SECTIONS["model.structural"]

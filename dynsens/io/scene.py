@@ -109,7 +109,7 @@ def read_scene(path: str | Path, group: str = "/", label: str = "") -> Scene:
     """The run stored in ``group`` of result file ``path`` as a :class:`Scene`."""
     from ..case.load import load_case_text
     from ..models.multibody.model import MultibodyModel
-    from ..models.structural import StructuralModel
+    from ..models.structural.model import StructuralModel
     path = Path(path)
     with h5py.File(path, "r") as f:
         text = f.attrs.get("case")

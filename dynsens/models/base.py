@@ -84,8 +84,8 @@ The caches that rely on A.-D. (keyed by identity ``is``/``id`` or by bytes):
   fields by set; reaction split (:mod:`~dynsens.models.multibody.reaction_split`): sets
   grouped by identity within one call; term kinematics and forces per call by term
   (:class:`~dynsens.models.multibody.bodies.Ctx`);
-* structural models: stacked parameters by list (:mod:`dynsens.models.structural`), the
-  compiled spring step's design by set (:mod:`dynsens.models.structural_step`);
+* structural models: stacked parameters by list (:mod:`dynsens.models.structural.model`), the
+  compiled spring step's design by set (:mod:`dynsens.models.structural.step`);
 * derivative modes: stacked directions by the block's state list and stacked parameter
   copies per block length (:mod:`dynsens.derivatives.partials`), output seeds' stacked copies per
   length (:mod:`dynsens.derivatives.output_seeds`), the direct mode's transition matrices by

@@ -44,7 +44,7 @@ def build_model(spec: Any, path: str, table: ParameterTable,
 
 def _load_builtin() -> None:
     # import for the side effect of registration; kept lazy so the core imports fast
-    from . import structural_build  # noqa: F401
+    from .structural import build  # noqa: F401
     try:
         from . import multibody  # noqa: F401
     except ImportError as exc:  # pragma: no cover - only while multibody is absent

@@ -120,7 +120,7 @@ def peak_type_responses(case: Case) -> set[str]:
 def _has_members(case: Case) -> bool:
     """Whether the case has members to post-check (bars or beams) and limits to check them by:
     a stress ratio's limits, or a buckling or interaction ratio among its responses."""
-    from ..models.structural import StructuralModel
+    from ..models.structural.model import StructuralModel
     model = case.model
     if not isinstance(model, StructuralModel):
         return False

@@ -3,7 +3,7 @@
 A model family that runs :func:`~.newton_core.newton_iterations` compiled overloads the step
 operations for a named tuple of its step's arrays (the multibody kernel's in
 :mod:`dynsens.models.multibody.compiled_step`, spring networks' in
-:mod:`dynsens.models.structural_step`) and compiles the iteration with :func:`compiled_iteration`.
+:mod:`dynsens.models.structural.step`) and compiles the iteration with :func:`compiled_iteration`.
 numba caches the result on disk: the types of the arguments, not the model, select the overloads.
 """
 from __future__ import annotations

@@ -3,7 +3,7 @@ r"""Co-rotational beam members between node bodies that carry an orientation (is
 A ``type: beam`` member joins two *node frames*: node i is a rigid body b_i (not a point mass:
 the beam loads its orientation) at its COM or at one of its markers s̄_i, with the body's
 orientation, or the ground at a marker.  The element is the 3D co-rotational Euler–Bernoulli beam
-of the structural model (:mod:`dynsens.models.beams3d_corot`), fed with the node positions and
+of the structural model (:mod:`dynsens.models.structural.beams3d_corot`), fed with the node positions and
 frames of the multibody state instead of rotation vectors:
 
 * chord d = P_2 − P_1, P_i = r_i + A(p_i) s̄_i;
@@ -38,7 +38,7 @@ import numpy as np
 from ...errors import ProblemCollector
 from .._keys import did_you_mean
 from ..base import Output, StepState
-from ..beams3d_corot import Jet2, corotated_deformations, energy_gradients
+from ..structural.beams3d_corot import Jet2, corotated_deformations, energy_gradients
 from .bodies import GROUND, BodyDef, Ctx, MBParams, Point
 from .forces import ForceElement
 from .spec import Reader

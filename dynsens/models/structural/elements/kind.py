@@ -2,7 +2,7 @@ r"""The protocol every structural element kind follows, and the registry of kind
 element ``type``.
 
 An :class:`ElementKind` holds *all* elements of one kind in a model (a set, evaluated together
-as arrays).  The structural model (:class:`~dynsens.models.structural.StructuralModel`) knows
+as arrays).  The structural model (:class:`~dynsens.models.structural.model.StructuralModel`) knows
 no kind by name: it reads each ``elements[i]`` entry into the set its ``type`` selects, and then
 loops over its sets, in the fixed order of their :attr:`ElementKind.order` (sums are formed in
 that order, which keeps every result bit for bit), for
@@ -33,10 +33,10 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from ...case_keys import Section, add_element_section
-from ...errors import ProblemCollector
-from ..parameters import ParameterTable
-from ..sparse_assembly import RightProduct
+from ....case_keys import Section, add_element_section
+from ....errors import ProblemCollector
+from ...parameters import ParameterTable
+from ...sparse_assembly import RightProduct
 
 Triplets = tuple[Any, Any, Any]       # (rows, cols, values): entries of an (n, n) matrix
 Touch = tuple[Any, Any]               # (parameter indices, DOF indices) of one element
@@ -91,7 +91,7 @@ class ElementKind(ABC):
     #: the key section's name in the table, and the section itself if the kind declares it
     section: ClassVar[str]
     keys: ClassVar[Section | None] = None
-    #: a compiled step serves models of this kind (:func:`.structural_step.serves`)
+    #: a compiled step serves models of this kind (:func:`dynsens.models.structural.step.serves`)
     compiled: ClassVar[bool] = False
     #: what the elements' outputs report (``kind`` of an output quantity), and in which unit
     output_kinds: ClassVar[tuple[str, ...]] = ()
@@ -187,7 +187,7 @@ class ElementKind(ABC):
 
     def damped_kind(self) -> Any:
         """The elements' share of Rayleigh's β K on their deformation rates (a
-        :class:`~dynsens.models.corotated_damping.DampedKind`), or None where K₀ keeps them."""
+        :class:`~dynsens.models.structural.corotated_damping.DampedKind`), or None where K₀ keeps them."""
         return None
 
     def design_touch(self) -> list[Touch]:

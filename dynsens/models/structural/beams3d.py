@@ -12,7 +12,7 @@ opposite coupling sign in the x–z plane).
 
 Rotations (``kinematics: small``, the default): the element is linear (K constant), the
 rotation vector is additive and the Newmark update handles it like any other unknown.
-``kinematics: corotational`` (:mod:`dynsens.models.beams3d_corot`): large displacements and
+``kinematics: corotational`` (:mod:`dynsens.models.structural.beams3d_corot`): large displacements and
 rotations; the node unknowns are then a total rotation vector ψ per node (R_i = exp(ψ_i)R₀), still a
 vector that Newmark updates additively (no multiplicative update is needed), regular for
 |ψ| < 2π; chosen over incremental rotation vectors because the state stays a plain vector in
@@ -39,12 +39,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..case_keys import allowed
-from ..errors import ProblemCollector
-from ._keys import check_keys, did_you_mean
+from ...case_keys import allowed
+from ...errors import ProblemCollector
+from .._keys import check_keys, did_you_mean
 from .beams import append_section
 from .beams3d_corot import deformations, element_forces, local_deformations, local_forces
-from .parameters import ParameterTable
+from ..parameters import ParameterTable
 
 SHAPES3 = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"),
            "properties": ("A", "Iy", "Iz", "J", "cy", "cz")}

@@ -5,8 +5,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...case_keys import allowed
-from .._keys import check_keys
+from ....case_keys import allowed
+from ..._keys import check_keys
 from .kind import ElementKind, ReadContext, Touch, register_kind
 
 

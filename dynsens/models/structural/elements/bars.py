@@ -9,9 +9,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...case_keys import allowed
-from ...errors import ProblemCollector
-from .._keys import check_keys
+from ....case_keys import allowed
+from ....errors import ProblemCollector
+from ..._keys import check_keys
 from ..corotated_damping import DampedKind
 from .kind import ElementKind, extend, ModelContext, ReadContext, Touch, Triplets, register_kind
 

@@ -1,14 +1,14 @@
 """Springs (``type: spring``) between two DOFs, or a DOF and ground: f = k₁δ + k₂δ² + k₃δ³ with
-δ = u_a − u_b (:func:`~dynsens.models.spring_law.spring_law`)."""
+δ = u_a − u_b (:func:`~dynsens.models.structural.spring_law.spring_law`)."""
 from __future__ import annotations
 
 from typing import Any, ClassVar
 
 import numpy as np
 
-from ...case_keys import allowed
-from ...errors import ProblemCollector
-from .._keys import check_keys
+from ....case_keys import allowed
+from ....errors import ProblemCollector
+from ..._keys import check_keys
 from ..spring_law import spring_law
 from .kind import ElementKind, ModelContext, ReadContext, Touch, Triplets, register_kind
 

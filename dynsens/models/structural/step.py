@@ -4,7 +4,7 @@ what becomes of its results.
 It serves a structural model of point masses, springs (:func:`.spring_law.spring_law`), viscous
 and Rayleigh damping and prescribed loads, whose iteration matrix S = M + c_q K_t + c_q̇ D the
 Python path factors as a tridiagonal band (a chain, after its reordering), in real arithmetic.
-The iteration runs compiled over the step operations of :mod:`.structural_step_kernels`; its
+The iteration runs compiled over the step operations of :mod:`.step_kernels`; its
 last factor becomes a :class:`~dynsens.solver.linalg.Factor` and its K_t the model's own
 linearization, for the sensitivities.
 
@@ -21,17 +21,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..integrators.newmark import correct_arrays
-from ..solver._jit import enabled
-from ..solver.banded import BandPlan, TridiagonalFactor
-from ..solver.compiled_iteration import REGULAR, CompiledStep, read_only
-from ..solver.linalg import Counters, Factor, SingularMatrixError
-from .base import StepState
-from .sparse_assembly import on_pattern
-from .structural_step_kernels import SpringStepData, iteration, probe_residual
+from ...integrators.newmark import correct_arrays
+from ...solver._jit import enabled
+from ...solver.banded import BandPlan, TridiagonalFactor
+from ...solver.compiled_iteration import REGULAR, CompiledStep, read_only
+from ...solver.linalg import Counters, Factor, SingularMatrixError
+from ..base import StepState
+from ..sparse_assembly import on_pattern
+from .step_kernels import SpringStepData, iteration, probe_residual
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .structural import StructuralModel
+    from .model import StructuralModel
 
 Array = np.ndarray
 

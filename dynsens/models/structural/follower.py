@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .timefunctions import TimeFunction
+from ..timefunctions import TimeFunction
 
 
 @dataclass

@@ -1,9 +1,8 @@
 """Structural element kinds as registered classes behind one protocol (:mod:`.kind`).
 
-A package of its own, not ``models/structural/``: the module :mod:`dynsens.models.structural`
-keeps its name (its public import path), and the kinds are meant for any model that carries
-structural members (flexible members in mechanisms follow).  One module per kind; every module
-here is imported by :func:`load_kinds` and registers its kinds.
+One module per kind; every module here is imported by :func:`load_kinds` and registers its
+kinds.  A structural model (:mod:`dynsens.models.structural.model`) loops over the element sets
+of these kinds and names none of them.
 """
 from __future__ import annotations
 

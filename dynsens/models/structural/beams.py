@@ -34,10 +34,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..case_keys import allowed
-from ..errors import ProblemCollector
-from ._keys import check_keys, did_you_mean
-from .parameters import ParameterTable
+from ...case_keys import allowed
+from ...errors import ProblemCollector
+from .._keys import check_keys, did_you_mean
+from ..parameters import ParameterTable
 
 SHAPES = {"tube": ("D", "t"), "rectangle": ("b", "h"), "box": ("b", "h", "t"), "properties": ("A", "I", "c")}
 #: shapes with a wall t that must leave a hole (2·t below every outer width)

@@ -1,15 +1,15 @@
 r"""Viscous dampers (``type: damper``) between two DOFs, or a DOF and ground: linear f = c δ̇
 (in the constant damping matrix), or nonlinear f = c δ̇ (δ̇² + ε²)^((α−1)/2) with ``exponent``
-and ``regularization`` (:class:`~dynsens.models.dampers.NonlinearDampers`)."""
+and ``regularization`` (:class:`~dynsens.models.structural.dampers.NonlinearDampers`)."""
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
 
-from ...case_keys import allowed
-from ...errors import ProblemCollector
-from .._keys import check_keys
+from ....case_keys import allowed
+from ....errors import ProblemCollector
+from ..._keys import check_keys
 from ..dampers import NonlinearDampers
 from .kind import ElementKind, extend, ModelContext, ReadContext, Touch, Triplets, register_kind
 from .springs import PAIR_SIGNS, read_pair

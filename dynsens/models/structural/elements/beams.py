@@ -1,6 +1,6 @@
 """Beams (``type: beam``): plane co-rotational beams in a ``dim: 2`` model
-(:class:`~dynsens.models.beams.BeamSet`), space-frame beams, small rotations or co-rotational,
-in a ``dim: 3`` model (:class:`~dynsens.models.beams3d.Beam3DSet`).  Both carry nodal rotations;
+(:class:`~dynsens.models.structural.beams.BeamSet`), space-frame beams, small rotations or co-rotational,
+in a ``dim: 3`` model (:class:`~dynsens.models.structural.beams3d.Beam3DSet`).  Both carry nodal rotations;
 their mass is lumped, or consistent (turning with plane beams, constant for space frames)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...errors import ProblemCollector
+from ....errors import ProblemCollector
 from ..beams import BeamSet, parse_beam
 from ..beams3d import Beam3DSet, parse_beam_3d
 from ..corotated_damping import DampedKind

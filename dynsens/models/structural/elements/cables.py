@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...case_keys import Key, Section
+from ....case_keys import Key, Section
 from .bars import Bars
 from .kind import ReadContext, Triplets, register_kind
 

@@ -2,7 +2,7 @@
 assembled from element entries (dense, or sparse on patterns kept per call site), and the
 linearization the Newton matrix and the sensitivity step are built from, and the residual rows
 each design variable reaches (the pattern of the design partials).  A mixin of
-:class:`~dynsens.models.structural.StructuralModel`; its element arrays live there."""
+:class:`~dynsens.models.structural.model.StructuralModel`; its element arrays live there."""
 from __future__ import annotations
 
 from typing import Any
@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .base import Linearization, StepState
-from .sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
+from ..base import Linearization, StepState
+from ..sparse_assembly import PatternAssembly, SparseLinearization, UnionCache
 
 
 class StructuralMatrices:

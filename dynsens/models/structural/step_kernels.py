@@ -1,7 +1,7 @@
 r"""The step operations of a spring network, compiled: numba overloads for :class:`SpringStepData`.
 
 :func:`dynsens.solver.newton_core.newton_iterations` compiled for a named tuple of a step's
-arrays (which designs it serves, and what becomes of its results: :mod:`.structural_step`):
+arrays (which designs it serves, and what becomes of its results: :mod:`.step`):
 
 * the state is the scheme's corrector (:func:`dynsens.integrators.newmark.correct_arrays`);
 * F_R = M q̈ + f_int(q) − f_ext(t) + D q̇ with the spring law's forces and tangents
@@ -21,13 +21,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..integrators.newmark import correct_arrays
-from ..solver import newton_core as core
-from ..solver import tridiagonal
-from ..solver._jit import inline, jit
-from ..solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
+from ...integrators.newmark import correct_arrays
+from ...solver import newton_core as core
+from ...solver import tridiagonal
+from ...solver._jit import inline, jit
+from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
                                          LazyIteration, is_step_data, sources_stamp, step_kept)
-from ..solver.linalg import all_finite, pivot_test
+from ...solver.linalg import all_finite, pivot_test
 from . import spring_law as law
 
 Array = np.ndarray
@@ -239,7 +239,7 @@ _PROBE: Any = None
 
 
 def probe_residual(ops: SpringStepData, z: np.ndarray) -> np.ndarray:
-    """F_R at the unknowns z, compiled (the serving test of :mod:`.structural_step`)."""
+    """F_R at the unknowns z, compiled (the serving test of :mod:`.step`)."""
     global _PROBE
     if _PROBE is None:
         iteration()                 # the overloads first

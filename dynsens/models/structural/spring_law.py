@@ -1,11 +1,11 @@
 """The law of a structural spring, one definition for every evaluation path: the numpy model
-(:meth:`~dynsens.models.elements.springs.Springs.state`, any batch shape) and the
-compiled step of spring networks (:mod:`dynsens.models.structural_step`)."""
+(:meth:`~dynsens.models.structural.elements.springs.Springs.state`, any batch shape) and the
+compiled step of spring networks (:mod:`dynsens.models.structural.step`)."""
 from __future__ import annotations
 
 from typing import Any
 
-from ..solver._jit import register_jitable
+from ...solver._jit import register_jitable
 
 
 @register_jitable

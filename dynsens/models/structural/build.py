@@ -1,19 +1,19 @@
-"""Build a :class:`~dynsens.models.structural.StructuralModel` from a case's ``model`` mapping
+"""Build a :class:`~dynsens.models.structural.model.StructuralModel` from a case's ``model`` mapping
 (``model.type: structural``): nodes and supports, DOFs, elements (each read by the set of its
 kind, :mod:`.elements`), loads, initial conditions, damping."""
 from __future__ import annotations
 
 from typing import Any
 
-from ..case_keys import allowed
-from ..errors import ProblemCollector
-from ._keys import check_keys, did_you_mean
+from ...case_keys import allowed
+from ...errors import ProblemCollector
+from .._keys import check_keys, did_you_mean
 from .elements import ElementKind, ReadContext, element_types, kind_class, load_kinds
 from .follower import FollowerLoads
-from .parameters import ParameterTable
-from .registry import register
-from .structural import AXES, GROUND, StructuralModel
-from .timefunctions import build_time_function
+from ..parameters import ParameterTable
+from ..registry import register
+from .model import AXES, GROUND, StructuralModel
+from ..timefunctions import build_time_function
 
 # ---------------------------------------------------------------------- builder
 _MODEL_KEYS = allowed("model.structural")

@@ -24,20 +24,20 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..case_keys import allowed
-from ..errors import ProblemCollector
-from ._keys import check_keys, did_you_mean
-from .base import Linearization, Model, Output, StepState, Traits
-from .parameters import ParameterTable
+from ...case_keys import allowed
+from ...errors import ProblemCollector
+from .._keys import check_keys, did_you_mean
+from ..base import Linearization, Model, Output, StepState, Traits
+from ..parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
 from .corotated_damping import CorotatedDamping
 from .dampers import NonlinearDampers
 from .elements import ElementKind, ModelContext
 from .follower import FollowerLoads
-from .sparse_assembly import PatternAssembly, RightProduct, UnionCache
-from .structural_matrices import StructuralMatrices
-from .timefunctions import TimeFunction
+from ..sparse_assembly import PatternAssembly, RightProduct, UnionCache
+from .matrices import StructuralMatrices
+from ..timefunctions import TimeFunction
 
 GROUND = "ground"
 AXES = ("x", "y", "z")
@@ -53,7 +53,7 @@ _EMPTY_FRAMES.freeze()
 class StructuralModel(StructuralMatrices, Model):
     """Assembled structural model; built from a case by :func:`build_structural`.  It knows no
     element kind by name: it loops over its element sets (:mod:`.elements`), in their order.
-    Its matrices and their assembly are :class:`.structural_matrices.StructuralMatrices`."""
+    Its matrices and their assembly are :class:`.matrices.StructuralMatrices`."""
 
     #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
     equation_sources: list[tuple[str, list[int]]] = []
@@ -333,8 +333,8 @@ class StructuralModel(StructuralMatrices, Model):
         return 0.0 if total is None else total
 
     def compiled_step(self, newton: bool, refactor: bool) -> Any:
-        """The compiled Newton iteration of :mod:`.structural_step`, where it serves this model."""
-        from .structural_step import step_factory
+        """The compiled Newton iteration of :mod:`.step`, where it serves this model."""
+        from .step import step_factory
         return step_factory(self, newton, refactor)
 
     def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
@@ -345,7 +345,7 @@ class StructuralModel(StructuralMatrices, Model):
                 qe = self._ext(s.q) if qe is None else qe
                 why = k.range_problem(qe, params)
                 if why:
-                    from ..errors import ModelError
+                    from ...errors import ModelError
                     raise ModelError(f"t = {np.real(t):.6g} s: {why}")
 
     def dof_labels(self) -> list[str]:
