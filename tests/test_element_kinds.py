@@ -9,7 +9,7 @@ import pytest
 import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.case_keys import SECTIONS
-from dynsens.models.structural.elements import KINDS, ElementKind, load_kinds
+from dynsens.models.structural.elements import KINDS, ElementKind, load_kinds, register_kind
 from dynsens.models.structural.step import serves
 
 
@@ -43,6 +43,7 @@ def test_every_registered_type_has_its_key_section_listed_in_the_model_elements(
 def test_a_type_without_a_kind_for_the_model_dimension_is_one_problem_at_its_key(monkeypatch) -> None:
     class PlaneOnly(ElementKind):
         type, dims, order, section = "plane_only", (2,), 99, "structural.mass"
+        compiled = False
 
         def __init__(self) -> None:
             self.names: list[str] = []
@@ -55,6 +56,21 @@ def test_a_type_without_a_kind_for_the_model_dimension_is_one_problem_at_its_key
     expected = r"\(1 problem\):\n  - model\.elements\[6\]\.type: a plane_only element serves models of dim 2, not 3"
     with pytest.raises(dynsens.CaseError, match=expected):
         load_case_dict(chain([{"type": "plane_only"}], dim=3))
+
+
+def test_every_kind_declares_whether_it_runs_compiled() -> None:
+    """Compiled or Python only is declared by each kind in its own class body: a registered kind
+    without the declaration is refused, and every shipped kind has one."""
+    for classes in load_kinds().values():
+        for cls in classes:
+            assert isinstance(cls.__dict__.get("compiled"), bool), cls.__name__
+
+    class Undeclared(ElementKind):
+        type, order, section = "undeclared", 99, "structural.mass"
+
+    with pytest.raises(TypeError, match="Undeclared.*must declare `compiled = True`"):
+        register_kind(Undeclared)
+    assert "undeclared" not in KINDS
 
 
 def test_the_compiled_step_serves_what_the_kinds_declare() -> None:

@@ -22,6 +22,7 @@ class Bars(ElementKind):
 
     type = "bar"
     order = 3
+    compiled = False                # Python only: the compiled step serves spring networks
     section = "structural.bar"
     member = True
     output_kinds: ClassVar[tuple[str, ...]] = ("force", "stress", "strain", "buckling")

@@ -64,6 +64,7 @@ class PlaneBeams(_BeamKind):
     type = "beam"
     dims = (2,)
     order = 4
+    compiled = False                # Python only: the compiled step serves spring networks
     width = 6
     mass_key = "beam_mass"
     stack_keys = BeamSet.STACK_KEYS
@@ -142,6 +143,7 @@ class SpaceBeams(_BeamKind):
     type = "beam"
     dims = (3,)
     order = 5
+    compiled = False                # Python only: the compiled step serves spring networks
     width = 12
     mass_key = "frame_mass"
     stack_keys = Beam3DSet.STACK_KEYS

@@ -57,6 +57,7 @@ class Cables(Bars):
 
     type = "cable"
     order = 6
+    compiled = False                # Python only: the compiled step serves spring networks
     section = "structural.cable"
     keys = CABLE_KEYS
     output_kinds: ClassVar[tuple[str, ...]] = ("force", "stress", "strain")

@@ -91,8 +91,10 @@ class ElementKind(ABC):
     #: the key section's name in the table, and the section itself if the kind declares it
     section: ClassVar[str]
     keys: ClassVar[Section | None] = None
-    #: a compiled step serves models of this kind (:func:`dynsens.models.structural.step.serves`)
-    compiled: ClassVar[bool] = False
+    #: a compiled step serves models of this kind (:func:`dynsens.models.structural.step.serves`):
+    #: every kind declares it in its own class body, True or False (Python only); a kind that
+    #: declares neither is refused at registration (no default decides it silently)
+    compiled: ClassVar[bool]
     #: what the elements' outputs report (``kind`` of an output quantity), and in which unit
     output_kinds: ClassVar[tuple[str, ...]] = ()
     #: the elements that ``element: all`` names (members: bars and beams)
@@ -216,7 +218,11 @@ KINDS: dict[str, list[type[ElementKind]]] = {}
 
 def register_kind(cls: type[ElementKind]) -> type[ElementKind]:
     """Class decorator: register an element kind under its ``type`` (one class per dimension),
-    and its key section (when it declares one) in the case's key table."""
+    and its key section (when it declares one) in the case's key table.  Raises TypeError for a
+    kind that does not declare ``compiled`` itself (compiled, or Python only)."""
+    if not isinstance(cls.__dict__.get("compiled"), bool):
+        raise TypeError(f"element kind {cls.__name__} ({cls.type!r}) must declare `compiled = True` (a compiled "
+                        "step serves it) or `compiled = False` (Python only) in its class body")
     KINDS.setdefault(cls.type, []).append(cls)
     if cls.keys is not None:
         add_element_section(cls.section, cls.keys)
