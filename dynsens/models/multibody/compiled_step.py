@@ -32,7 +32,8 @@ from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIV
 from ...solver.linalg import Counters, Factor, all_finite, pivot_test
 from . import compiled as cc
 from . import compiled_linearization as clin
-from .residual import CompiledLinearization, time_inputs
+from .residual import time_inputs
+from .residual_compiled import CompiledLinearization
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import MultibodyModel

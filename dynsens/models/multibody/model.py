@@ -38,6 +38,7 @@ from .joints import Equation, Joint, NormEq
 from .kernel import KParams, Kin, Layout, kernel_params, stack_kernel_params
 from .kernel_compiled import CompiledKin, KinCache, _use_compiled
 from .residual import Evaluation, other_forces_q, time_inputs_steps
+from .residual_compiled import evaluate
 from .rotational import RotationalSpringDamper
 from .rotations import from_axis_angle, rmatmul
 from .run_cache import RunCache
@@ -244,7 +245,7 @@ class MultibodyModel(Model):
         key = (id(kin), t, lam.tobytes(), p.tobytes(), pd.tobytes(), lam.dtype.char, p.dtype.char)
         if last is not None and last[0] == key and last[1].kin is kin:
             return last[1]
-        ev = Evaluation(self, kin, t, lam, p, pd)
+        ev = evaluate(self, kin, t, lam, p, pd)
         self.cache.evaluation = (key, ev, (s.lam, s.p, s.pd))
         return ev
 
@@ -285,8 +286,7 @@ class MultibodyModel(Model):
         dt = kin.dtype
         cf, shift = self.coefficients_steps(ts, kp)
         ext, f_ext, g = time_inputs_steps(self, kp, ts, dt)
-        ev = Evaluation(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, g))
-        assert ev.compiled
+        ev = evaluate(self, kin, ts[-1], lam, p, pd, inputs=(cf, shift, ext, f_ext, g))
         R = ev.residual().reshape(K, B, -1)
         if self.other_forces:                     # closed-form elements, at each step's time
             for k, t in enumerate(ts):

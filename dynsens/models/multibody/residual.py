@@ -20,16 +20,14 @@ differentiated by complex step (central differences for complex data).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, cast
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from ..base import Linearization
 from .bodies import Ctx
-from . import compiled as cc
-from . import compiled_linearization as clin
 from .kernel import Kin
-from .kernel_compiled import CompiledKin
 from .rotational import rotational_law, weight_rows
 from .rotations import T_G, rmatmul
 
@@ -59,15 +57,6 @@ def _Gb(b: Array) -> Array:
 def _GTv(v: Array) -> Array:
     """∂(G(a)ᵀ v)/∂a (..., 4, 4) for v (..., 3)."""
     return (v @ _TG_V).reshape(v.shape[:-1] + (4, 4))
-
-
-class CompiledLinearization(Linearization):
-    """A dense linearization of the compiled kernel: the iteration matrix is assembled by it
-    too (one call instead of a handful of array operations per Newton iteration)."""
-
-    def iteration_matrix(self, c_q: float, c_qd: float, c_p: float, n_q: int) -> Array:
-        R_p = self.R_p if self.R_p is not None else np.zeros((self.R_z.shape[0], 0), self.R_z.dtype)
-        return clin.iteration_matrix(self.R_z, self.R_q, self.R_qd, R_p, float(c_q), float(c_qd), float(c_p))
 
 
 def point_force(pf: Any, t: float, pv: Array) -> Array:
@@ -138,11 +127,14 @@ def _steady(model: "MultibodyModel", kp: Any, dt: np.dtype) -> tuple[Array, Arra
     return kept
 
 
-class Evaluation:
+class Evaluation(ABC):
     """Residual pieces at one (batched) state; :meth:`residual` and :meth:`linearization`.
 
-    With compiled kinematics and force laws the compiled kernel evaluates everything
-    (:mod:`.compiled`); otherwise the numpy expressions below, which are its reference.
+    Two backends, chosen once per evaluation by :func:`.residual_compiled.evaluate`: the numpy
+    expressions of :class:`NumpyEvaluation` (the reference) and the compiled kernel's
+    :class:`.residual_compiled.CompiledEvaluation`.  Both leave the same pieces for the sparse
+    linearization and the outputs: constraint levels ``Phi`` and coefficients ``cf``, product
+    weights ``w`` and primitive forces ``f``.
 
     Parameters
     ----------
@@ -151,21 +143,34 @@ class Evaluation:
     t : time (s); lam (Bs, n_λ), p (Bs, n_p), pd (Bs, n_p): multipliers, pressures, rates.
     """
 
-    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array,
-                 inputs: tuple[Array, ...] | None = None):
+    #: whether the compiled kernel evaluates (the sparse linearization reads its arrays then)
+    compiled: ClassVar[bool]
+    Phi: Array
+    cf: Array
+    w: Array
+    f: Array
+
+    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
         self.model, self.kin, self.kp, self.t = model, kin, kin.kp, t
         self.lam, self.p, self.pd = lam, p, pd
-        # (cf, shift, ext, f_ext, g) per entry, for a block of steps at different times
-        # (compiled kernel only); otherwise evaluated at t
-        self._given_inputs = inputs
-        # the compiled kernel in the kinematics' dtype (complex holds real multipliers too)
-        self.compiled = (isinstance(kin, CompiledKin) and model.layout.compiled_laws
-                         and (kin.dtype.kind == "c" or (lam.dtype.kind != "c" and p.dtype.kind != "c"
-                                                        and pd.dtype.kind != "c")))
-        if self.compiled:
-            self._compiled_forces_and_residual()
-            return
-        assert inputs is None, "time inputs per entry need the compiled kernel"
+
+    @abstractmethod
+    def residual(self) -> Array:
+        """F_R (B, n_z)."""
+
+    @abstractmethod
+    def linearization(self) -> Linearization:
+        """Exact ∂F_R/∂(z, q, q̇, p) of the first batch entry."""
+
+
+class NumpyEvaluation(Evaluation):
+    """The numpy expressions of the residual and its linearization: the reference of the
+    compiled kernel (:mod:`.compiled`), and the path of data it does not take."""
+
+    compiled = False
+
+    def __init__(self, model: "MultibodyModel", kin: Kin, t: float, lam: Array, p: Array, pd: Array):
+        super().__init__(model, kin, t, lam, p, pd)
         lay = model.layout
         kp = self.kp
         self.Phi, cf = model.constraint_levels(t, kin)
@@ -199,34 +204,9 @@ class Evaluation:
                 f[:, j] -= point_force(pf, self.t, kp.pv)
         self.f = f
 
-    def _compiled_forces_and_residual(self) -> None:
-        """Constraint levels, laws, forces and F_R in one compiled call (:mod:`.compiled`); the
-        time functions (constraint coefficients, element inputs, point forces) are evaluated here."""
-        m, kp, lay = self.model, self.kp, self.model.layout
-        kin = cast(CompiledKin, self.kin)   # the compiled path runs on compiled kinematics
-        cl, ck, t, dt = kin.arrays, kin.params, self.t, kin.dtype
-        if self._given_inputs is not None:
-            cf, shift, ext, f_ext, g = self._given_inputs
-        else:
-            cf, shift = m.coefficients(t, kp)
-            ext, f_ext, g = time_inputs(m, kp, t, dt)
-        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp, self._rot) = \
-            cc.forces_and_residual(
-                kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
-                cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
-                cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
-                np.ascontiguousarray(self.lam, dt), np.ascontiguousarray(self.p, dt),
-                np.ascontiguousarray(self.pd, dt), float(m.scale), float(m.alpha),
-                float(m.beta), cc.TG, cl.rot_prod, ck.rot_c)
-        if m.other_forces and self._given_inputs is None:
-            # (a block of steps at different times: Model.residual_batch_steps adds them per step)
-            R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
-        self.cf, self._R = cf, R
 
     def residual(self) -> Array:
         """F_R (B, n_z)."""
-        if self.compiled:
-            return self._R
         m, kin, kp, lay = self.model, self.kin, self.kp, self.model.layout
         Lp = kin.Lp
         p, pd_, pdd = Lp[:, 0], Lp[:, 1], Lp[:, 2]
@@ -262,8 +242,6 @@ class Evaluation:
 
     def linearization(self) -> Linearization:
         """Exact ∂F_R/∂(z, q, q̇, p) of the first batch entry."""
-        if self.compiled:
-            return self._compiled_linearization()
         m, kin, lay = self.model, self.kin, self.model.layout
         tr = m.traits
         n_q, n_lam, n_p = tr.n_q, tr.n_lam, tr.n_p
@@ -325,26 +303,6 @@ class Evaluation:
         return Linearization(R_z, np.concatenate([R1_q, R2_q, R3_q]),
                              np.concatenate([R1_qd, R2_qd, R3_qd]),
                              np.concatenate([R1_p, np.zeros((n_lam, n_p)), R3_p]) if n_p else None)
-
-    def _compiled_linearization(self) -> Linearization:
-        """:meth:`linearization` by the compiled kernel; the axial laws' partials enter as arrays."""
-        m, lay = self.model, self.model.layout
-        kin = cast(CompiledKin, self.kin)   # the compiled path runs on compiled kinematics
-        tr = m.traits
-        cl, ck = kin.arrays, kin.params
-        G = clin.product_rows(kin.C[0], kin.ABV[0], cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
-                            cl.side_coef, tr.n_q)
-        R_z, R_q, R_qd, R_p = clin.linearization(
-            kin.Lp[0], kin.C[0], kin.ABV[0], G, cl.pb, cl.is_point, ck.Ts4[0], cl.side_ptr, cl.side_prim,
-            cl.side_coef, lay.n_cp, cl.prod_eq, np.ascontiguousarray(self.cf[0], kin.dtype), m.eq_row_weights,
-            m.norm_row_weights, cl.norm_eq, cl.norm_body, float(m.scale), self.w[0], self.f[0],
-            np.asarray(self.lam[0], kin.dtype), ck.mass[0], ck.J[0], cc.TG, cl.ax_prod, self._ax[0], self._Pp[0],
-            cl.p_owner, self._hL[0], self._hLd[0], self._hp[0], cl.rot_prod, self._rot[0])
-        if m.other_forces:
-            Kq, Kqd = other_forces_jacobians(m, self.t, kin.q[0], kin.qd[0], kin.kp.prms[0])
-            R_q[:tr.n_q] -= Kq
-            R_qd[:tr.n_q] -= Kqd
-        return CompiledLinearization(R_z, R_q, R_qd, R_p if tr.n_p else None)
 
     def _inertia_blocks(self, dt: Any) -> tuple[Array, Array, Array]:
         """∂(Mq̈ − Q_v)/∂(q, q̇, q̈) (each (n_q, n_q)), block diagonal per body."""
