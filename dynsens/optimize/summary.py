@@ -134,7 +134,7 @@ def decision_summary(path: str | Path, result: Any, design_units: Sequence[str] 
     lines += _condensed(rows, "design variables", lambda row: "(active)" in row)
     fam_rows = removed_rows(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper)
     if fam_rows:
-        lines.append("members removed (variable at its lower bound; the file lists them, /optimization/summary/removed):")
+        lines.append("members removed (variable at its lower bound; listed in /optimization/summary/removed):")
         lines += fam_rows
     active = [c.response for i, c in enumerate(problem.constraints) if np.isfinite(b.g[i]) and
               (abs(b.g[i]) <= ACTIVE_TOL if c.kind == "eq" else -FEAS_TOL <= b.g[i] <= ACTIVE_TOL)]
