@@ -16,6 +16,7 @@ from .jobs import StartJob, StartOutcome, run_start
 from .methods import check_method
 from .problem import OptimizationError, ScaledProblem, _fmt, _spec, build_problem, scaled_evaluation, simulate
 from .store import holds_writer_lock, validate_resume_file
+from .summary import removed_members
 from .store import (_init_file, _outcome_attrs, _outcome_from_file, _problem_attrs, _problem_from_file,
                     _set_attrs, _start_group, _store_optimum, _write_row, set_status)
 
@@ -277,6 +278,11 @@ def _finalize(path: Path, case: Case, problem: ScaledProblem, outs: list[StartOu
         s.create_dataset("n_sim", data=np.array([o.n_sim for o in outs]))
         s.create_dataset("message", data=np.array([o.message for o in outs], dtype=h5py.string_dtype()))
         s.attrs["best"] = b.index
+        removed = removed_members(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper)
+        if removed:     # per design family, the members of the best design at their lower bound
+            r = s.create_group("removed")
+            for family, members in removed.items():
+                r.create_dataset(family, data=np.array(members, dtype=object), dtype=h5py.string_dtype())
         f.flush()
     if np.isfinite(b.f):
         _store_optimum(path, case, b.x)

@@ -63,6 +63,34 @@ def bound_rows(names: Sequence[str], x: np.ndarray, lower: np.ndarray, upper: np
     return lines
 
 
+def removed_members(names: Sequence[str], x: np.ndarray, lower: np.ndarray,
+                    upper: np.ndarray) -> dict[str, list[str]]:
+    """Per design family (variables named ``family[element]``), the elements whose variable sits at
+    its lower bound: in sizing and ground-structure optimization these members are removed
+    (a bar at its minimum gauge carries next to nothing).  Families with none map to []."""
+    removed: dict[str, list[str]] = {}
+    for j, n in enumerate(names):
+        if not n.endswith("]") or "[" not in n:
+            continue
+        family, element = n[:-1].split("[", 1)
+        span = upper[j] - lower[j] if np.isfinite(upper[j] - lower[j]) else max(abs(x[j]), 1.0)
+        at_lower = bool(np.isfinite(lower[j]) and x[j] <= lower[j] + BOUND_TOL * span)
+        removed.setdefault(family, [])
+        if at_lower:
+            removed[family].append(element)
+    return removed
+
+
+def removed_rows(names: Sequence[str], x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+    """One line per design family: how many of its members are at the lower bound (removed)."""
+    counts = {n[:-1].split("[", 1)[0]: 0 for n in names if n.endswith("]") and "[" in n}
+    for family, members in removed_members(names, x, lower, upper).items():
+        counts[family] = len(members)
+    total = {f: sum(1 for n in names if n.startswith(f + "[")) for f in counts}
+    return [f"  family {f}: {counts[f]} of {total[f]} members at the lower bound (removed), {total[f] - counts[f]} "
+            "remain" for f in counts]
+
+
 def _condensed(rows: list[str], what: str, routine: Callable[[str], bool]) -> list[str]:
     """All rows up to ``LISTED`` of them; beyond, the others than the routine ones (inactive
     constraints, variables at a bound) and a count of the rest (the file has every one)."""
@@ -104,6 +132,10 @@ def decision_summary(path: str | Path, result: Any, design_units: Sequence[str] 
     lines.append("design variables and bounds:")
     rows = bound_rows(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper, design_units)
     lines += _condensed(rows, "design variables", lambda row: "(active)" in row)
+    fam_rows = removed_rows(problem.names, np.asarray(b.x, dtype=float), problem.lower, problem.upper)
+    if fam_rows:
+        lines.append("members removed (variable at its lower bound; listed in /optimization/summary/removed):")
+        lines += fam_rows
     active = [c.response for i, c in enumerate(problem.constraints) if np.isfinite(b.g[i]) and
               (abs(b.g[i]) <= ACTIVE_TOL if c.kind == "eq" else -FEAS_TOL <= b.g[i] <= ACTIVE_TOL)]
     at_bound = [ln.split(" =")[0].strip() for ln in bound_rows(problem.names, np.asarray(b.x, dtype=float),
