@@ -63,7 +63,7 @@ docs: $(DOCS_STAMP)
 # pytest process does not need.
 MIN_VENV ?= .venv-min
 MIN_PINS := numpy==1.24.0 scipy==1.10.0 h5py==3.8.0 click==8.1.0 pyyaml==6.0.1 numba==0.60.0 \
-	matplotlib==3.7.0 pytest==7.4.0 pytest-xdist==3.3.0
+	matplotlib==3.7.0 pytest==7.4.0
 MIN_STAMP := $(MIN_VENV)/.installed
 MIN_TESTS := tests/test_api.py tests/test_sdof_closed_form.py tests/test_case_errors.py tests/test_optimize.py \
 	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_newmark.py \
