@@ -8,11 +8,21 @@ STAMP := $(VENV)/.installed
 
 .PHONY: install setup test test-fast lint docs min-env test-min figures-check example reproduce-table1 figures views report bench bench-peers cases clean
 
-$(STAMP): pyproject.toml
+INSTALLED := $(VENV)/.installed-packages
+
+# the packages (lint and docs need no compiled kernel: CI runs them beside the warm-up)
+$(INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
-	$(PY) -m dynsens.warmup   # compile the kernels and compiled steps into numba's cache (~1 min, once)
+	touch $(INSTALLED)
+
+install: $(INSTALLED)
+
+# then numba's kernels and compiled steps compiled into its cache, once, in two processes (about
+# 3 min on 2 quiet cores; it prints its progress)
+$(STAMP): $(INSTALLED)
+	$(PY) -m dynsens.warmup --jobs 2
 	touch $(STAMP)
 
 setup: $(STAMP)
