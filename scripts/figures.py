@@ -3,7 +3,6 @@
 
     python scripts/figures.py make      # every figure, by the command that makes it (≈ 10 min)
     python scripts/figures.py check     # a few short runs (≈ 1 min): fails on a stale figure
-    python scripts/figures.py record    # only rewrite docs/figures.json (after a make)
 
 Comparing the pictures themselves would be fragile (matplotlib's rendering, fonts and PNG
 encoder vary between versions and machines) and would need the expensive runs.  Instead every
@@ -126,7 +125,8 @@ def differences(recorded: Any, current: Any, where: str = "") -> list[str]:
 
 
 def record() -> None:
-    """Write the probes' values beside the figures (docs/figures.json), atomically."""
+    """Write the probes' values beside the figures (docs/figures.json), atomically; only
+    :func:`make` calls it, after every figure was rebuilt (a record is never written alone)."""
     data = {"about": "written by `make figures` (scripts/figures.py); `make figures-check` compares "
                      "each figure's probe with these values",
             "rtol": RTOL,
@@ -153,7 +153,7 @@ def make() -> None:
 def check() -> int:
     """0 when every figure's probe equals its record, 1 (naming the stale figures) otherwise."""
     if not RECORD.exists():
-        print(f"{RECORD.relative_to(ROOT)} missing: run `make figures`", file=sys.stderr)
+        print(f"{RECORD} missing: run `make figures`", file=sys.stderr)
         return 1
     recorded = json.loads(RECORD.read_text(encoding="utf-8"))["figures"]
     stale = []
@@ -180,15 +180,12 @@ def check() -> int:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("action", choices=("make", "check", "record"))
+    ap.add_argument("action", choices=("make", "check"))
     args = ap.parse_args(argv)
     if args.action == "make":
         make()
-    elif args.action == "record":
-        record()
-    else:
-        return check()
-    return 0
+        return 0
+    return check()
 
 
 if __name__ == "__main__":
