@@ -12,9 +12,9 @@ gradients that every point of Fig. 5 divides by, the coarsest step of a work-pre
 the first point of an optimization history, the designs a study draws, ...).  ``make figures``
 rebuilds the figures and writes the probes' values to ``docs/figures.json``; ``check`` runs the
 probes on the current code and fails, naming each figure and its command, when a value moved by
-more than ``RTOL`` relative.  A code change that moves what a figure shows moves its probe, so
-the figure cannot silently go stale; a change that leaves every probe unchanged (a refactoring)
-does not force a rebuild.
+more than ``RTOL`` relative (a vector relative to its largest entry).  A code change that moves
+what a figure shows moves its probe, so the figure cannot silently go stale; a change that
+leaves every probe unchanged (a refactoring) does not force a rebuild.
 """
 from __future__ import annotations
 
@@ -33,7 +33,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORD = ROOT / "docs" / "figures.json"
-RTOL = 1e-8        # a move far below what a figure can show, far above run-to-run round-off
+# a figure shows three digits at best; the weir's event-located gradients move by up to 5e-5
+# between the compiled and the numpy kernel (summation order, a condition number near 1e13), and
+# could between machines
+RTOL = 1e-3
 WEIR = "cases/tyrolean_weir.yaml"
 DYNSENS = [sys.executable, "-m", "dynsens"]
 
@@ -109,8 +112,14 @@ def probes() -> dict[str, Any]:
     return {f.name: f.probe() for f in FIGURES}
 
 
+def _numbers(x: Any) -> bool:
+    return isinstance(x, list) and all(isinstance(v, (int, float)) for v in x)
+
+
 def differences(recorded: Any, current: Any, where: str = "") -> list[str]:
-    """Where two probe records differ (keys, lengths, or numbers beyond ``RTOL``)."""
+    """Where two probe records differ: keys, lengths, or numbers beyond ``RTOL``.  A vector (a
+    gradient, a design) is compared as a whole, relative to its largest entry: a component near
+    zero may move by round-off of the others."""
     if isinstance(recorded, dict) and isinstance(current, dict):
         if recorded.keys() != current.keys():
             return [f"{where}: keys {sorted(recorded)} recorded, {sorted(current)} now"]
@@ -118,10 +127,20 @@ def differences(recorded: Any, current: Any, where: str = "") -> list[str]:
     if isinstance(recorded, list) and isinstance(current, list):
         if len(recorded) != len(current):
             return [f"{where}: {len(recorded)} entries recorded, {len(current)} now"]
-        return [d for i, (a, b) in enumerate(zip(recorded, current)) for d in differences(a, b, f"{where}[{i}]")]
-    a, b = float(recorded), float(current)
-    same = (np.isnan(a) and np.isnan(b)) or abs(a - b) <= RTOL * max(abs(a), abs(b)) or a == b
-    return [] if same else [f"{where}: {a!r} recorded, {b!r} now"]
+        if not (_numbers(recorded) and _numbers(current)):
+            return [d for i, (a, b) in enumerate(zip(recorded, current)) for d in differences(a, b, f"{where}[{i}]")]
+    a, b = np.atleast_1d(np.asarray(recorded, float)), np.atleast_1d(np.asarray(current, float))
+    if not np.array_equal(np.isnan(a), np.isnan(b)):
+        return [f"{where}: {recorded!r} recorded, {current!r} now"]
+    a, b = np.nan_to_num(a), np.nan_to_num(b)
+    scale = max(np.max(np.abs(a), initial=0.0), np.max(np.abs(b), initial=0.0))
+    moved = np.abs(a - b) > RTOL * scale
+    if not moved.any():
+        return []
+    i = int(np.argmax(np.abs(a - b)))
+    at = f"[{i}]" if np.ndim(recorded) else ""
+    share = abs(a[i] - b[i]) / scale
+    return [f"{where}{at}: {float(a[i])!r} recorded, {float(b[i])!r} now ({share:.1e} of the largest entry)"]
 
 
 def record() -> None:

@@ -17,8 +17,12 @@ import figures  # noqa: E402
 def test_moves_beyond_the_tolerance_are_reported_and_round_off_is_not() -> None:
     rec = {"f": {"values": {"a": 1.0, "b": [2.0, -3.0]}, "nan": math.nan}}
     assert figures.differences(rec, {"f": {"values": {"a": 1.0 + 1e-12, "b": [2.0, -3.0]}, "nan": math.nan}}) == []
-    moved = figures.differences(rec, {"f": {"values": {"a": 1.0, "b": [2.0, -3.0 * (1 + 1e-6)]}, "nan": math.nan}})
+    near_zero = figures.differences({"g": [1.0, 1e-12]}, {"g": [1.0, 2e-12]})    # relative to the largest
+    assert near_zero == []
+    moved = figures.differences(rec, {"f": {"values": {"a": 1.0, "b": [2.0, -3.0 * (1 + 1e-2)]}, "nan": math.nan}})
     assert len(moved) == 1 and moved[0].startswith("f.values.b[1]: -3.0 recorded")
+    assert figures.differences({"s": 1.0}, {"s": 1.0 + 2 * figures.RTOL})[0].startswith("s: 1.0 recorded")
+    assert figures.differences({"s": math.nan}, {"s": 1.0}) != []
     assert figures.differences(rec, {"f": {"values": {"a": 1.0}, "nan": math.nan}})[0].startswith("f.values: keys")
     assert "entries recorded" in figures.differences({"x": [1.0]}, {"x": [1.0, 2.0]})[0]
 
