@@ -6,13 +6,23 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test test-fast lint docs test-min example reproduce-table1 figures views report bench bench-peers cases clean
+.PHONY: install setup test test-fast lint docs min-env test-min figures-check example reproduce-table1 figures views report bench bench-peers cases clean
 
-$(STAMP): pyproject.toml
+INSTALLED := $(VENV)/.installed-packages
+
+# the packages (lint and docs need no compiled kernel: CI runs them beside the warm-up)
+$(INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
-	$(PY) -m dynsens.warmup   # compile the kernels and compiled steps into numba's cache (~1 min, once)
+	touch $(INSTALLED)
+
+install: $(INSTALLED)
+
+# then numba's kernels and compiled steps compiled into its cache, once, in two processes (about
+# 3 min on 2 quiet cores; it prints its progress)
+$(STAMP): $(INSTALLED)
+	$(PY) -m dynsens.warmup --jobs 2
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -34,7 +44,7 @@ test-fast: $(STAMP)
 # ruff and mypy with the configuration in pyproject.toml, and no function of dynsens/ above
 # cyclomatic complexity 30 (radon; scripts/check_complexity.py). CI runs this
 LINT_STAMP := $(VENV)/.lint-installed
-$(LINT_STAMP): $(STAMP)
+$(LINT_STAMP): $(INSTALLED)
 	$(PY) -m pip install --quiet -e ".[lint]"
 	touch $(LINT_STAMP)
 
@@ -45,7 +55,7 @@ lint: $(LINT_STAMP)
 
 # the documentation site -> site/ (MkDocs; warnings are errors; CI runs this)
 DOCS_STAMP := $(VENV)/.docs-installed
-$(DOCS_STAMP): $(STAMP)
+$(DOCS_STAMP): $(INSTALLED)
 	$(PY) -m pip install --quiet -e ".[docs]"
 	touch $(DOCS_STAMP)
 
@@ -64,16 +74,22 @@ docs: $(DOCS_STAMP)
 MIN_VENV ?= .venv-min
 MIN_PINS := numpy==1.24.0 scipy==1.10.0 h5py==3.8.0 click==8.1.0 pyyaml==6.0.1 numba==0.60.0 \
 	matplotlib==3.7.0 pytest==7.4.0
+MIN_STAMP := $(MIN_VENV)/.installed
 MIN_TESTS := tests/test_api.py tests/test_sdof_closed_form.py tests/test_case_errors.py tests/test_optimize.py \
 	tests/test_compiled_kernel.py tests/test_compiled_step.py tests/test_structural_step.py tests/test_newmark.py \
 	"tests/test_direct_step.py::test_the_compiled_block_equals_the_python_steps[tyrolean_weir]" \
 	"tests/test_direct_step.py::test_the_compiled_block_equals_the_python_steps[duffing_chain]" \
 	tests/test_direct_step.py::test_a_block_of_random_records_equals_the_python_steps
-test-min:
+$(MIN_STAMP): pyproject.toml Makefile
 	test -x $(MIN_VENV)/bin/python || $(PYTHON) -m venv $(MIN_VENV)
 	$(MIN_VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(MIN_VENV)/bin/python -m pip install --quiet $(MIN_PINS)
 	$(MIN_VENV)/bin/python -m pip install --quiet --no-deps -e .
+	touch $(MIN_STAMP)
+
+min-env: $(MIN_STAMP)
+
+test-min: $(MIN_STAMP)
 	$(MIN_VENV)/bin/python -c "import numpy, scipy, h5py, click, yaml, numba; \
 		print('minimum versions:', numpy.__version__, scipy.__version__, h5py.__version__, click.__version__, \
 		yaml.__version__, numba.__version__)"
@@ -87,15 +103,15 @@ example: $(STAMP)
 reproduce-table1: $(STAMP)
 	$(PY) scripts/reproduce_table1.py
 
-# the figures the README shows, regenerated from the current code by the commands that make them
-# (≈ 8 min on 2 cores)
+# the figures in docs/, regenerated from the current code by the commands that make them (≈ 10 min
+# on 2 cores; scripts/figures.py lists them), and their probes recorded in docs/figures.json
 figures: $(STAMP)
-	$(PY) scripts/reproduce_table1.py --figure docs/fig5.png
-	$(VENV)/bin/dynsens convergence cases/duffing_chain.yaml --set integrator.t_end=1 --dt 0.004,0.002,0.001,0.0005 -o results/convergence
-	$(VENV)/bin/dynsens convergence cases/tyrolean_weir.yaml --dt 0.004,0.002,0.001 --methods ddm-forward,fd-forward -o results/convergence
-	cp results/convergence/duffing_chain_tip_end_work_precision.png results/convergence/tyrolean_weir_f_work_precision.png docs/
-	$(VENV)/bin/dynsens optimize cases/tyrolean_weir.yaml -o results/weir_opt.h5 --overwrite --plots results/weir_plots
-	cp results/weir_plots/weir_opt_history.png docs/weir_opt_history.png
+	$(PY) scripts/figures.py make
+
+# cheap check that the figures in docs/ are current (CI runs it, ≈ 1 min): short runs of what each
+# figure shows, compared with the values recorded by `make figures`
+figures-check: $(STAMP)
+	$(PY) scripts/figures.py check
 
 # the weir's animation and the tower's stress-ratio frame in the README (docs/viewing.md)
 views: $(STAMP)

@@ -175,7 +175,7 @@ class MultibodyModel(Model):
     def coefficients(self, t: float, kp: KParams) -> tuple[Array, Array]:
         """Time coefficients (c, ċ, c̈) of the constraint products (B, n_cp, 3) and the shifts
         (s, ṡ, s̈) of the equations (B, n_eq, 3) (1 for the normalisations) at time t (s);
-        read-only arrays."""
+        shared arrays (kept for the step's time): callers must not write into them."""
         lay = self.layout
         if not lay.coefs and not lay.shifts:
             return self._cf0, self._shift0
@@ -183,8 +183,9 @@ class MultibodyModel(Model):
         hit = kp.cache.coefficients
         if hit is not None and hit[0] == t:
             return hit[1]
+        # (no one writes into them; they stay writeable like the constant ones above, because numba
+        # compiles a read-only array argument as another type: a second signature of every kernel)
         cf, shift = self.coefficients_steps(np.array([t]), kp)
-        cf.flags.writeable = shift.flags.writeable = False
         kp.cache.coefficients = (t, (cf, shift))
         return cf, shift
 

@@ -1,0 +1,211 @@
+"""The figures in docs/: rebuild them all (``make figures``) or check cheaply that they are current
+(``make figures-check``, run by CI).
+
+    python scripts/figures.py make      # every figure, by the command that makes it (≈ 10 min)
+    python scripts/figures.py check     # a few short runs (≈ 1 min): fails on a stale figure
+
+Comparing the pictures themselves would be fragile (matplotlib's rendering, fonts and PNG
+encoder vary between versions and machines) and would need the expensive runs.  Instead every
+figure has a *probe*: short runs of the model the figure shows, at the design it shows, whose
+responses and gradients are numbers that the figure is drawn from (the semi-analytical
+gradients that every point of Fig. 5 divides by, the coarsest step of a work-precision curve,
+the first point of an optimization history, the designs a study draws, ...).  ``make figures``
+rebuilds the figures and writes the probes' values to ``docs/figures.json``; ``check`` runs the
+probes on the current code and fails, naming each figure and its command, when a value moved by
+more than ``RTOL`` relative (a vector relative to its largest entry).  A code change that moves
+what a figure shows moves its probe, so the figure cannot silently go stale; a change that
+leaves every probe unchanged (a refactoring) does not force a rebuild.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+RECORD = ROOT / "docs" / "figures.json"
+# a figure shows three digits at best; the weir's event-located gradients move by up to 5e-5
+# between the compiled and the numpy kernel (summation order, a condition number near 1e13), and
+# could between machines
+RTOL = 1e-3
+WEIR = "cases/tyrolean_weir.yaml"
+DYNSENS = [sys.executable, "-m", "dynsens"]
+
+
+@lru_cache(maxsize=None)
+def _run(case: str, sensitivities: bool, x: tuple[float, ...] | None = None,
+         overrides: tuple[tuple[str, Any], ...] = ()) -> dict[str, Any]:
+    """Responses (and gradients) of one run, as lists of floats (runs shared by probes once)."""
+    import dynsens
+    sim = dynsens.simulate(ROOT / case, None if x is None else np.array(x), sensitivities=sensitivities,
+                           history=(), **dict(overrides))
+    out: dict[str, Any] = {"values": {k: float(v) for k, v in sorted(sim.values.items())}}
+    if sensitivities:
+        out["gradients"] = {k: [float(g) for g in v] for k, v in sorted(sim.gradients.items())}
+    return out
+
+
+def _tower_optimum() -> tuple[float, ...]:
+    import dynsens
+    record = yaml.safe_load((ROOT / "cases" / "records" / "tower_sizing_optimum.yaml").read_text(encoding="utf-8"))
+    case = dynsens.load_case(ROOT / "cases" / "tower_sizing.yaml")
+    return tuple(float(record["design"][name]) for name in case.design_names)
+
+
+def _study_designs() -> dict[str, Any]:
+    import dynsens
+    from dynsens.study.sampling import sample_designs
+    designs = sample_designs(dynsens.load_case(ROOT / WEIR), "lhs:24", 18)
+    return {"designs": designs.tolist(), "first": _run(WEIR, True, tuple(designs[0]))}
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A figure (or a set made by one command), the commands that make it and its probe."""
+    name: str
+    paths: tuple[str, ...]
+    commands: tuple[tuple[str, ...], ...]
+    probe: Callable[[], dict[str, Any]] = field(compare=False)
+
+
+FIGURES = (
+    Figure("fig5", ("docs/fig5.png",),
+           ((sys.executable, "scripts/reproduce_table1.py", "--figure", "docs/fig5.png"),),
+           lambda: {mode: _run(WEIR, True, None, (("integrator.event_location", mode),))
+                    for mode in ("step", "interpolate")}),
+    Figure("duffing_chain work-precision", ("docs/duffing_chain_tip_end_work_precision.png",),
+           ((*DYNSENS, "convergence", "cases/duffing_chain.yaml", "--set", "integrator.t_end=1",
+             "--dt", "0.004,0.002,0.001,0.0005", "-o", "results/convergence"),
+            ("cp", "results/convergence/duffing_chain_tip_end_work_precision.png", "docs/")),
+           lambda: _run("cases/duffing_chain.yaml", True, None, (("integrator.t_end", 1.0), ("integrator.dt", 0.004)))),
+    Figure("weir work-precision", ("docs/tyrolean_weir_f_work_precision.png",),
+           ((*DYNSENS, "convergence", WEIR, "--dt", "0.004,0.002,0.001", "--methods", "ddm-forward,fd-forward",
+             "-o", "results/convergence"),
+            ("cp", "results/convergence/tyrolean_weir_f_work_precision.png", "docs/")),
+           lambda: _run(WEIR, True, None, (("integrator.dt", 0.004),))),
+    Figure("weir optimization history", ("docs/weir_opt_history.png",),
+           ((*DYNSENS, "optimize", WEIR, "-o", "results/weir_opt.h5", "--overwrite", "--plots", "results/weir_plots"),
+            ("cp", "results/weir_plots/weir_opt_history.png", "docs/weir_opt_history.png")),
+           lambda: _run(WEIR, True)),
+    Figure("weir study", ("docs/weir_study/study_pairs.png", "docs/weir_study/study_sensitivity.png",
+                          "docs/weir_study/study_responses.png"),
+           ((*DYNSENS, "study", WEIR, "-o", "results/weir_study.h5", "--sample", "lhs:24", "--seed", "18",
+             "--gradients", "--workers", "2", "--plots", "docs/weir_study", "--overwrite"),),
+           _study_designs),
+    Figure("views", ("docs/tyrolean_weir.gif", "docs/tower_stress_ratio.png"),
+           ((sys.executable, "scripts/make_view_figures.py"),),
+           lambda: {"weir": _run(WEIR, False), "tower": _run("cases/tower_sizing.yaml", False, _tower_optimum())}),
+)
+
+
+def probes() -> dict[str, Any]:
+    """Every figure's probe values, by figure name."""
+    return {f.name: f.probe() for f in FIGURES}
+
+
+def _numbers(x: Any) -> bool:
+    return isinstance(x, list) and all(isinstance(v, (int, float)) for v in x)
+
+
+def differences(recorded: Any, current: Any, where: str = "") -> list[str]:
+    """Where two probe records differ: keys, lengths, or numbers beyond ``RTOL``.  A vector (a
+    gradient, a design) is compared as a whole, relative to its largest entry: a component near
+    zero may move by round-off of the others."""
+    if isinstance(recorded, dict) and isinstance(current, dict):
+        if recorded.keys() != current.keys():
+            return [f"{where}: keys {sorted(recorded)} recorded, {sorted(current)} now"]
+        return [d for k in recorded for d in differences(recorded[k], current[k], f"{where}.{k}" if where else k)]
+    if isinstance(recorded, list) and isinstance(current, list):
+        if len(recorded) != len(current):
+            return [f"{where}: {len(recorded)} entries recorded, {len(current)} now"]
+        if not (_numbers(recorded) and _numbers(current)):
+            return [d for i, (a, b) in enumerate(zip(recorded, current)) for d in differences(a, b, f"{where}[{i}]")]
+    a, b = np.atleast_1d(np.asarray(recorded, float)), np.atleast_1d(np.asarray(current, float))
+    if not np.array_equal(np.isnan(a), np.isnan(b)):
+        return [f"{where}: {recorded!r} recorded, {current!r} now"]
+    a, b = np.nan_to_num(a), np.nan_to_num(b)
+    scale = max(np.max(np.abs(a), initial=0.0), np.max(np.abs(b), initial=0.0))
+    moved = np.abs(a - b) > RTOL * scale
+    if not moved.any():
+        return []
+    i = int(np.argmax(np.abs(a - b)))
+    at = f"[{i}]" if np.ndim(recorded) else ""
+    share = abs(a[i] - b[i]) / scale
+    return [f"{where}{at}: {float(a[i])!r} recorded, {float(b[i])!r} now ({share:.1e} of the largest entry)"]
+
+
+def record() -> None:
+    """Write the probes' values beside the figures (docs/figures.json), atomically; only
+    :func:`make` calls it, after every figure was rebuilt (a record is never written alone)."""
+    data = {"about": "written by `make figures` (scripts/figures.py); `make figures-check` compares "
+                     "each figure's probe with these values",
+            "rtol": RTOL,
+            "figures": {f.name: {"paths": list(f.paths), "commands": [" ".join(c[1:] if c[0] == sys.executable
+                                                                               else c) for c in f.commands],
+                                 "probe": f.probe()} for f in FIGURES}}
+    tmp = RECORD.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    tmp.replace(RECORD)
+    print(f"written: {RECORD.relative_to(ROOT)}")
+
+
+def make() -> None:
+    """Rebuild every figure by its commands, then record the probes."""
+    for f in FIGURES:
+        t0 = time.perf_counter()
+        for cmd in f.commands:
+            print("$", " ".join(cmd), flush=True)
+            subprocess.run(cmd, cwd=ROOT, check=True)
+        print(f"made {f.name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    record()
+
+
+def check() -> int:
+    """0 when every figure's probe equals its record, 1 (naming the stale figures) otherwise."""
+    if not RECORD.exists():
+        print(f"{RECORD} missing: run `make figures`", file=sys.stderr)
+        return 1
+    recorded = json.loads(RECORD.read_text(encoding="utf-8"))["figures"]
+    stale = []
+    for f in FIGURES:
+        t0 = time.perf_counter()
+        missing = [p for p in f.paths if not (ROOT / p).exists()]
+        diffs = ([f"missing {', '.join(missing)}"] if missing else []) + \
+            (["no record"] if f.name not in recorded else differences(recorded[f.name]["probe"], f.probe()))
+        print(f"{f.name}: {'current' if not diffs else 'STALE'} ({time.perf_counter() - t0:.1f} s)", flush=True)
+        if diffs:
+            stale.append((f, diffs))
+    for f, diffs in stale:
+        print(f"\n{f.name} ({', '.join(f.paths)}) is stale:", file=sys.stderr)
+        for d in diffs[:8]:
+            print(f"  {d}", file=sys.stderr)
+        if len(diffs) > 8:
+            print(f"  ... and {len(diffs) - 8} more", file=sys.stderr)
+    if stale:
+        print("\nrebuild with `make figures` (and commit docs/ with docs/figures.json)", file=sys.stderr)
+        return 1
+    print(f"all {len(FIGURES)} figure sets current")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("action", choices=("make", "check"))
+    args = ap.parse_args(argv)
+    if args.action == "make":
+        make()
+        return 0
+    return check()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

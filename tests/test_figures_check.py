@@ -1,0 +1,48 @@
+"""The check that the figures in docs/ are current (scripts/figures.py, `make figures-check`):
+a probe value that moved beyond its tolerance, a changed set of keys or a missing figure or
+record fails it, naming the figure; round-off below the tolerance does not."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import figures  # noqa: E402
+
+
+def test_moves_beyond_the_tolerance_are_reported_and_round_off_is_not() -> None:
+    rec = {"f": {"values": {"a": 1.0, "b": [2.0, -3.0]}, "nan": math.nan}}
+    assert figures.differences(rec, {"f": {"values": {"a": 1.0 + 1e-12, "b": [2.0, -3.0]}, "nan": math.nan}}) == []
+    near_zero = figures.differences({"g": [1.0, 1e-12]}, {"g": [1.0, 2e-12]})    # relative to the largest
+    assert near_zero == []
+    moved = figures.differences(rec, {"f": {"values": {"a": 1.0, "b": [2.0, -3.0 * (1 + 1e-2)]}, "nan": math.nan}})
+    assert len(moved) == 1 and moved[0].startswith("f.values.b[1]: -3.0 recorded")
+    assert figures.differences({"s": 1.0}, {"s": 1.0 + 2 * figures.RTOL})[0].startswith("s: 1.0 recorded")
+    assert figures.differences({"s": math.nan}, {"s": 1.0}) != []
+    assert figures.differences(rec, {"f": {"values": {"a": 1.0}, "nan": math.nan}})[0].startswith("f.values: keys")
+    assert "entries recorded" in figures.differences({"x": [1.0]}, {"x": [1.0, 2.0]})[0]
+
+
+def test_every_figure_in_docs_is_covered_and_exists() -> None:
+    root = figures.ROOT
+    listed = {p for f in figures.FIGURES for p in f.paths}
+    shipped = {str(p.relative_to(root)) for ext in ("png", "gif") for p in (root / "docs").rglob(f"*.{ext}")}
+    assert shipped == listed
+
+
+def test_check_fails_on_a_stale_probe_and_a_missing_record(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    fig = figures.Figure("toy", ("docs/fig5.png",), (), lambda: {"value": 2.0})
+    monkeypatch.setattr(figures, "FIGURES", (fig,))
+    monkeypatch.setattr(figures, "RECORD", tmp_path / "figures.json")
+    assert figures.check() == 1 and "run `make figures`" in capsys.readouterr().err
+    figures.RECORD.write_text(json.dumps({"figures": {"toy": {"probe": {"value": 2.0}}}}))
+    assert figures.check() == 0
+    figures.RECORD.write_text(json.dumps({"figures": {"toy": {"probe": {"value": 2.1}}}}))
+    assert figures.check() == 1
+    err = capsys.readouterr().err
+    assert "toy (docs/fig5.png) is stale" in err and "value: 2.1 recorded, 2.0 now" in err
