@@ -226,8 +226,9 @@ def _arm_with_beam(method="direct", raw_only=False):
 
 def test_coupled_sensitivities_through_a_beam_member():
     """Direct gradients through the beam member (its section a sets EA, EI, GJ, the lumped mass and
-    rotary inertia) and the drive torque against the complex step of the whole run (1e-7: the
-    element's Jacobian inside a complex run is by central differences) and the adjoint (1e-9)."""
+    rotary inertia) and the drive torque against the complex step of the whole run (1e-7, set when
+    the element's Jacobian inside a complex run was by central differences; it is exact now) and
+    the adjoint (1e-9)."""
     case = _arm_with_beam()
     res = dynsens.run_case(case)
     assert res.status == "completed"
@@ -258,7 +259,7 @@ def test_a_very_stiff_beam_reproduces_a_welded_tip():
 
 
 def test_beam_member_sparse_equals_dense():
-    """The beam member acts outside the kernel; the sparse linearization places its complex-step
+    """The beam member acts outside the kernel; the sparse linearization places its exact
     Jacobian by its node bodies (sparse.element_bodies): same responses and gradients as dense."""
     out = {}
     for la in ("dense", "sparse"):
