@@ -226,8 +226,9 @@ def _arm_with_beam(method="direct", raw_only=False):
 
 def test_coupled_sensitivities_through_a_beam_member():
     """Direct gradients through the beam member (its section a sets EA, EI, GJ, the lumped mass and
-    rotary inertia) and the drive torque against the complex step of the whole run (1e-7: the
-    element's Jacobian inside a complex run is by central differences) and the adjoint (1e-9)."""
+    rotary inertia) and the drive torque against the complex step of the whole run (1e-7, set when
+    the element's Jacobian inside a complex run was by central differences; it is exact now) and
+    the adjoint (1e-9)."""
     case = _arm_with_beam()
     res = dynsens.run_case(case)
     assert res.status == "completed"
@@ -258,7 +259,7 @@ def test_a_very_stiff_beam_reproduces_a_welded_tip():
 
 
 def test_beam_member_sparse_equals_dense():
-    """The beam member acts outside the kernel; the sparse linearization places its complex-step
+    """The beam member acts outside the kernel; the sparse linearization places its exact
     Jacobian by its node bodies (sparse.element_bodies): same responses and gradients as dense."""
     out = {}
     for la in ("dense", "sparse"):
@@ -271,3 +272,43 @@ def test_beam_member_sparse_equals_dense():
         assert abs(s.value - r.value) <= 1e-12 * abs(r.value), name
         np.testing.assert_allclose(s.gradient, r.gradient, rtol=1e-10, atol=1e-12 * np.abs(r.gradient).max(),
                                    err_msg=name)
+
+
+def test_beam_member_exact_jacobians_equal_the_complex_step():
+    """The beam member's exact ∂Q/∂q and ∂Q/∂q̇ (second-order jets, BeamMember.add_jacobians) equal
+    the complex step of its generalized force Q (1e-9 of the largest entry) at a deformed, moving
+    state of cases like _arm_with_beam (one node on a body marker, one at a body's COM, damping on)
+    and of the cantilever's ground node.  Before the exact Jacobians the element had none
+    (add_jacobians raised NotImplementedError)."""
+    from dynsens.models.multibody.assembly import _jac
+    from dynsens.models.multibody.residual import other_forces_q
+    rng = np.random.default_rng(33)
+    for ground in (False, True):
+        raw = _arm_with_beam(raw_only=True)
+        if ground:
+            raw["model"]["members"][0]["nodes"] = ["ground.O", "head"]
+            raw["model"]["bodies"]["ground"] = {"markers": {"O": [0.5, 0.2, 0.1]}}
+        raw["model"]["members"][0]["damping"] = 0.02
+        model = load_case_dict(raw).model
+        prm = model.parameters(np.array([0.01, 40.0]))
+        beam = [el for el in model.other_forces if el.name == "beam"]
+        assert len(beam) == 1 and beam[0].exact_jacobians
+        n = model.traits.n_q
+        q = np.zeros(n)
+        for b in range(n // 7):                   # arm at 0.3 rad about z, head displaced and turned
+            ang = np.array([0.3, 0.35])[b] if b < 2 else 0.0
+            q[7 * b + 3:7 * b + 7] = [np.cos(ang / 2), 0.01 * rng.standard_normal(), 0.02, np.sin(ang / 2)]
+            q[7 * b + 3:7 * b + 7] /= np.linalg.norm(q[7 * b + 3:7 * b + 7])
+        q[0:3] = [0.5 * np.cos(0.3), 0.5 * np.sin(0.3), 0.0]
+        q[7:10] = [1.5 * np.cos(0.3) + 0.01, 1.5 * np.sin(0.3) - 0.02, 0.005]
+        qd = rng.standard_normal(n)
+        Kq, Kqd = np.zeros((n, n)), np.zeros((n, n))
+        beam[0].add_jacobians(0.0, q, qd, prm, Kq, Kqd)
+        def force(qb, qdb, model=model, prm=prm, beam=beam):
+            return other_forces_q(model, 0.0, qb, qdb, [prm], beam).T
+        cq = _jac(lambda qb: force(qb.T, qd[None]), q, True)            # noqa: B023 (used at once)
+        cqd = _jac(lambda qb: force(q[None], qb.T), qd, True)           # noqa: B023
+        scale = np.abs(cq).max()
+        assert scale > 1.0 and np.abs(cqd).max() > 0.0
+        np.testing.assert_allclose(Kq, cq, rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(Kqd, cqd, rtol=0, atol=1e-9 * np.abs(cqd).max())

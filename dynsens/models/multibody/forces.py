@@ -32,10 +32,13 @@ class ForceElement:
     Elements with ``closed_form = True`` also give Q_ext for a batch of entries directly from
     (t, q, parameter vectors) and its exact q-Jacobian (:meth:`add_batch`, :meth:`add_jacobian`):
     the residual then needs no per-entry context and the linearization no complex step.
+    Elements with ``exact_jacobians = True`` keep the per-entry residual (:meth:`add`) but give
+    their exact q- and q̇-Jacobians (:meth:`add_jacobians`).
     """
 
     name: str
     closed_form = False
+    exact_jacobians = False
 
     def add(self, ctx: Ctx, out: Array) -> None:
         raise NotImplementedError
@@ -47,6 +50,10 @@ class ForceElement:
 
     def add_jacobian(self, t: float, q: Array, pv: Array, out: Array) -> None:
         """out (n_q, n_q) += ∂Q_ext/∂q at one state q (n_q,), parameter vector pv (n_pv,)."""
+        raise NotImplementedError
+
+    def add_jacobians(self, t: float, q: Array, qd: Array, prm: Any, Kq: Array, Kqd: Array) -> None:
+        """Kq += ∂Q_ext/∂q, Kqd += ∂Q_ext/∂q̇ (n_q, n_q) at one state q, q̇ (n_q,), parameters prm."""
         raise NotImplementedError
 
 

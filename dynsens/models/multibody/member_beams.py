@@ -18,7 +18,8 @@ first order) in the 7 coordinates of each moving node.  This equals the virtual-
 Q_p = 2 Eᵀ n of forces.py for the element's end moments n, up to a component along p that the
 Euler-parameter normalisation absorbs.  An optional stiffness-proportional damping β (s) adds
 β ∂Π/∂e evaluated at the deformation rates ė (material damping of every deformation mode).
-The element is evaluated outside the kernel; its Jacobians come by complex step (forces.py).
+The element is evaluated outside the kernel; its Jacobians are exact, from the second-order jets
+(:meth:`BeamMember.add_jacobians`), not by complex step.
 
 Mass: lumped as the structural co-rotational beam's: ρ A L/2 on each node's mass, and a rotary
 inertia about the element axes of ρ I_p L/2 (twist, I_p = I_y + I_z) and ρ A L³/78 (bending,
@@ -38,7 +39,7 @@ import numpy as np
 from ...errors import ProblemCollector
 from .._keys import did_you_mean
 from ..base import Output, StepState
-from ..structural.beams3d_corot import Jet2, corotated_deformations, energy_gradients
+from ..structural.beams3d_corot import Jet2, corotated_deformations, energy_gradients, local_stiffness
 from .bodies import GROUND, BodyDef, Ctx, MBParams, Point
 from .forces import ForceElement
 from .spec import Reader
@@ -70,6 +71,7 @@ class BeamMember(ForceElement):
     axes: tuple[tuple[str, str, str], tuple[str, str, str]]
     idx: dict[str, int]
     length: str
+    exact_jacobians = True
 
     # ---------------------------------------------------------------- kinematics
     def _section(self, prm: MBParams) -> tuple[Any, ...]:
@@ -77,13 +79,15 @@ class BeamMember(ForceElement):
         E, G = pv[i["E"]], pv[i["G"]]
         return (prm.scal[self.length], E * pv[i["area"]], G * pv[i["J"]], E * pv[i["Iy"]], E * pv[i["Iz"]])
 
-    def deformations(self, ctx: Ctx) -> tuple[list, list[tuple[int, int]]]:
+    def deformations(self, ctx: Ctx, order: int = 1) -> tuple[list, list[tuple[int, int]]]:
         """The 7 local deformations as jets in the moving nodes' coordinates (values (k,),
-        gradients (k, n_s)) and the q rows (offset, count) of the seeds."""
+        gradients (k, n_s), with ``order`` 2 Hessians (k, n_s, n_s)) and the q rows (offset,
+        count) of the seeds."""
         nodes = [pt for pt in (self.point_1, self.point_2)]
         moving = [pt.body for pt in nodes if pt.body != GROUND]
         n_s, k = 7 * len(moving), ctx.k
         eye = np.broadcast_to(np.eye(n_s), (k, n_s, n_s)) if n_s else None
+        zero = np.zeros((k, n_s, n_s)) if order == 2 else None
         pos: list[list[Any]] = []
         frames: list[list[list[Any]]] = []
         seeds: list[tuple[int, int]] = []
@@ -96,7 +100,7 @@ class BeamMember(ForceElement):
                 continue
             a, j0 = 7 * pt.body, 7 * len(seeds)
             seeds.append((a, 7))
-            q = [Jet2(ctx.q[a + c], eye[:, j0 + c]) for c in range(7)]  # type: ignore[index]
+            q = [Jet2(ctx.q[a + c], eye[:, j0 + c], zero) for c in range(7)]  # type: ignore[index]
             r, p = q[:3], q[3:]
             As = _rotate_quad(p, s)
             pos.append([r[c] + As[c] for c in range(3)])
@@ -105,9 +109,10 @@ class BeamMember(ForceElement):
         L0 = ctx.params.scal[self.length]
         return corotated_deformations(d, frames, L0), seeds
 
-    def local_forces(self, ctx: Ctx) -> tuple[list, list, list[tuple[int, int]]]:
-        """(f, dl, seeds): the 7 local forces (elastic + damping) (k,), the deformation jets."""
-        dl, seeds = self.deformations(ctx)
+    def local_forces(self, ctx: Ctx, order: int = 1) -> tuple[list, list, list[tuple[int, int]]]:
+        """(f, dl, seeds): the 7 local forces (elastic + damping) (k,), the deformation jets
+        (of ``order`` 1 or 2)."""
+        dl, seeds = self.deformations(ctx, order)
         L, EA, GJ, EIy, EIz = self._section(ctx.params)
         f = energy_gradients([x.v for x in dl], L, EA, GJ, EIy, EIz)
         beta = ctx.params.pv[self.idx["damping"]]
@@ -127,6 +132,27 @@ class BeamMember(ForceElement):
         for a, n in seeds:
             out[a:a + n] -= grad[:, j:j + n].T
             j += n
+
+    def add_jacobians(self, t: float, q: Array, qd: Array, prm: MBParams, Kq: Array, Kqd: Array) -> None:
+        """Kq += ∂Q/∂q and Kqd += ∂Q/∂q̇ (n_q, n_q) at one state, exact: with the deformation
+        jets' gradients B = ∂e/∂q, Hessians H_m = ∂²e_m/∂q², the (constant) local stiffness D
+        and the local forces f = D (e + β ė), ė = B q̇,
+        ∂Q/∂q = −(Bᵀ D B + Σ_m f_m H_m + β Bᵀ D [H_m q̇]_m), ∂Q/∂q̇ = −β Bᵀ D B."""
+        ctx = Ctx(q[:, None], qd[:, None], np.zeros((q.shape[0], 1)), prm, t)
+        f, dl, seeds = self.local_forces(ctx, order=2)
+        if not seeds:
+            return
+        L, EA, GJ, EIy, EIz = self._section(prm)
+        section = {"L": L, "EA": EA, "GJ": GJ, "EIy": EIy, "EIz": EIz}
+        D = local_stiffness(section, np.zeros((), np.result_type(q, prm.pv)))
+        B = np.stack([x.g[0] for x in dl])                                       # (7, n_s)
+        rows = np.concatenate([np.arange(a, a + n) for a, n in seeds])
+        qds = qd[rows]
+        beta = prm.pv[self.idx["damping"]]
+        DB = D @ B
+        Hqd = np.stack([x.H[0] @ qds for x in dl])                               # ∂ė/∂q (7, n_s)
+        Kq[np.ix_(rows, rows)] -= B.T @ DB + sum(f[m][0] * dl[m].H[0] for m in range(7)) + beta * (DB.T @ Hqd)
+        Kqd[np.ix_(rows, rows)] -= beta * (B.T @ DB)
 
     # ---------------------------------------------------------------- mass
     def lump_mass(self, prm: MBParams) -> None:

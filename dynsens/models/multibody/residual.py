@@ -364,15 +364,18 @@ def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms:
 def other_forces_jacobians(model: "MultibodyModel", t: float, q: Array, qd: Array, prm: Any
                            ) -> tuple[Array, Array]:
     """∂Q_ext/∂q and ∂Q_ext/∂q̇ (n_q, n_q) of the elements without a law here: exact for the
-    closed-form elements, by complex step (central differences for complex data) for the rest."""
+    closed-form elements and those with exact Jacobians, by complex step (central differences
+    for complex data) for the rest."""
     from .assembly import _jac
     n_q = model.traits.n_q
     dt = np.result_type(q, qd, prm.pv, float)
     Kq, Kqd = np.zeros((n_q, n_q), dt), np.zeros((n_q, n_q), dt)
-    rest = [el for el in model.other_forces if not el.closed_form]
+    rest = [el for el in model.other_forces if not (el.closed_form or el.exact_jacobians)]
     for el in model.other_forces:
         if el.closed_form:
             el.add_jacobian(t, q, prm.pv, Kq)
+        elif el.exact_jacobians:
+            el.add_jacobians(t, q, qd, prm, Kq, Kqd)
     if rest:
         real = not (np.iscomplexobj(q) or np.iscomplexobj(qd) or np.iscomplexobj(prm.pv))
         Kq += _jac(lambda qb: other_forces_q(model, t, qb.T, qd[None], [prm], rest).T, q, real)
