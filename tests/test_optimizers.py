@@ -131,3 +131,46 @@ def test_each_method_reaches_the_optimum_from_a_start_on_the_bounds(method: str)
     res = dynsens.optimize(raw, verify=False)
     assert res.success and res.feasible, res.message
     np.testing.assert_allclose(res.x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)
+
+
+@pytest.mark.parametrize("method", _installed("IPOPT"))
+def test_ipopt_is_interrupted_resumed_and_multi_started_like_the_others(tmp_path: Path, monkeypatch,
+                                                                       method: str) -> None:
+    """Ctrl-C inside IPOPT's iteration callback reaches the CLI (cyipopt re-raises it), the file
+    keeps the history, ``--resume`` finishes from the last iterate to the closed-form optimum,
+    and ``--starts 2`` runs two IPOPT starts."""
+    import h5py
+    import yaml
+    from click.testing import CliRunner
+
+    from dynsens.cli.main import cli as main
+    from dynsens.cli import optimize as cli_opt
+    case = tmp_path / "pair.yaml"
+    case.write_text(yaml.safe_dump(pair(method)))
+    out = tmp_path / "opt.h5"
+    real, seen = cli_opt.progress_line, []
+
+    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
+        if msg["kind"] == "iteration":
+            seen.append(1)
+            if len(seen) == 3:
+                raise KeyboardInterrupt
+        return real(msg, objective)
+
+    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(out), "--no-verify"])
+    assert r.exit_code == 130 and "--resume" in r.output, r.output
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "interrupted" and f["optimization/start_0/history/x"].shape[0] == 3
+    monkeypatch.setattr(cli_opt, "progress_line", real)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(out), "--resume", "--no-verify"])
+    assert r.exit_code == 0, r.output
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "converged"
+        x = f["optimization/start_0/history/x"][-1]
+    np.testing.assert_allclose(x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(tmp_path / "ms.h5"), "--starts", "2",
+                                  "--no-verify"])
+    assert r.exit_code == 0, r.output
+    with h5py.File(tmp_path / "ms.h5", "r") as f:
+        assert {"start_0", "start_1"} <= set(f["optimization"])
