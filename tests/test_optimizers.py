@@ -50,7 +50,15 @@ def pair(method: str) -> dict:
     return raw
 
 
-@pytest.mark.parametrize("method", ["SLSQP", "MMA", "CCSAQ", "trust-constr"])
+def _installed(method: str) -> list:
+    """IPOPT needs the system's Ipopt library beside cyipopt (``dynsens[ipopt]``); skipped where
+    it is not installed, with the reason."""
+    import importlib.util
+    have = importlib.util.find_spec("cyipopt") is not None
+    return [pytest.param(method, marks=pytest.mark.skipif(not have, reason="cyipopt / Ipopt not installed"))]
+
+
+@pytest.mark.parametrize("method", ["SLSQP", "MMA", "CCSAQ", "trust-constr", *_installed("IPOPT")])
 def test_each_method_reaches_the_closed_form_optimum(method: str) -> None:
     res = dynsens.optimize(pair(method), verify=False)
     assert res.success and res.feasible, res.message
@@ -60,10 +68,11 @@ def test_each_method_reaches_the_closed_form_optimum(method: str) -> None:
     assert res.history["x"].shape[0] == res.nit + 1 and res.history["kkt"][-1] < 1e-3
 
 
-def test_mma_finds_the_shipped_truss_optimum_of_slsqp() -> None:
+@pytest.mark.parametrize("method", ["MMA", *_installed("IPOPT")])
+def test_mma_finds_the_shipped_truss_optimum_of_slsqp(method: str) -> None:
     truss = REPO / "cases" / "truss_lightweight.yaml"
     ref = dynsens.optimize(truss, verify=False)
-    mma = dynsens.optimize(truss, verify=False, optimization__method="MMA")
+    mma = dynsens.optimize(truss, verify=False, optimization__method=method)
     assert mma.success and mma.feasible
     assert mma.fun == pytest.approx(ref.fun, rel=1e-5)
     np.testing.assert_allclose(mma.x, ref.x, rtol=1e-3)
@@ -89,7 +98,30 @@ def test_what_the_methods_refuse(monkeypatch) -> None:
         dynsens.optimize(pair("MMA"), verify=False)
 
 
-@pytest.mark.parametrize("method", ["SLSQP", "MMA", "trust-constr"])
+def test_a_missing_ipopt_names_the_extra_and_the_library(monkeypatch) -> None:
+    real_import = builtins.__import__
+
+    def no_cyipopt(name, *args, **kwargs):  # type: ignore[no-untyped-def]
+        if name == "cyipopt":
+            raise ImportError("No module named 'cyipopt'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_cyipopt)
+    with pytest.raises(OptimizationError, match=r"coinor-libipopt-dev.*pip install 'dynsens\[ipopt\]'"):
+        dynsens.optimize(pair("IPOPT"), verify=False)
+
+
+@pytest.mark.parametrize("method", _installed("IPOPT"))
+def test_ipopt_takes_an_equality(method: str) -> None:
+    """u₁,max = a₁ as an equality (MMA refuses it): the optimum is the same, k₁* = 2F₁/a₁."""
+    raw = pair(method)
+    raw["optimization"]["constraints"][0]["lower"] = A1
+    res = dynsens.optimize(raw, verify=False)
+    assert res.success and res.feasible, res.message
+    np.testing.assert_allclose(res.x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)
+
+
+@pytest.mark.parametrize("method", ["SLSQP", "MMA", "trust-constr", *_installed("IPOPT")])
 def test_each_method_reaches_the_optimum_from_a_start_on_the_bounds(method: str) -> None:
     """A start on the upper bounds: trust-constr (an interior-point method) stopped there after
     one iteration and called the start its optimum; it now starts just inside the bounds."""
@@ -99,3 +131,46 @@ def test_each_method_reaches_the_optimum_from_a_start_on_the_bounds(method: str)
     res = dynsens.optimize(raw, verify=False)
     assert res.success and res.feasible, res.message
     np.testing.assert_allclose(res.x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)
+
+
+@pytest.mark.parametrize("method", _installed("IPOPT"))
+def test_ipopt_is_interrupted_resumed_and_multi_started_like_the_others(tmp_path: Path, monkeypatch,
+                                                                       method: str) -> None:
+    """Ctrl-C inside IPOPT's iteration callback reaches the CLI (cyipopt re-raises it), the file
+    keeps the history, ``--resume`` finishes from the last iterate to the closed-form optimum,
+    and ``--starts 2`` runs two IPOPT starts."""
+    import h5py
+    import yaml
+    from click.testing import CliRunner
+
+    from dynsens.cli.main import cli as main
+    from dynsens.cli import optimize as cli_opt
+    case = tmp_path / "pair.yaml"
+    case.write_text(yaml.safe_dump(pair(method)))
+    out = tmp_path / "opt.h5"
+    real, seen = cli_opt.progress_line, []
+
+    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
+        if msg["kind"] == "iteration":
+            seen.append(1)
+            if len(seen) == 3:
+                raise KeyboardInterrupt
+        return real(msg, objective)
+
+    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(out), "--no-verify"])
+    assert r.exit_code == 130 and "--resume" in r.output, r.output
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "interrupted" and f["optimization/start_0/history/x"].shape[0] == 3
+    monkeypatch.setattr(cli_opt, "progress_line", real)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(out), "--resume", "--no-verify"])
+    assert r.exit_code == 0, r.output
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "converged"
+        x = f["optimization/start_0/history/x"][-1]
+    np.testing.assert_allclose(x, [2 * F1 / A1, 2 * F2 / A2], rtol=1e-4)
+    r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(tmp_path / "ms.h5"), "--starts", "2",
+                                  "--no-verify"])
+    assert r.exit_code == 0, r.output
+    with h5py.File(tmp_path / "ms.h5", "r") as f:
+        assert {"start_0", "start_1"} <= set(f["optimization"])

@@ -25,6 +25,8 @@ spread of the optimizers' stopping points along the optimum's flat directions (m
 """
 from __future__ import annotations
 
+import importlib.util
+
 from pathlib import Path
 from typing import Any
 
@@ -113,17 +115,25 @@ def test_the_quasi_static_run_is_linear_statics(variant: str) -> None:
 # minimum's basin (measured: from A6 = 4..5 in², not from 2 or 8).  Its ftol is the relative
 # change of the weight (the case's 1e-10 lies below the size of its last steps).  trust-constr is
 # not tested: it reaches 5060.85 lb from A6 = 1 only, and stalls 0.03 % above 1593.2 lb
-# (docs/optimization.md).
+# (docs/optimization.md).  IPOPT's ftol is its KKT tolerance: with the limited-memory Hessian
+# the displacement problem reaches 5060.85 lb from the uniform start at 1e-6 in 29 iterations,
+# and not at 1e-8 in 200.
 RUNS = [   # method, variant, start, ftol (None: the case's)
     ("SLSQP", "stress", {"A": 20.0}, None),
     ("SLSQP", "stress+displacement", {"A": 20.0}, None),
     ("MMA", "stress", {"A": 20.0}, 1e-8),
     ("MMA", "stress+displacement", {"A": 20.0, "A[bar6]": 5.0}, 1e-8),
+    ("IPOPT", "stress", {"A": 20.0}, 1e-8),
+    ("IPOPT", "stress+displacement", {"A": 20.0}, 1e-6),
 ]
 
 
-@pytest.mark.parametrize("method, variant, start, ftol", RUNS,
-                         ids=[f"{m}-{v}" for m, v, _, _ in RUNS])
+_NO_IPOPT = pytest.mark.skipif(importlib.util.find_spec("cyipopt") is None, reason="cyipopt / Ipopt not installed")
+
+
+@pytest.mark.parametrize("method, variant, start, ftol",
+                         [pytest.param(*run, marks=[_NO_IPOPT] if run[0] == "IPOPT" else [], id=f"{run[0]}-{run[1]}")
+                          for run in RUNS])
 def test_optimizers_reach_the_published_optimum(method: str, variant: str, start: dict, ftol: float | None) -> None:
     weight, unit, areas = PUBLISHED[variant]
     raw = raw_case(variant)

@@ -12,7 +12,7 @@ from ..case_keys import allowed
 from ..models._keys import check_keys, did_you_mean
 from .responses_spec import read_number
 
-METHODS = ("SLSQP", "MMA", "CCSAQ", "trust-constr")   # dynsens.optimize.methods serves them
+METHODS = ("SLSQP", "MMA", "CCSAQ", "trust-constr", "IPOPT")   # dynsens.optimize.methods serves them
 
 
 @dataclass(frozen=True)

@@ -154,11 +154,13 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _req("objective", "name", "response to minimize"),
         _k("constraints", "list", "lower <= response <= upper", item="optimization.constraint"),
         _k("method", "enum", "optimizer: SLSQP (dense quasi-Newton, tens of variables), MMA or CCSAQ (Svanberg's "
-           "moving asymptotes, many variables; `pip install 'dynsens[mma]'`), trust-constr (interior point)",
-           values=("SLSQP", "MMA", "CCSAQ", "trust-constr"), default="SLSQP"),
+           "moving asymptotes, many variables; `pip install 'dynsens[mma]'`), trust-constr (interior point), "
+           "IPOPT (interior point, limited-memory Hessian, many variables; "
+           "the Ipopt library and `pip install 'dynsens[ipopt]'`)",
+           values=("SLSQP", "MMA", "CCSAQ", "trust-constr", "IPOPT"), default="SLSQP"),
         _k("maxiter", "integer", "iterations of the optimizer", default=100),
         _k("ftol", "number", "tolerance on the scaled objective (MMA: its relative change; trust-constr: the "
-           "optimality measure)", default=1e-6),
+           "optimality measure; IPOPT: its scaled KKT tolerance `tol`)", default=1e-6),
         _k("verification", "section", "the verification run at the optimum (on by default)",
            item="optimization.verification"),
     )),

@@ -13,6 +13,10 @@ history, the KKT measure and ``--resume`` are the same for all:
   is one design nlopt evaluates (inner iterations included); ``maxiter`` bounds them.
 * ``trust-constr`` (scipy): an interior-point / trust-region method with a quasi-Newton (BFGS)
   Hessian of the Lagrangian.
+* ``IPOPT`` (cyipopt, Wächter & Biegler's primal-dual interior-point filter line-search method):
+  the exact gradients and a limited-memory (L-BFGS) Hessian of the Lagrangian, O(m·k) memory:
+  for many variables, with equality constraints.  Needs the Ipopt library (Debian:
+  ``coinor-libipopt-dev``) and ``pip install 'dynsens[ipopt]'``.
 
 ``--resume`` restarts the method at the last recorded iterate; none of these keeps a state
 that the file could restore (SLSQP's Hessian, MMA's asymptotes are rebuilt).
@@ -27,7 +31,8 @@ import numpy as np
 from ..case.optimization import METHODS
 from .problem import Evaluator, OptimizationError, ScaledProblem
 
-EXTRA = {"MMA": "mma", "CCSAQ": "mma"}
+EXTRA = {"MMA": "mma", "CCSAQ": "mma", "IPOPT": "ipopt"}
+MODULE = {"mma": "nlopt", "ipopt": "cyipopt"}     # the module each extra provides
 
 
 @dataclass
@@ -53,12 +58,15 @@ def check_method(method: str, problem: ScaledProblem) -> None:
     if method not in METHODS:
         raise OptimizationError(f"optimization.method: expected one of {', '.join(METHODS)}, found {method!r}")
     if method in EXTRA:
+        module = MODULE[EXTRA[method]]
         try:
-            import nlopt  # noqa: F401
+            __import__(module)
         except ImportError:
-            raise OptimizationError(f"optimization.method: {method} needs nlopt: pip install "
+            library = " and the Ipopt library (Debian: apt-get install coinor-libipopt-dev)" \
+                if method == "IPOPT" else ""
+            raise OptimizationError(f"optimization.method: {method} needs {module}{library}: pip install "
                                     f"'dynsens[{EXTRA[method]}]'") from None
-        if _split(problem)[1]:
+        if method != "IPOPT" and _split(problem)[1]:
             raise OptimizationError(f"optimization.method: {method} takes inequality constraints only; the "
                                     "case has an equality (lower == upper): use SLSQP or trust-constr")
 
@@ -72,6 +80,8 @@ def run_method(method: str, evaluator: Evaluator, u0: np.ndarray, maxiter: int, 
         return _slsqp(evaluator, u0, maxiter, ftol, on_iteration)
     if method == "trust-constr":
         return _trust_constr(evaluator, u0, maxiter, ftol, on_iteration)
+    if method == "IPOPT":
+        return _ipopt(evaluator, u0, maxiter, ftol, on_iteration)
     return _nlopt(method, evaluator, u0, maxiter, ftol, on_iteration)
 
 
@@ -171,3 +181,52 @@ def _nlopt(method: str, evaluator: Evaluator, u0: np.ndarray, maxiter: int, ftol
     success = code in (nlopt.SUCCESS, nlopt.FTOL_REACHED, nlopt.XTOL_REACHED, nlopt.STOPVAL_REACHED)
     return MethodResult(np.asarray(u, dtype=float), success, code, f"{method}: {messages.get(code, code)}",
                         max(calls[0] - 1, 0))
+
+
+def _ipopt(evaluator: Evaluator, u0: np.ndarray, maxiter: int, ftol: float,
+           on_iteration: Callable[[np.ndarray], None]) -> MethodResult:
+    import cyipopt
+    problem = evaluator.problem
+    ineq, eq = _split(problem)
+    order = ineq + eq                      # g ≥ 0 for the inequalities, g = 0 for the equalities
+    last: list[np.ndarray] = [np.asarray(u0, dtype=float)]
+    count = [0]
+
+    class _Problem:
+        def objective(self, u: np.ndarray) -> float:
+            last[0] = np.array(u, dtype=float)
+            return float(evaluator.fun(last[0]))
+
+        def gradient(self, u: np.ndarray) -> np.ndarray:
+            return np.asarray(evaluator.jac(np.array(u, dtype=float)), dtype=float)
+
+        def constraints(self, u: np.ndarray) -> np.ndarray:
+            return np.asarray(evaluator.cons(np.array(u, dtype=float), order), dtype=float)
+
+        def jacobian(self, u: np.ndarray) -> np.ndarray:
+            # dense, row-major: IPOPT's default structure when none is given
+            return np.asarray(evaluator.cons_jac(np.array(u, dtype=float), order), dtype=float).ravel()
+
+        def intermediate(self, alg_mod: int, iter_count: int, *args: float) -> bool:
+            # Ipopt < 3.14 does not hand the iterate to the callback: the accepted point is the
+            # last one whose objective the line search evaluated; iteration 0 is the start
+            if iter_count > 0:
+                count[0] = iter_count
+                on_iteration(last[0])
+            return True
+
+    lo, up = problem.u_bounds
+    nlp = cyipopt.Problem(n=u0.size, m=len(order), problem_obj=_Problem(),
+                          lb=np.where(np.isfinite(lo), lo, -1e20), ub=np.where(np.isfinite(up), up, 1e20),
+                          cl=np.zeros(len(order)), cu=np.r_[np.full(len(ineq), 1e20), np.zeros(len(eq))])
+    for key, value in (("hessian_approximation", "limited-memory"), ("max_iter", int(maxiter)),
+                       ("tol", float(ftol)), ("print_level", 0), ("sb", "yes")):
+        nlp.add_option(key, value)
+    u, info = nlp.solve(np.asarray(u0, dtype=float))
+    status = int(info["status"])
+    # 0: solved, 1: solved to the acceptable level, 3: the step became tiny for several iterations
+    # (Ipopt's STOP_AT_TINY_STEP: x no longer changes at machine precision; a tol below the
+    # attainable KKT accuracy ends here, at the optimum; feasibility is checked after the method)
+    message = info["status_msg"]
+    message = message.decode() if isinstance(message, bytes) else str(message)
+    return MethodResult(np.asarray(u, dtype=float), status in (0, 1, 3), status, f"IPOPT: {message}", count[0])
