@@ -242,3 +242,17 @@ def assert_same_failures(compiled, python):
         assert compiled[2] == python[2]
     else:
         np.testing.assert_allclose(compiled[2], python[2], rtol=4 * np.finfo(float).eps, atol=0)
+
+
+def ipopt_missing() -> bool:
+    """Whether cyipopt (the ``ipopt`` extra, built on the system's Ipopt) is missing here: its
+    tests are skipped then, except where ``DYNSENS_REQUIRE_IPOPT`` is set (CI installs it), where
+    a missing cyipopt is an error, not a skip."""
+    import importlib.util
+    import os
+    missing = importlib.util.find_spec("cyipopt") is None
+    if missing and os.environ.get("DYNSENS_REQUIRE_IPOPT"):
+        raise RuntimeError("DYNSENS_REQUIRE_IPOPT is set but cyipopt is not installed "
+                           "(apt-get install coinor-libipopt-dev liblapack-dev libblas-dev pkg-config; "
+                           "pip install 'dynsens[ipopt]')")
+    return missing

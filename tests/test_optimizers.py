@@ -18,6 +18,7 @@ import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.errors import CaseError
 from dynsens.optimize.problem import OptimizationError
+from helpers import ipopt_missing
 
 REPO = Path(__file__).resolve().parents[1]
 F1, F2, A1, A2 = 10.0, 30.0, 0.2, 0.3
@@ -52,10 +53,8 @@ def pair(method: str) -> dict:
 
 def _installed(method: str) -> list:
     """IPOPT needs the system's Ipopt library beside cyipopt (``dynsens[ipopt]``); skipped where
-    it is not installed, with the reason."""
-    import importlib.util
-    have = importlib.util.find_spec("cyipopt") is not None
-    return [pytest.param(method, marks=pytest.mark.skipif(not have, reason="cyipopt / Ipopt not installed"))]
+    it is not installed, with the reason (never in CI: :func:`helpers.ipopt_missing`)."""
+    return [pytest.param(method, marks=pytest.mark.skipif(ipopt_missing(), reason="cyipopt / Ipopt not installed"))]
 
 
 @pytest.mark.parametrize("method", ["SLSQP", "MMA", "CCSAQ", "trust-constr", *_installed("IPOPT")])

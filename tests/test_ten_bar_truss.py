@@ -25,8 +25,6 @@ spread of the optimizers' stopping points along the optimum's flat directions (m
 """
 from __future__ import annotations
 
-import importlib.util
-
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +34,7 @@ import yaml
 
 import dynsens
 from dynsens.case.load import load_case_dict
+from helpers import ipopt_missing
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "ten_bar_truss.yaml"
 EPS = 1e-6                          # the case's scale of loads and limits
@@ -128,7 +127,7 @@ RUNS = [   # method, variant, start, ftol (None: the case's)
 ]
 
 
-_NO_IPOPT = pytest.mark.skipif(importlib.util.find_spec("cyipopt") is None, reason="cyipopt / Ipopt not installed")
+_NO_IPOPT = pytest.mark.skipif(ipopt_missing(), reason="cyipopt / Ipopt not installed")
 
 
 @pytest.mark.parametrize("method, variant, start, ftol",
