@@ -316,7 +316,7 @@ def _element_output(model: "MultibodyModel", name: str, kind: Any, path: str,
     also among the springs), or that of an element of a force law (:mod:`.force_law`)."""
     from .force_law import load_laws
     from .members import member_output
-    families: list[tuple[list[Any], Any]] = [(model.members, lambda m, el, k, p, pr: member_output(m, el, k, p, pr))]
+    families: list[tuple[list[Any], Callable[..., Output | None]]] = [(model.members, member_output)]
     families += [(law.elements(model), law.output) for law in load_laws().values()]
     for elements, resolve in families:
         el = next((e for e in elements if e.name == name), None)
