@@ -168,10 +168,27 @@ def test_every_joint_type_is_covered() -> None:
     assert covered == set(JOINT_TYPES)
 
 
-def test_every_force_type_is_covered() -> None:
-    from dynsens.models.multibody.build import FORCE_KEYS
+def test_every_compiled_force_law_is_covered() -> None:
+    """Every law that declares the compiled kernels serve it is run here (a new law declares
+    ``compiled = False`` and runs the Python path: :mod:`dynsens.models.multibody.force_law`)."""
+    from dynsens.models.multibody.force_law import load_laws
     covered = {k.split(" ")[0] for k in FORCES if k != "gravity"}
-    assert covered == set(FORCE_KEYS)
+    assert covered == {t for t, law in load_laws().items() if law.compiled}
+
+
+def test_every_force_law_declares_whether_it_runs_compiled() -> None:
+    """Compiled or Python only is declared by each law in its own class body: every shipped law
+    has the declaration, and a law without it is refused at registration."""
+    from dynsens.models.multibody.force_law import FORCE_LAWS, ForceLaw, load_laws, register_law
+    for law in load_laws().values():
+        assert isinstance(type(law).__dict__.get("compiled"), bool), type(law).__name__
+
+    class Undeclared(ForceLaw):
+        type, order = "undeclared", 99
+
+    with pytest.raises(TypeError, match="Undeclared.*must declare `compiled = True`"):
+        register_law(Undeclared)
+    assert "undeclared" not in FORCE_LAWS
 
 
 def test_unknown_law_is_refused_when_the_kernel_is_set_up(monkeypatch) -> None:

@@ -143,8 +143,10 @@ def reference_markdown() -> str:
 
 def generated() -> dict[Path, str]:
     """The generated files and their contents (with the key sections the element kinds declare)."""
+    from ..models.multibody.force_law import load_laws
     from ..models.structural.elements import load_kinds
     load_kinds()
+    load_laws()
     return {SCHEMA_PATH: json.dumps(json_schema(), indent=1, ensure_ascii=False) + "\n",
             REFERENCE_PATH: reference_markdown()}
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from .general import GENERAL_SECTIONS
-from .keys import (AGGREGATE_TYPES, BEAM_SECTION_SHAPES, FORCE_TYPES, JOINT_TYPES, KINDS, NO_DEFAULT,
+from .keys import (AGGREGATE_TYPES, BEAM_SECTION_SHAPES, JOINT_TYPES, KINDS, NO_DEFAULT,
                    RESPONSE_TYPES, STRUCTURAL_ELEMENT_TYPES, TIME_FUNCTION_TYPES, Key, Section)
 from .models import MODEL_SECTIONS
 
@@ -37,11 +37,21 @@ def add_element_section(name: str, section: Section) -> None:
     SECTIONS["model.structural"] = replace(model, keys=keys)
 
 
+def add_force_section(name: str, section: Section, force_sections: list[str]) -> None:
+    """Add the key section of a multibody force law that declares its keys in its own module
+    (:mod:`dynsens.models.multibody.laws`); the model's ``forces`` list names ``force_sections``
+    (every registered law's section, in the laws' order)."""
+    SECTIONS[name] = section
+    model = SECTIONS["model.multibody"]
+    keys = tuple(replace(k, item=tuple(force_sections)) if k.name == "forces" else k for k in model.keys)
+    SECTIONS["model.multibody"] = replace(model, keys=keys)
+
+
 def required(section: str) -> tuple[str, ...]:
     """The keys ``section`` requires."""
     return tuple(k.name for k in SECTIONS[section].keys if k.required)
 
 
-__all__ = ["AGGREGATE_TYPES", "BEAM_SECTION_SHAPES", "FORCE_TYPES", "JOINT_TYPES", "KINDS", "NO_DEFAULT",
+__all__ = ["AGGREGATE_TYPES", "BEAM_SECTION_SHAPES", "JOINT_TYPES", "KINDS", "NO_DEFAULT",
            "RESPONSE_TYPES", "SECTIONS", "STRUCTURAL_ELEMENT_TYPES", "TIME_FUNCTION_TYPES", "Key", "Section",
-           "add_element_section", "allowed", "required"]
+           "add_element_section", "add_force_section", "allowed", "required"]

@@ -57,5 +57,4 @@ RESPONSE_TYPES = ("value", *AGGREGATE_TYPES, "interaction_ratio", "integral", "e
                   "frequency", "buckling_factor", "expression")
 STRUCTURAL_ELEMENT_TYPES = ("mass", "spring", "damper", "bar", "beam")
 BEAM_SECTION_SHAPES = ("tube", "rectangle", "box", "properties")
-FORCE_TYPES = ("point_force", "torque", "spring_damper", "rotational_spring_damper", "hydraulic_cylinder")
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "cylindrical", "fixed", "planar_pin")

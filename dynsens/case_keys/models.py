@@ -2,7 +2,7 @@
 multibody models (bodies, joints, drivers, forces, initial assembly, stabilization, projection)."""
 from __future__ import annotations
 
-from .keys import BEAM_SECTION_SHAPES, FORCE_TYPES, JOINT_TYPES, STRUCTURAL_ELEMENT_TYPES, Section, _k, _req
+from .keys import BEAM_SECTION_SHAPES, JOINT_TYPES, STRUCTURAL_ELEMENT_TYPES, Section, _k, _req
 
 MODEL_SECTIONS: dict[str, Section] = {
     # ------------------------------------------------------------------ structural models
@@ -118,7 +118,7 @@ MODEL_SECTIONS: dict[str, Section] = {
         _req("bodies", "map", "body name -> body ('ground' has only markers)", item="multibody.body"),
         _k("joints", "list", "joints, distance rods and drivers",
            item=("multibody.joint", "multibody.distance_joint", "multibody.driver")),
-        _k("forces", "list", "force elements", item=tuple(f"multibody.{t}" for t in FORCE_TYPES)),
+        _k("forces", "list", "force elements", item=()),   # the force laws' sections (:func:`.add_force_section`)
         _k("members", "list", "flexible structural members between node bodies (docs/flexible_members.md)",
            item=("multibody.member.bar", "multibody.member.beam")),
         _k("initial", "section", "consistent initial assembly", item="multibody.initial"),
@@ -183,27 +183,6 @@ MODEL_SECTIONS: dict[str, Section] = {
         _req("marker_1", "name", "marker on body 1"), _req("marker_2", "name", "marker on body 2"),
         _req("length", "expr", "rod length"),
     ), type_value="distance"),
-    "multibody.point_force": Section("forces[i], type: point_force", "A force at a marker.", (
-        _req("type", "enum", "force type", values=("point_force",)), _k("name", "name", "force name"),
-        _req("body", "name", "body"), _k("point", "name", "marker (default: the COM)"),
-        _req("force", "vector", "[Fx, Fy, Fz]", length=3),
-        _k("frame", "enum", "components in global or body axes", values=("global", "body"), default="global"),
-        _k("function", "any", "time function multiplying the force", default="constant"),
-    ), type_value="point_force"),
-    "multibody.torque": Section("forces[i], type: torque", "A torque on a body.", (
-        _req("type", "enum", "force type", values=("torque",)), _k("name", "name", "force name"),
-        _req("body", "name", "body"), _req("torque", "vector", "[Mx, My, Mz]", length=3),
-        _k("frame", "enum", "components in global or body axes", values=("global", "body"), default="global"),
-        _k("function", "any", "time function multiplying the torque", default="constant"),
-    ), type_value="torque"),
-    "multibody.spring_damper": Section("forces[i], type: spring_damper", "Axial spring-damper between two markers: "
-                                       "f = k(L − L0) + k3(L − L0)³ + d L̇.", (
-        _req("type", "enum", "force type", values=("spring_damper",)), _k("name", "name", "force name"),
-        _req("body_1", "name", "body 1"), _req("point_1", "name", "marker on body 1"),
-        _req("body_2", "name", "body 2"), _req("point_2", "name", "marker on body 2"),
-        _k("stiffness", "expr", "k", default=0.0), _k("cubic_stiffness", "expr", "k3", default=0.0),
-        _k("damping", "expr", "d", default=0.0), _k("free_length", "expr", "L0 (default: the initial length)"),
-    ), type_value="spring_damper"),
     "multibody.member.bar": Section("members[i], type: bar", "A bar between two node bodies: tension "
                                     "N = E A (L − L0)/L0 + c L̇ (engineering strain), mass ρ A L0 lumped half on "
                                     "each node.", (
@@ -226,33 +205,6 @@ MODEL_SECTIONS: dict[str, Section] = {
         _k("orientation", "vector", "a vector in the local x–y plane, giving local y", length=3,
            default="global z; global y for a beam along z"),
     ), type_value="beam"),
-    "multibody.rotational_spring_damper": Section("forces[i], type: rotational_spring_damper",
-                                                  "Torque −k(φ − φ0) − d φ̇ about an axis between two bodies.", (
-        _req("type", "enum", "force type", values=("rotational_spring_damper",)), _k("name", "name", "force name"),
-        _req("body_1", "name", "body 1 (or ground)"), _req("body_2", "name", "body 2"),
-        _req("axis", "vector", "axis (global at t0)", length=3),
-        _k("stiffness", "expr", "k (torque per rad)", default=0.0), _k("damping", "expr", "d", default=0.0),
-        _k("free_angle", "expr", "φ0 (rad)", default=0.0),
-    ), type_value="rotational_spring_damper"),
-    "multibody.hydraulic_cylinder": Section("forces[i], type: hydraulic_cylinder", "Two-chamber cylinder between two "
-                                            "markers; its chamber pressures are first-order states.", (
-        _req("type", "enum", "force type", values=("hydraulic_cylinder",)), _k("name", "name", "force name"),
-        _req("body_1", "name", "barrel body"), _req("point_1", "name", "barrel pivot marker"),
-        _req("body_2", "name", "rod body"), _req("point_2", "name", "rod eye marker"),
-        _k("bore", "expr", "piston diameter (or give area_1)"), _k("rod", "expr", "rod diameter (or give area_2)"),
-        _k("area_1", "expr", "piston-side area"), _k("area_2", "expr", "rod-side area"),
-        _req("length_0", "expr", "pin-to-pin length at zero stroke"), _req("stroke_max", "expr", "stroke"),
-        _req("bulk_modulus", "expr", "effective bulk modulus"),
-        _req("dead_volume_1", "expr", "piston-side dead (line) volume"),
-        _req("dead_volume_2", "expr", "rod-side dead (line) volume"),
-        _k("tank_conductance", "expr", "laminar return-line conductance (rod side to tank)", default=0.0),
-        _k("tank_pressure", "expr", "tank pressure", default=0.0),
-        _k("damping", "expr", "viscous damping on the stroke rate", default=0.0),
-        _req("pump_flow", "expr", "pump flow into the piston side (volume per time)"),
-        _k("pump_function", "any", "time function multiplying the pump flow", default="constant"),
-        _k("initial_pressures", "any", "'static' (p1 holds the load, p2 = tank), or [p1 | static, p2]",
-           default="static"),
-    ), type_value="hydraulic_cylinder"),
     "multibody.initial": Section("model.initial", "The initial assembly (closes the loops consistently).", (
         _k("hold", "list", "coordinates kept as given, e.g. rack.angle_z", item="string"),
         _k("distances", "list", "prescribed distances between markers", item="multibody.distance"),

@@ -28,7 +28,7 @@ from .members import read_members
 from .pointmass import attachment_problem, orientation_lock, read_distance_joint
 from .rotations import rotate, atan2_cs
 from .spec import Reader
-from .build_forces import FORCE_KEYS, read_forces  # noqa: F401  (FORCE_KEYS: the force types' keys)
+from .build_forces import read_forces
 
 # the accepted keys live in the case language's key table (dynsens/case_keys/)
 TOP_KEYS = allowed("model.multibody")

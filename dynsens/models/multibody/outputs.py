@@ -13,10 +13,11 @@ Spec forms (``quantity:`` in a case):
 * ``{body: B, kind: position | velocity | acceleration | angle_z | angular_velocity |
   angular_velocity_z}`` (angle_z = direction of the body x-axis in the x–y plane, rad);
 * ``{marker: body.marker, kind: position | velocity}``;
-* ``{element: CYL, kind: stroke | stroke_rate | pressure_1 | pressure_2 | force | volume_1 |
-  volume_2}`` for hydraulic cylinders, ``{element: SPRING, kind: length | length_rate | force}``,
-  ``{element: ROT, kind: angle | angle_rate | torque}`` for rotational spring-dampers (torque on
-  body_2 about the axis, N·m).
+* ``{element: NAME, kind: K}`` for a flexible member (:mod:`.members`) or the element of a force
+  law (:mod:`.force_law`; its ``output_kinds``), e.g. a hydraulic cylinder's ``stroke |
+  stroke_rate | pressure_1 | pressure_2 | force | volume_1 | volume_2``, a spring's
+  ``length | length_rate | force``, a rotational spring-damper's ``angle | angle_rate | torque``
+  (torque on body_2 about the axis, N·m).
 
 All functions are complex-safe.  Quantities that are linear in the state and independent of
 the design are declared ``linear``; joint reaction forces, body angles and angular
@@ -46,8 +47,6 @@ JOINT_KINDS = ("reaction_force", "reaction_force_norm", "reaction_moment",
 BODY_KINDS = ("position", "velocity", "acceleration", "angle_z", "angular_velocity",
               "angular_velocity_z")
 MARKER_KINDS = ("position", "velocity")
-CYL_KINDS = ("stroke", "stroke_rate", "pressure_1", "pressure_2", "force", "volume_1", "volume_2")
-SPRING_KINDS = ("length", "length_rate", "force")
 
 
 def _ctx(s: StepState, params: Any, t: float) -> Ctx:
@@ -311,48 +310,14 @@ def _marker_output(model: "MultibodyModel", name: str, kind: Any, path: str,
                   tuple(f"{name}.{c}" for c in ("x", "y", "z")))
 
 
-def _cylinder_output(model: "MultibodyModel", cyl: Any, kind: Any, path: str,
-                     problems: ProblemCollector) -> Output | None:
-    """A hydraulic cylinder's stroke, pressures, force or volumes (CYL_KINDS)."""
-    if not _known_kind(kind, CYL_KINDS, "cylinder", path, problems):
-        return None
-    name = cyl.name
-    if kind in ("pressure_1", "pressure_2"):
-        j = cyl.p_index + (kind == "pressure_2")
-        return Output(lambda t, s, prm: s.p[j:j + 1], (f"{name}.{kind}",), linear=True)
-    # the push force depends on the state only (t enters the pressure rates: pump flow)
-    return Output(_axial(model, cyl, kind), (f"{name}.{kind}",), batched=True, autonomous=True)
-
-
-def _spring_output(model: "MultibodyModel", spr: Any, kind: Any, path: str,
-                   problems: ProblemCollector) -> Output | None:
-    """A spring's length, length rate or force (SPRING_KINDS)."""
-    if not _known_kind(kind, SPRING_KINDS, "spring", path, problems, listed=False):
-        return None
-    return Output(_axial(model, spr, kind), (f"{spr.name}.{kind}",), batched=True, autonomous=True)
-
-
-_ROT_UNITS = {"angle": "rad", "angle_rate": "rad/s", "torque": ""}
-
-
-def _rotational_output(model: "MultibodyModel", rot: Any, kind: Any, path: str,
-                       problems: ProblemCollector) -> Output | None:
-    """A rotational spring-damper's angle, rate or torque (its state(): angle, rate, torque)."""
-    kinds = tuple(_ROT_UNITS)
-    if not _known_kind(kind, kinds, "rotational spring", path, problems):
-        return None
-    level = kinds.index(kind)
-    return Output(lambda t, s, prm: rot.state(_ctx(s, prm, t))[level][0], (f"{rot.name}.{kind}",),
-                  _ROT_UNITS[kind])
-
-
 def _element_output(model: "MultibodyModel", name: str, kind: Any, path: str,
                     problems: ProblemCollector) -> Output | None:
     """A force element's quantity: a flexible member's (:mod:`.members`; first, as a bar member is
-    also among the springs), a cylinder's, a spring's or a rotational spring-damper's."""
+    also among the springs), or that of an element of a force law (:mod:`.force_law`)."""
+    from .force_law import load_laws
     from .members import member_output
-    families = ((model.members, member_output), (model.cylinders, _cylinder_output),
-                (model.springs, _spring_output), (model.rotational, _rotational_output))
+    families: list[tuple[list[Any], Callable[..., Output | None]]] = [(model.members, member_output)]
+    families += [(law.elements(model), law.output) for law in load_laws().values()]
     for elements, resolve in families:
         el = next((e for e in elements if e.name == name), None)
         if el is not None:

@@ -347,7 +347,7 @@ def other_forces_q(model: "MultibodyModel", t: float, q: Array, qd: Array, prms:
     if len(prms) == 1:
         Q, Qd = (np.broadcast_to(v, (B, n_q)).T for v in (q, qd))
         o = np.zeros((n_q, B), dt)
-        ctx = Ctx(Q, Qd, np.zeros((n_q, 1)), prms[0], t)
+        ctx = Ctx(Q, Qd, np.zeros((n_q, B)), prms[0], t)     # (B columns: elements may read Point kinematics)
         for el in rest:
             el.add(ctx, o)
         return out + o.T
