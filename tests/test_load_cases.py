@@ -87,3 +87,14 @@ def test_a_case_without_load_cases_is_one_load_case():
     del raw["load_cases"]
     cases = load_case_set(raw, "plain")
     assert list(cases.cases) == ["sdof_step"]
+
+
+def test_load_cases_run_in_parallel_on_the_executor_with_the_same_numbers():
+    from dynsens.executor import ProcessExecutor
+    cases = load_case_set(_raw(), "lc")
+    x = np.array([d.value for d in cases.case("gust").design])
+    serial = evaluate_load_cases(cases, x)
+    with ProcessExecutor(2) as ex:
+        parallel = evaluate_load_cases(cases, x, executor=ex)
+    assert serial[0] == parallel[0]
+    assert all(np.array_equal(serial[1][k], parallel[1][k]) for k in serial[1])

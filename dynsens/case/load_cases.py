@@ -19,7 +19,7 @@ import copy
 import json
 import re
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -117,24 +117,35 @@ def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
     return LoadCaseSet(source, cases)
 
 
+def _run_load_case(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, tuple[Any, np.ndarray | None]]:
+    """Executor task: one load case (travelling as its YAML text) at one design."""
+    from ..executor import cached_case
+    from ..simulation import run_case
+    text, source, x, sensitivities = arg
+    res = run_case(cached_case(text, source), x, sensitivities=sensitivities, history=())
+    return {r: (v.value, v.gradient) for r, v in res.responses.items()}
+
+
 def evaluate_load_cases(cases: LoadCaseSet, x: np.ndarray, *, sensitivities: bool = True,
-                        run: Callable[..., Any] | None = None,
-                        ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+                        executor: Any = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Run every load case at design ``x``; values and gradients keyed ``<response>@<load case>``.
 
-    ``run`` defaults to `dynsens.simulation.run_case` (each load case is an independent
-    transient, so the runs may be mapped onto an executor by the caller).
+    The load cases are independent transients: with an `dynsens.executor.Executor` they run in
+    parallel (local processes or Dask), each with its own adjoint or direct gradient.
     """
-    if run is None:
-        from ..simulation import run_case as run
+    from ..executor import SerialExecutor, remember_case
+    args = []
+    for case in cases.cases.values():
+        remember_case(case)   # the serial path re-uses the loaded case, no re-parse
+        args.append((case.text, case.source, x, sensitivities))
+    results = (executor or SerialExecutor()).map(_run_load_case, args)
     values: dict[str, Any] = {}
     grads: dict[str, np.ndarray] = {}
-    for name, case in cases.cases.items():
-        res = run(case, x, sensitivities=sensitivities, history=())
-        for r, v in res.responses.items():
-            values[f"{r}{SEPARATOR}{name}"] = v.value
-            if v.gradient is not None:
-                grads[f"{r}{SEPARATOR}{name}"] = np.asarray(v.gradient)
+    for name, responses in zip(cases.cases, results):
+        for r, (value, gradient) in responses.items():
+            values[f"{r}{SEPARATOR}{name}"] = value
+            if gradient is not None:
+                grads[f"{r}{SEPARATOR}{name}"] = np.asarray(gradient)
     return values, grads
 
 
