@@ -98,3 +98,8 @@ def test_load_cases_run_in_parallel_on_the_executor_with_the_same_numbers():
         parallel = evaluate_load_cases(cases, x, executor=ex)
     assert serial[0] == parallel[0]
     assert all(np.array_equal(serial[1][k], parallel[1][k]) for k in serial[1])
+
+
+def test_a_single_case_loader_refuses_load_cases_by_name():
+    with pytest.raises(CaseError, match="load_cases.*load_case_set"):
+        load_case_dict(_raw(), "lc.yaml")
