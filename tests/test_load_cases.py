@@ -103,3 +103,16 @@ def test_load_cases_run_in_parallel_on_the_executor_with_the_same_numbers():
 def test_a_single_case_loader_refuses_load_cases_by_name():
     with pytest.raises(CaseError, match="load_cases.*load_case_set"):
         load_case_dict(_raw(), "lc.yaml")
+
+
+def test_the_commands_refuse_a_case_with_load_cases_with_exit_2(tmp_path: Path):
+    from click.testing import CliRunner
+
+    from dynsens.cli import simulate  # noqa: F401  (registers the command)
+    from dynsens.cli.main import cli
+    path = tmp_path / "two_loads.yaml"
+    path.write_text(yaml.safe_dump(_raw()))
+    res = CliRunner().invoke(cli, ["simulate", str(path), "-o", str(tmp_path / "out.h5")])
+    assert res.exit_code == 2, res.output
+    assert "load_cases" in res.output and "two_loads.yaml" in res.output
+    assert not (tmp_path / "out.h5").exists()
