@@ -44,6 +44,9 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _k("responses", "list", "responses: values, maxima, integrals, event times, expressions",
            item=tuple(f"response.{t}" for t in RESPONSE_TYPES)),
         _k("optimization", "section", "objective and constraints for `dynsens optimize`", item="optimization"),
+        _k("load_cases", "map", "named load cases: name -> {key path: value}, each the case with these "
+           "overrides of model.loads, model.forces, model.initial, integrator.t_end or integrator.dt; "
+           "responses become RESPONSE@NAME (see docs/load_cases.md)", item="any"),
     )),
     "design": Section("design", "The design variables x.", (
         _k("variables", "list", "one entry per design variable, in the order of x", item="design.variable"),

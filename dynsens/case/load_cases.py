@@ -1,0 +1,178 @@
+"""Named load cases: several transients of one model, each under its own loads, initial state
+and time window (the scenarios of TACS / OpenMDAO).
+
+A case declares them in a top-level mapping ``load_cases``, name -> {key path: value}; each
+entry is the base case with those overrides applied (the ``--set`` mechanism), restricted to
+the keys that define a load case::
+
+    load_cases:
+      impact: {model.loads[0].value: 40.0, integrator.t_end: 0.5}
+      gust:   {model.loads[0].value: 10.0, model.initial.velocity: {u: 0.1}}
+
+Responses are named ``<response>@<load case>``; a constraint over all load cases is their
+maximum or Kreisselmeier-Steinhauser envelope (`aggregate_over_cases`), whose gradient follows
+from each load case's own (adjoint or direct) gradient by the chain rule.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import CaseError, Problem
+from .load import Case, load_case_dict
+
+#: key paths a load case may override (a prefix followed by '.', '[' or the end)
+OVERRIDABLE = ("model.loads", "model.forces", "model.initial", "integrator.t_end", "integrator.dt")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+SEPARATOR = "@"
+
+
+def _overridable(key: str) -> bool:
+    return any(key == p or key.startswith(p + ".") or key.startswith(p + "[") for p in OVERRIDABLE)
+
+
+def split_load_cases(raw: dict, source: str = "<dict>") -> tuple[dict, dict[str, list[str]]]:
+    """The base mapping (without ``load_cases``) and each load case's ``--set`` strings.
+
+    Raises CaseError (file, key path, expected, found) for a malformed ``load_cases`` block.
+    """
+    base = copy.deepcopy(raw)
+    spec = base.pop("load_cases", None)
+    if spec is None:
+        return base, {}
+    problems: list[Problem] = []
+    if not isinstance(spec, dict) or not spec:
+        raise CaseError([Problem("load_cases", "expected a non-empty mapping name -> {key path: value}, "
+                                               f"found {json.dumps(spec, default=str)}")], source)
+    cases: dict[str, list[str]] = {}
+    for name, entry in spec.items():
+        path = f"load_cases.{name}"
+        if not isinstance(name, str) or not _NAME.match(name):
+            problems.append(Problem(path, f"expected a name of letters, digits and '_', found {name!r}"))
+            continue
+        if not isinstance(entry, dict):
+            problems.append(Problem(path, "expected a mapping {key path: value}, "
+                                          f"found {type(entry).__name__}"))
+            continue
+        sets = []
+        for key, value in entry.items():
+            if not isinstance(key, str) or not _overridable(key):
+                problems.append(Problem(f"{path}.{key}", "expected a key path under "
+                                        f"{', '.join(OVERRIDABLE)}, found {key!r} (not overridable "
+                                        "by a load case)"))
+                continue
+            sets.append(f"{key}={json.dumps(value)}")
+        cases[name] = sets
+    if problems:
+        raise CaseError(problems, source)
+    return base, cases
+
+
+@dataclass
+class LoadCaseSet:
+    """The load cases of one case: name -> validated `Case` (the same design variables)."""
+
+    source: str
+    cases: dict[str, Case]
+
+    @property
+    def response_names(self) -> tuple[str, ...]:
+        """All per-load-case responses, ``<response>@<load case>``."""
+        return tuple(f"{r}{SEPARATOR}{n}" for n, c in self.cases.items() for r in c.response_names)
+
+    def case(self, name: str) -> Case:
+        """The load case ``name``; CaseError naming the known ones otherwise."""
+        if name not in self.cases:
+            raise CaseError([Problem("load_cases", f"expected one of {', '.join(self.cases)}, "
+                                                   f"found unknown load case {name!r}")], self.source)
+        return self.cases[name]
+
+
+def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
+    """Validate every load case of ``raw`` (each the base case with its overrides applied).
+
+    A case without ``load_cases`` gives a single load case named after the case.
+    """
+    base, sets = split_load_cases(raw, source)
+    if not sets:
+        case = load_case_dict(base, source)
+        return LoadCaseSet(source, {case.name: case})
+    cases = {}
+    for name, overrides in sets.items():
+        try:
+            cases[name] = load_case_dict(base, f"{source} (load case {name})", overrides)
+        except CaseError as exc:   # name the load case's key path in every problem
+            raise CaseError([Problem(f"load_cases.{name}: {p.path}", p.message) for p in exc.problems],
+                            source) from None
+    first = next(iter(cases.values()))
+    for name, c in cases.items():
+        if [d.name for d in c.design] != [d.name for d in first.design]:
+            raise CaseError([Problem(f"load_cases.{name}", "expected the same design variables in every "
+                                     "load case")], source)
+    return LoadCaseSet(source, cases)
+
+
+def _run_load_case(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, tuple[Any, np.ndarray | None]]:
+    """Executor task: one load case (travelling as its YAML text) at one design."""
+    from ..executor import cached_case
+    from ..simulation import run_case
+    text, source, x, sensitivities = arg
+    res = run_case(cached_case(text, source), x, sensitivities=sensitivities, history=())
+    return {r: (v.value, v.gradient) for r, v in res.responses.items()}
+
+
+def evaluate_load_cases(cases: LoadCaseSet, x: np.ndarray, *, sensitivities: bool = True,
+                        executor: Any = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Run every load case at design ``x``; values and gradients keyed ``<response>@<load case>``.
+
+    The load cases are independent transients: with an `dynsens.executor.Executor` they run in
+    parallel (local processes or Dask), each with its own adjoint or direct gradient.
+    """
+    from ..executor import SerialExecutor, remember_case
+    args = []
+    for case in cases.cases.values():
+        remember_case(case)   # the serial path re-uses the loaded case, no re-parse
+        args.append((case.text, case.source, x, sensitivities))
+    results = (executor or SerialExecutor()).map(_run_load_case, args)
+    values: dict[str, Any] = {}
+    grads: dict[str, np.ndarray] = {}
+    for name, responses in zip(cases.cases, results):
+        for r, (value, gradient) in responses.items():
+            values[f"{r}{SEPARATOR}{name}"] = value
+            if gradient is not None:
+                grads[f"{r}{SEPARATOR}{name}"] = np.asarray(gradient)
+    return values, grads
+
+
+def aggregate_over_cases(values: dict[str, Any], grads: dict[str, np.ndarray], response: str,
+                         load_cases: list[str], how: str = "ks", rho: float = 50.0,
+                         ) -> tuple[Any, np.ndarray | None]:
+    """The maximum or KS envelope of ``response`` over ``load_cases``, and its gradient.
+
+    KS(g) = g_max + ln(sum_i exp(rho (g_i - g_max))) / rho (an upper bound of max g_i, at most
+    ln(n)/rho above it). The shift by g_max uses the real part so that a complex-step run
+    differentiates through it.
+    """
+    keys = [f"{response}{SEPARATOR}{c}" for c in load_cases]
+    missing = [k for k in keys if k not in values]
+    if missing:
+        raise KeyError(f"expected responses {', '.join(keys)}, found no {', '.join(missing)}")
+    g = np.array([values[k] for k in keys])
+    have_grad = all(k in grads for k in keys)
+    G = np.array([grads[k] for k in keys]) if have_grad else None
+    if how == "max":
+        i = int(np.argmax(np.real(g)))
+        return g[i], (G[i] if G is not None else None)
+    if how != "ks":
+        raise ValueError(f"expected how 'ks' or 'max', found {how!r}")
+    gmax = np.max(np.real(g))
+    w = np.exp(rho * (g - gmax))
+    ks = gmax + np.log(np.sum(w)) / rho
+    if G is None:
+        return ks, None
+    return ks, (w / np.sum(w)) @ G

@@ -1,0 +1,118 @@
+"""Named load cases (issue 34): each load case is the base case with its overrides; the KS over
+load cases has the gradient of the complex step of the whole runs."""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from dynsens.case.load import load_case_dict
+from dynsens.case.load_cases import aggregate_over_cases, evaluate_load_cases, load_case_set
+from dynsens.errors import CaseError
+from dynsens.simulation import run_case
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _raw(method: str = "adjoint") -> dict:
+    raw = yaml.safe_load((ROOT / "cases" / "sdof_step.yaml").read_text())
+    raw["integrator"]["t_end"] = 1.0
+    raw["sensitivity"]["method"] = method
+    raw["load_cases"] = {
+        "impact": {"model.loads[0].value": 40.0, "integrator.t_end": 0.6},
+        "gust": {"model.loads[0].value": 10.0, "model.initial.velocity": {"u": 0.3}},
+    }
+    return raw
+
+
+def test_each_load_case_equals_the_overridden_case_by_hand():
+    raw = _raw()
+    cases = load_case_set(raw, "lc")
+    values, grads = evaluate_load_cases(cases, np.array([d.value for d in cases.case("impact").design]))
+    base = copy.deepcopy(raw)
+    del base["load_cases"]
+    by_hand = load_case_dict(base, "by hand", ["model.loads[0].value=40.0", "integrator.t_end=0.6"])
+    res = run_case(by_hand, history=())
+    assert values["q_ks@impact"] == res.responses["q_ks"].value            # bit-identical
+    assert np.array_equal(grads["q_ks@impact"], res.responses["q_ks"].gradient)
+    assert values["q_ks@impact"] != values["q_ks@gust"]
+
+
+def test_ks_over_load_cases_against_complex_step_and_direct():
+    cases = load_case_set(_raw("adjoint"), "lc")
+    x = np.array([d.value for d in cases.case("gust").design])
+    names = list(cases.cases)
+    values, grads = evaluate_load_cases(cases, x)
+    ks, g = aggregate_over_cases(values, grads, "q_ks", names, rho=20.0)
+    h = 1e-30
+    cs = np.empty(x.size)
+    for j in range(x.size):
+        xc = x.astype(complex)
+        xc[j] += 1j * h
+        vc, _ = evaluate_load_cases(cases, xc, sensitivities=False)
+        cs[j] = np.imag(aggregate_over_cases(vc, {}, "q_ks", names, rho=20.0)[0]) / h
+    assert np.allclose(g, cs, rtol=1e-7, atol=1e-12)                 # stated tolerance: 1e-7 relative
+    direct = load_case_set(_raw("direct"), "lc")
+    vd, gd = evaluate_load_cases(direct, x)
+    _, g_direct = aggregate_over_cases(vd, gd, "q_ks", names, rho=20.0)
+    assert np.allclose(g, g_direct, rtol=1e-11, atol=1e-14)          # adjoint = direct to round-off
+    m, gm = aggregate_over_cases(values, grads, "q_ks", names, how="max")
+    assert m <= ks <= m + np.log(2) / 20.0
+
+
+def test_bad_load_cases_are_named():
+    raw = _raw()
+    raw["load_cases"]["impact"]["model.elements[0].mass"] = 3.0
+    with pytest.raises(CaseError) as err:
+        load_case_set(raw, "lc.yaml")
+    assert "load_cases.impact.model.elements[0].mass" in str(err.value)
+    assert "not overridable" in str(err.value) and "lc.yaml" in str(err.value)
+    with pytest.raises(CaseError, match="unknown load case 'wind'"):
+        load_case_set(_raw(), "lc.yaml").case("wind")
+    raw = _raw()
+    raw["load_cases"] = []
+    with pytest.raises(CaseError, match="non-empty mapping"):
+        load_case_set(raw, "lc.yaml")
+    raw = _raw()
+    raw["load_cases"]["gust"]["integrator.dt"] = -1.0
+    with pytest.raises(CaseError, match="load_cases.gust"):
+        load_case_set(raw, "lc.yaml")
+
+
+def test_a_case_without_load_cases_is_one_load_case():
+    raw = _raw()
+    del raw["load_cases"]
+    cases = load_case_set(raw, "plain")
+    assert list(cases.cases) == ["sdof_step"]
+
+
+def test_load_cases_run_in_parallel_on_the_executor_with_the_same_numbers():
+    from dynsens.executor import ProcessExecutor
+    cases = load_case_set(_raw(), "lc")
+    x = np.array([d.value for d in cases.case("gust").design])
+    serial = evaluate_load_cases(cases, x)
+    with ProcessExecutor(2) as ex:
+        parallel = evaluate_load_cases(cases, x, executor=ex)
+    assert serial[0] == parallel[0]
+    assert all(np.array_equal(serial[1][k], parallel[1][k]) for k in serial[1])
+
+
+def test_a_single_case_loader_refuses_load_cases_by_name():
+    with pytest.raises(CaseError, match="load_cases.*load_case_set"):
+        load_case_dict(_raw(), "lc.yaml")
+
+
+def test_the_commands_refuse_a_case_with_load_cases_with_exit_2(tmp_path: Path):
+    from click.testing import CliRunner
+
+    from dynsens.cli import simulate  # noqa: F401  (registers the command)
+    from dynsens.cli.main import cli
+    path = tmp_path / "two_loads.yaml"
+    path.write_text(yaml.safe_dump(_raw()))
+    res = CliRunner().invoke(cli, ["simulate", str(path), "-o", str(tmp_path / "out.h5")])
+    assert res.exit_code == 2, res.output
+    assert "load_cases" in res.output and "two_loads.yaml" in res.output
+    assert not (tmp_path / "out.h5").exists()
