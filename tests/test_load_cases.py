@@ -105,14 +105,51 @@ def test_a_single_case_loader_refuses_load_cases_by_name():
         load_case_dict(_raw(), "lc.yaml")
 
 
-def test_the_commands_refuse_a_case_with_load_cases_with_exit_2(tmp_path: Path):
+def _cli(args: list[str]):  # type: ignore[no-untyped-def]
     from click.testing import CliRunner
 
-    from dynsens.cli import simulate  # noqa: F401  (registers the command)
+    from dynsens.cli import check_gradients, optimize, simulate  # noqa: F401  (registers the commands)
     from dynsens.cli.main import cli
+    return CliRunner().invoke(cli, args)
+
+
+def test_simulate_writes_one_group_per_load_case_equal_to_the_api(tmp_path: Path):
+    import h5py
+
+    from dynsens.case.load_cases import simulate_load_cases
+    from dynsens.io.reader import read_result
+    path = tmp_path / "two_loads.yaml"
+    path.write_text(yaml.safe_dump(_raw("direct"), sort_keys=False))
+    out = tmp_path / "out.h5"
+    res = _cli(["simulate", str(path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "load case impact:" in res.output and "load case gust:" in res.output
+    api = simulate_load_cases(load_case_set(_raw("direct"), "lc"))
+    with h5py.File(out, "r") as f:
+        assert list(f["load_cases"]) == sorted(api) and f.attrs["status"] == "completed"
+        assert "load_cases" in yaml.safe_load(f.attrs["case"])
+        for name, run in api.items():
+            g = f["load_cases"][name]
+            assert np.array_equal(g["time"][()], run.time)                       # bit for bit
+            for r, v in run.responses.items():
+                assert g["responses"][r]["value"][()] == v.value
+                assert np.array_equal(g["responses"][r]["gradient"][()], v.gradient)
+    back = read_result(str(out), group="load_cases/impact")
+    assert back.responses["q_ks"]["value"] == api["impact"].responses["q_ks"].value
+    again = _cli(["simulate", str(path), "-o", str(out)])                     # no clobbering
+    assert again.exit_code != 0 and "--overwrite" in again.output
+
+
+def test_simulate_refuses_plots_of_load_cases_and_bad_load_cases_with_exit_2(tmp_path: Path):
     path = tmp_path / "two_loads.yaml"
     path.write_text(yaml.safe_dump(_raw()))
-    res = CliRunner().invoke(cli, ["simulate", str(path), "-o", str(tmp_path / "out.h5")])
+    res = _cli(["simulate", str(path), "-o", str(tmp_path / "out.h5"), "--plots", str(tmp_path / "p")])
+    assert res.exit_code == 2 and "--plots" in res.output and "load_cases" in res.output
+    raw = _raw()
+    raw["load_cases"]["impact"]["model.elements[0].mass"] = 3.0
+    path.write_text(yaml.safe_dump(raw))
+    res = _cli(["simulate", str(path), "-o", str(tmp_path / "out.h5")])
     assert res.exit_code == 2, res.output
-    assert "load_cases" in res.output and "two_loads.yaml" in res.output
+    assert "load_cases.impact.model.elements[0].mass" in res.output and "two_loads.yaml" in res.output
+    assert "Traceback" not in res.output
     assert not (tmp_path / "out.h5").exists()

@@ -19,12 +19,16 @@ import copy
 import json
 import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from ..errors import CaseError, Problem
 from .load import Case, load_case_dict
+from .overrides import apply_overrides
+from .yamltext import parse_yaml, read_case_text
 
 #: key paths a load case may override (a prefix followed by '.', '[' or the end)
 OVERRIDABLE = ("model.loads", "model.forces", "model.initial", "integrator.t_end", "integrator.dt")
@@ -79,6 +83,18 @@ class LoadCaseSet:
 
     source: str
     cases: dict[str, Case]
+    text: str = ""     #: the whole case (with its ``load_cases``) as YAML, for the file header
+    optimization: Any = None   #: the case's ``optimization`` mapping as written (names ``RESPONSE@LOADCASE``)
+
+    @property
+    def name(self) -> str:
+        """The case's name (as the first load case's)."""
+        return next(iter(self.cases.values())).name
+
+    @property
+    def design_names(self) -> tuple[str, ...]:
+        """The design variables (the same in every load case)."""
+        return next(iter(self.cases.values())).design_names
 
     @property
     def response_names(self) -> tuple[str, ...]:
@@ -102,6 +118,8 @@ def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
     if not sets:
         case = load_case_dict(base, source)
         return LoadCaseSet(source, {case.name: case})
+    # the optimization names responses over load cases (`q_ks@impact`): read by `LoadCaseSet`, not per load case
+    optimization = base.pop("optimization", None)
     cases = {}
     for name, overrides in sets.items():
         try:
@@ -114,7 +132,33 @@ def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
         if [d.name for d in c.design] != [d.name for d in first.design]:
             raise CaseError([Problem(f"load_cases.{name}", "expected the same design variables in every "
                                      "load case")], source)
-    return LoadCaseSet(source, cases)
+    return LoadCaseSet(source, cases, yaml.safe_dump(raw, sort_keys=False), optimization)
+
+
+def has_load_cases(path: str | Path) -> bool:
+    """Whether the case file at ``path`` declares ``load_cases`` (False for an unreadable file:
+    the single-case loader then reports it)."""
+    try:
+        raw = parse_yaml(read_case_text(Path(path), str(path)), str(path))
+    except CaseError:
+        return False
+    return isinstance(raw, dict) and "load_cases" in raw
+
+
+def load_case_set_file(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> LoadCaseSet:
+    """Load the case file at ``path`` with its load cases; ``--set`` overrides apply to the base
+    case (before the load cases' own)."""
+    src = str(path)
+    text = read_case_text(Path(path), src)
+    raw = parse_yaml(text, src)
+    if not isinstance(raw, dict):
+        raise CaseError(f"expected a mapping at the top level, found {type(raw).__name__}", src)
+    if overrides:
+        apply_overrides(raw, list(overrides), src)
+    cases = load_case_set(raw, src)
+    if not overrides:
+        cases.text = text
+    return cases
 
 
 def _run_load_case(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, tuple[Any, np.ndarray | None]]:
@@ -124,6 +168,28 @@ def _run_load_case(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, tuple[An
     text, source, x, sensitivities = arg
     res = run_case(cached_case(text, source), x, sensitivities=sensitivities, history=())
     return {r: (v.value, v.gradient) for r, v in res.responses.items()}
+
+
+def _simulate_load_case(arg: tuple[str, str, bool | None]) -> Any:
+    """Executor task: the whole run (histories, responses, gradients) of one load case."""
+    from ..executor import cached_case
+    from ..simulation import run_case
+    text, source, sensitivities = arg
+    return run_case(cached_case(text, source), sensitivities=sensitivities)
+
+
+def simulate_load_cases(cases: LoadCaseSet, *, sensitivities: bool | None = None,
+                        executor: Any = None) -> dict[str, Any]:
+    """Run every load case at its initial design: name -> its `SimulationResult` (as
+    `dynsens.simulation.run_case` of that load case; ``sensitivities`` overrides the case's).
+
+    With an `dynsens.executor.Executor` the load cases run in parallel, with the same numbers.
+    """
+    from ..executor import SerialExecutor, remember_case
+    for case in cases.cases.values():
+        remember_case(case)
+    args = [(c.text, c.source, sensitivities) for c in cases.cases.values()]
+    return dict(zip(cases.cases, (executor or SerialExecutor()).map(_simulate_load_case, args)))
 
 
 def evaluate_load_cases(cases: LoadCaseSet, x: np.ndarray, *, sensitivities: bool = True,
