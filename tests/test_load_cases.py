@@ -153,3 +153,20 @@ def test_simulate_refuses_plots_of_load_cases_and_bad_load_cases_with_exit_2(tmp
     assert "load_cases.impact.model.elements[0].mass" in res.output and "two_loads.yaml" in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "out.h5").exists()
+
+
+def test_check_gradients_checks_every_load_case(tmp_path: Path):
+    path = tmp_path / "two_loads.yaml"
+    path.write_text(yaml.safe_dump(_raw("adjoint"), sort_keys=False))
+    res = _cli(["check-gradients", str(path), "--scheme", "complex", "--steps", "1e-20", "--rtol", "1e-6",
+                "--workers", "1", "-o", str(tmp_path / "rep")])
+    assert res.exit_code == 0, res.output
+    assert "## load case impact" in res.output and "## load case gust" in res.output
+    for name in ("impact", "gust"):
+        assert f"gradient check in load case {name} passed at rtol = 1e-06" in res.output
+    import json
+    data = json.loads((tmp_path / "rep.json").read_text())
+    assert sorted(data) == ["gust", "impact"]
+    # a gradient off in one load case fails the check, naming it (rtol below round-off)
+    res = _cli(["check-gradients", str(path), "--steps", "1e-3", "--rtol", "1e-12", "--workers", "1"])
+    assert res.exit_code == 1 and "in load case impact" in res.output
