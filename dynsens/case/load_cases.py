@@ -18,15 +18,16 @@ from __future__ import annotations
 import copy
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from ..errors import CaseError, Problem
+from ..errors import CaseError, Problem, ProblemCollector
 from .load import Case, load_case_dict
+from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
 from .yamltext import parse_yaml, read_case_text
 
@@ -77,29 +78,54 @@ def split_load_cases(raw: dict, source: str = "<dict>") -> tuple[dict, dict[str,
     return base, cases
 
 
+#: a constraint on ``RESPONSE@all`` bounds the response in every load case (one constraint each)
+ALL = "all"
+
+
 @dataclass
 class LoadCaseSet:
-    """The load cases of one case: name -> validated `Case` (the same design variables)."""
+    """The load cases of one case: name -> validated `Case` (the same design variables).
+
+    For `dynsens optimize` it stands in for a `Case`: the design (bounds, scale, units) of its
+    load cases, the responses ``RESPONSE@LOADCASE`` and the validated ``optimization``.
+    """
 
     source: str
     cases: dict[str, Case]
     text: str = ""     #: the whole case (with its ``load_cases``) as YAML, for the file header
-    optimization: Any = None   #: the case's ``optimization`` mapping as written (names ``RESPONSE@LOADCASE``)
+    optimization: OptimizationSpec | None = None   #: objective and constraints on ``RESPONSE@LOADCASE``
+
+    @property
+    def first(self) -> Case:
+        """The first load case (its design is every load case's)."""
+        return next(iter(self.cases.values()))
 
     @property
     def name(self) -> str:
         """The case's name (as the first load case's)."""
-        return next(iter(self.cases.values())).name
+        return self.first.name
 
     @property
-    def design_names(self) -> tuple[str, ...]:
+    def design(self) -> list:
         """The design variables (the same in every load case)."""
-        return next(iter(self.cases.values())).design_names
+        return self.first.design
+
+    design_names = property(lambda self: self.first.design_names, doc="Names of the design variables.")
+    design_units = property(lambda self: self.first.design_units, doc="Units of the design variables.")
+    lower = property(lambda self: self.first.lower, doc="Lower bounds (m,).")
+    upper = property(lambda self: self.first.upper, doc="Upper bounds (m,).")
+    scale = property(lambda self: self.first.scale, doc="Typical magnitudes of the design variables (m,).")
+    x0 = property(lambda self: self.first.x0, doc="Initial design (m,).")
 
     @property
     def response_names(self) -> tuple[str, ...]:
         """All per-load-case responses, ``<response>@<load case>``."""
         return tuple(f"{r}{SEPARATOR}{n}" for n, c in self.cases.items() for r in c.response_names)
+
+    @property
+    def response_units(self) -> dict[str, str]:
+        """Unit of every ``<response>@<load case>``."""
+        return {f"{r}{SEPARATOR}{n}": u for n, c in self.cases.items() for r, u in c.response_units.items()}
 
     def case(self, name: str) -> Case:
         """The load case ``name``; CaseError naming the known ones otherwise."""
@@ -107,6 +133,52 @@ class LoadCaseSet:
             raise CaseError([Problem("load_cases", f"expected one of {', '.join(self.cases)}, "
                                                    f"found unknown load case {name!r}")], self.source)
         return self.cases[name]
+
+    def run(self, x: np.ndarray, executor: Any = None) -> "LoadCaseRun":
+        """Every load case at design ``x`` with sensitivities (for the optimizer)."""
+        from ..executor import SerialExecutor, remember_case
+        for case in self.cases.values():
+            remember_case(case)
+        args = [(c.text, c.source, np.asarray(x, dtype=float)) for c in self.cases.values()]
+        runs = (executor or SerialExecutor()).map(_load_case_responses, args)
+        return LoadCaseRun({f"{r}{SEPARATOR}{n}": v for n, rs in zip(self.cases, runs) for r, v in rs.items()})
+
+
+@dataclass
+class LoadCaseRun:
+    """The responses of every load case at one design, keyed ``<response>@<load case>``."""
+
+    responses: dict[str, Any]
+
+
+def _load_case_responses(arg: tuple[str, str, np.ndarray]) -> dict[str, Any]:
+    """Executor task: one load case's responses (values, gradients) at one design."""
+    from ..executor import cached_case
+    from ..simulation import run_case
+    text, source, x = arg
+    return dict(run_case(cached_case(text, source), x, sensitivities=True, history=()).responses)
+
+
+def _optimization(spec: Any, cases: dict[str, Case], source: str) -> OptimizationSpec | None:
+    """The ``optimization`` section over load cases: the objective names ``RESPONSE@LOADCASE``;
+    a constraint on ``RESPONSE@all`` becomes one constraint per load case."""
+    if spec is None:
+        return None
+    names = tuple(f"{r}{SEPARATOR}{n}" for n, c in cases.items() for r in c.response_names)
+    over_all = {f"{r}{SEPARATOR}{ALL}" for c in cases.values() for r in c.response_names}
+    pc = ProblemCollector(source)
+    opt = validate_optimization(spec, names + tuple(sorted(over_all)), pc)
+    if opt is not None and opt.objective in over_all:
+        pc.add("optimization.objective", f"expected one load case's response (RESPONSE@LOADCASE, one of "
+                                         f"{', '.join(names)}), found {opt.objective!r} (all load cases: "
+                                         "a constraint only)")
+    pc.raise_if_any()
+    assert opt is not None
+    constraints = []
+    for c in opt.constraints:
+        response, _, at = c.response.rpartition(SEPARATOR)
+        constraints += ([replace(c, response=f"{response}{SEPARATOR}{n}") for n in cases] if at == ALL else [c])
+    return replace(opt, constraints=tuple(constraints))
 
 
 def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
@@ -132,7 +204,7 @@ def load_case_set(raw: dict, source: str = "<dict>") -> LoadCaseSet:
         if [d.name for d in c.design] != [d.name for d in first.design]:
             raise CaseError([Problem(f"load_cases.{name}", "expected the same design variables in every "
                                      "load case")], source)
-    return LoadCaseSet(source, cases, yaml.safe_dump(raw, sort_keys=False), optimization)
+    return LoadCaseSet(source, cases, yaml.safe_dump(raw, sort_keys=False), _optimization(optimization, cases, source))
 
 
 def has_load_cases(path: str | Path) -> bool:
@@ -143,6 +215,17 @@ def has_load_cases(path: str | Path) -> bool:
     except CaseError:
         return False
     return isinstance(raw, dict) and "load_cases" in raw
+
+
+def load_any_text(text: str, source: str) -> Any:
+    """The case in YAML ``text``: a `LoadCaseSet` when it declares ``load_cases``, else a `Case`."""
+    from .load import load_case_text
+    raw = parse_yaml(text, source)
+    if isinstance(raw, dict) and "load_cases" in raw:
+        cases = load_case_set(raw, source)
+        cases.text = text
+        return cases
+    return load_case_text(text, source)
 
 
 def load_case_set_file(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> LoadCaseSet:

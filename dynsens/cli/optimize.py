@@ -10,6 +10,7 @@ import click
 import numpy as np
 
 from ..case.load import load_case
+from ..case.load_cases import LoadCaseSet, has_load_cases, load_case_set_file
 from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, plot_optimization
 from ..optimize.verified import optimize_verified
 from ..optimize.verify import Verification, format_verification
@@ -145,10 +146,14 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
     if output is not None:
         check_output(output)                        # before the case is read
-    case = load_case(case_file, overrides)
+    # a case with load cases stands in for one case (its design, RESPONSE@LOADCASE responses)
+    case: Any = load_case_set_file(case_file, overrides) if has_load_cases(case_file) else load_case(case_file, overrides)
     if output is None:
         output = default_output(case, "_opt.h5")
         check_output(output)
+    several = isinstance(case, LoadCaseSet)
+    if several and plots:
+        raise click.UsageError(f"--plots: not available for a case with load_cases yet ({case_file})")
     if plots:
         from ..io.paths import check_output_folder
         from ..optimize.plots import plot_files
@@ -213,6 +218,9 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
     if plots:
         for p in plot_optimization(output, plots):
             click.echo(f"plot: {p}")
+    if several:
+        click.echo(f"load cases {', '.join(case.cases)}: not verified at a refined step (not available for "
+                   "load cases yet); their runs at the optimum are in /optimization/load_cases/NAME/optimum")
     if verification is not None:
         click.echo("verified: the optimum passes the verification" if verification.passed else
                    "NOT VERIFIED: the optimum fails the verification (see above and /verification in the file)")
