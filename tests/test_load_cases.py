@@ -170,3 +170,87 @@ def test_check_gradients_checks_every_load_case(tmp_path: Path):
     # a gradient off in one load case fails the check, naming it (rtol below round-off)
     res = _cli(["check-gradients", str(path), "--steps", "1e-3", "--rtol", "1e-12", "--workers", "1"])
     assert res.exit_code == 1 and "in load case impact" in res.output
+
+
+TWO_LOADS = ROOT / "cases" / "truss_two_loads.yaml"
+
+
+def _optimum(path: Path, load_case: str) -> tuple[np.ndarray, dict]:
+    import h5py
+    with h5py.File(path, "r") as f:
+        g = f[f"optimization/load_cases/{load_case}/optimum"]
+        return g["x"][()], dict(g["responses"].attrs)
+
+
+def test_optimize_the_shipped_two_load_case_truss_to_a_feasible_design_active_in_both(tmp_path: Path):
+    out = tmp_path / "opt.h5"
+    res = _cli(["optimize", str(TWO_LOADS), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "The optimizer converged" in res.output and "The result is feasible" in res.output
+    assert "stress_ks@impact <= 1; stress_ks@gust <= 1" in res.output
+    x, impact = _optimum(out, "impact")
+    _, gust = _optimum(out, "gust")
+    # the gust sizes the chords, the impact the webs: the stress limit is active in both
+    assert abs(impact["stress_ks"] - 1.0) < 1e-4 and abs(gust["stress_ks"] - 1.0) < 1e-4
+    assert max(impact["buckling_ks"], gust["buckling_ks"]) < 1.0 + 1e-4
+    assert impact["mass"] == gust["mass"]
+
+
+def test_a_dominated_load_case_stays_inactive_and_the_optimum_is_the_single_case_one(tmp_path: Path):
+    # the second load case is the impact at half the force: never active, so the optimum is
+    # truss_lightweight's (the same model under the impact alone), to the optimizer's tolerance
+    raw = yaml.safe_load(TWO_LOADS.read_text())
+    raw["load_cases"] = {"impact": {}, "half": {"model.loads[0].value": -30000.0}}
+    path = tmp_path / "dominated.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    res = _cli(["optimize", str(path), "-o", str(tmp_path / "two.h5")])
+    assert res.exit_code == 0, res.output
+    x_two, impact = _optimum(tmp_path / "two.h5", "impact")
+    _, half = _optimum(tmp_path / "two.h5", "half")
+    assert half["stress_ks"] < 0.7 and half["buckling_ks"] < 0.7          # inactive
+    assert "stress_ks@half = " in res.output and "inactive" in res.output
+    single = tmp_path / "single.yaml"
+    del raw["load_cases"]
+    raw["optimization"]["objective"] = "mass"
+    raw["optimization"]["constraints"] = [{"response": "stress_ks", "upper": 1.0},
+                                          {"response": "buckling_ks", "upper": 1.0}]
+    single.write_text(yaml.safe_dump(raw, sort_keys=False))
+    res = _cli(["optimize", str(single), "-o", str(tmp_path / "one.h5"), "--no-verify"])
+    assert res.exit_code == 0, res.output
+    import h5py
+    with h5py.File(tmp_path / "one.h5", "r") as f:
+        x_one = f["optimization/optimum/x"][()]
+    assert np.allclose(x_two, x_one, rtol=1e-3), (x_two, x_one)     # SLSQP ftol 1e-6, different paths
+
+
+def test_adjoint_equals_direct_in_each_load_case_of_the_shipped_truss():
+    from dynsens.case.load_cases import load_case_set_file
+    x = None
+    results = {}
+    for method in ("direct", "adjoint"):
+        # complex partials: the two modes then agree to round-off (as tests/test_adjoint.py checks)
+        cases = load_case_set_file(TWO_LOADS, [f"sensitivity.method={method}", "sensitivity.partials=complex"])
+        x = np.array([d.value for d in cases.design]) * 0.9
+        results[method] = evaluate_load_cases(cases, x)
+    assert x is not None
+    (_, gd), (_, ga) = results["direct"], results["adjoint"]
+    assert sorted(gd) == sorted(ga) and "stress_ks@gust" in gd
+    for k in gd:   # relative to the gradient's norm, as tests/test_adjoint.py
+        assert np.linalg.norm(ga[k] - gd[k]) <= 1e-10 * np.linalg.norm(gd[k]), k
+
+
+@pytest.mark.parametrize("objective, constraint, message", [
+    ("mass@impact", "stress_ks@wind", "optimization.constraints[0].response"),
+    ("mass@all", "stress_ks@all", "a constraint only"),
+    ("mass", "stress_ks@all", "optimization.objective"),
+])
+def test_optimize_names_a_bad_response_over_load_cases_with_exit_2(tmp_path: Path, objective, constraint, message):
+    raw = yaml.safe_load(TWO_LOADS.read_text())
+    raw["optimization"]["objective"] = objective
+    raw["optimization"]["constraints"] = [{"response": constraint, "upper": 1.0}]
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    res = _cli(["optimize", str(path), "-o", str(tmp_path / "o.h5")])
+    assert res.exit_code == 2, res.output
+    assert message in res.output and "bad.yaml" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "o.h5").exists()

@@ -228,6 +228,12 @@ def load_any_text(text: str, source: str) -> Any:
     return load_case_text(text, source)
 
 
+def load_any_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Any:
+    """The case file at ``path``: a `LoadCaseSet` when it declares ``load_cases``, else a `Case`."""
+    from .load import load_case
+    return load_case_set_file(path, overrides) if has_load_cases(path) else load_case(path, overrides)
+
+
 def load_case_set_file(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> LoadCaseSet:
     """Load the case file at ``path`` with its load cases; ``--set`` overrides apply to the base
     case (before the load cases' own)."""

@@ -9,8 +9,7 @@ from typing import Any
 import click
 import numpy as np
 
-from ..case.load import load_case
-from ..case.load_cases import LoadCaseSet, has_load_cases, load_case_set_file
+from ..case.load_cases import LoadCaseSet, load_any_case
 from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, plot_optimization
 from ..optimize.verified import optimize_verified
 from ..optimize.verify import Verification, format_verification
@@ -147,7 +146,7 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
     if output is not None:
         check_output(output)                        # before the case is read
     # a case with load cases stands in for one case (its design, RESPONSE@LOADCASE responses)
-    case: Any = load_case_set_file(case_file, overrides) if has_load_cases(case_file) else load_case(case_file, overrides)
+    case: Any = load_any_case(case_file, overrides)
     if output is None:
         output = default_output(case, "_opt.h5")
         check_output(output)
