@@ -194,6 +194,10 @@ def test_optimize_the_shipped_two_load_case_truss_to_a_feasible_design_active_in
     assert abs(impact["stress_ks"] - 1.0) < 1e-4 and abs(gust["stress_ks"] - 1.0) < 1e-4
     assert max(impact["buckling_ks"], gust["buckling_ks"]) < 1.0 + 1e-4
     assert impact["mass"] == gust["mass"]
+    # one start with --workers: its load cases run in parallel, with the same numbers
+    res = _cli(["optimize", str(TWO_LOADS), "-o", str(tmp_path / "parallel.h5"), "--workers", "2"])
+    assert res.exit_code == 0 and "in parallel on 2 local processes" in res.output, res.output
+    assert np.array_equal(_optimum(tmp_path / "parallel.h5", "impact")[0], x)
 
 
 def test_a_dominated_load_case_stays_inactive_and_the_optimum_is_the_single_case_one(tmp_path: Path):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import copy
 import json
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +94,8 @@ class LoadCaseSet:
     cases: dict[str, Case]
     text: str = ""     #: the whole case (with its ``load_cases``) as YAML, for the file header
     optimization: OptimizationSpec | None = None   #: objective and constraints on ``RESPONSE@LOADCASE``
+    #: where `run` sends the load cases (an `dynsens.executor.Executor`; None: one after the other)
+    executor: Any = field(default=None, repr=False, compare=False)
 
     @property
     def first(self) -> Case:
@@ -135,7 +137,9 @@ class LoadCaseSet:
         return self.cases[name]
 
     def run(self, x: np.ndarray, executor: Any = None) -> "LoadCaseRun":
-        """Every load case at design ``x`` with sensitivities (for the optimizer)."""
+        """Every load case at design ``x`` with sensitivities (for the optimizer), on ``executor``
+        (default: the set's own)."""
+        executor = executor or self.executor
         from ..executor import SerialExecutor, remember_case
         for case in self.cases.values():
             remember_case(case)

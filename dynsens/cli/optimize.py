@@ -105,7 +105,8 @@ def format_verdict(o: StartOutcome) -> str:
               help="Number of starts: x0, then a Latin hypercube in the bounds [default: 1].")
 @seed_option("the Latin hypercube")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Worker processes for several starts [default: min(starts, CPUs)].")
+              help="Worker processes for several starts [default: min(starts, CPUs)]; with one start and "
+                   "load_cases, for its load cases.")
 @scheduler_option
 @click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
 @click.option("--verify/--no-verify", "verify", default=None,
@@ -195,6 +196,11 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
             click.echo(f"round {k + 1}: re-optimizing from the optimum with the failing bounds tightened")
 
     n_rounds = case.optimization.verification.rounds if rounds is None else rounds
+    if several and (starts or 1) == 1 and (scheduler or (workers or 1) > 1):
+        # one start: its load cases run in parallel instead (several starts: the starts do)
+        from ..executor import make_executor
+        case.executor = make_executor(workers, scheduler, tasks=len(case.cases))
+        click.echo(f"load cases {', '.join(case.cases)} in parallel on {case.executor.description}")
     try:
         result, verification = optimize_verified(
             case, output, verify=verify, rounds=rounds, on_round=on_round, starts=starts, seed=seed, x0=x0,
@@ -204,6 +210,9 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         bar.close()
         click.echo(f"interrupted: the history so far is in {output}; continue with --resume", err=True)
         sys.exit(130)
+    finally:
+        if several and case.executor is not None:
+            case.executor.close()
     bar.close()
     click.echo("")
     click.echo(format_table(result, case.design_names, objective))
