@@ -258,3 +258,13 @@ def test_optimize_names_a_bad_response_over_load_cases_with_exit_2(tmp_path: Pat
     assert res.exit_code == 2, res.output
     assert message in res.output and "bad.yaml" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_command_that_does_not_run_load_cases_refuses_them_by_name_with_exit_2(tmp_path: Path):
+    from dynsens.cli import modes  # noqa: F401  (registers the command)
+    path = tmp_path / "two_loads.yaml"
+    path.write_text(yaml.safe_dump(_raw()))
+    res = _cli(["modes", str(path)])
+    assert res.exit_code == 2, res.output
+    assert "load_cases" in res.output and "this command does not yet" in res.output
+    assert "two_loads.yaml" in res.output and "Traceback" not in res.output

@@ -148,8 +148,9 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
         text = yaml.safe_dump(raw, sort_keys=False)
     if "load_cases" in raw:   # one transient per load case: `load_cases.load_case_set` splits them
         raise CaseError([Problem("load_cases", "expected a single-load-case case here, found named load "
-                                 "cases: load them with dynsens.case.load_cases.load_case_set, or run "
-                                 "them with dynsens simulate (see docs/load_cases.md)")], source)
+                                 "cases: load them with dynsens.case.load_cases.load_case_set (the "
+                                 "simulate, optimize and check-gradients commands run them; this "
+                                 "command does not yet; see docs/load_cases.md)")], source)
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]
