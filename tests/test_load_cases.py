@@ -136,6 +136,10 @@ def test_simulate_writes_one_group_per_load_case_equal_to_the_api(tmp_path: Path
                 assert np.array_equal(g["responses"][r]["gradient"][()], v.gradient)
     back = read_result(str(out), group="load_cases/impact")
     assert back.responses["q_ks"]["value"] == api["impact"].responses["q_ks"].value
+    from dynsens.cli import info  # noqa: F401  (registers the command)
+    shown = _cli(["info", str(out)])
+    assert shown.exit_code == 0 and "load case impact (/load_cases/impact): status completed" in shown.output
+    assert "load case gust" in shown.output and "q_ks = " in shown.output
     again = _cli(["simulate", str(path), "-o", str(out)])                     # no clobbering
     assert again.exit_code != 0 and "--overwrite" in again.output
 
