@@ -143,7 +143,7 @@ class LoadCaseSet:
         from ..executor import SerialExecutor, remember_case
         for case in self.cases.values():
             remember_case(case)
-        args = [(c.text, c.source, np.asarray(x, dtype=float)) for c in self.cases.values()]
+        args = [(c.text, c.source, np.asarray(x, dtype=float), True) for c in self.cases.values()]
         runs = (executor or SerialExecutor()).map(_load_case_responses, args)
         return LoadCaseRun({f"{r}{SEPARATOR}{n}": v for n, rs in zip(self.cases, runs) for r, v in rs.items()})
 
@@ -155,12 +155,13 @@ class LoadCaseRun:
     responses: dict[str, Any]
 
 
-def _load_case_responses(arg: tuple[str, str, np.ndarray]) -> dict[str, Any]:
-    """Executor task: one load case's responses (values, gradients) at one design."""
+def _load_case_responses(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, Any]:
+    """Executor task: one load case (travelling as its YAML text) at one design: its responses
+    (values, gradients when ``sensitivities``)."""
     from ..executor import cached_case
     from ..simulation import run_case
-    text, source, x = arg
-    return dict(run_case(cached_case(text, source), x, sensitivities=True, history=()).responses)
+    text, source, x, sensitivities = arg
+    return dict(run_case(cached_case(text, source), x, sensitivities=sensitivities, history=()).responses)
 
 
 def _optimization(spec: Any, cases: dict[str, Case], source: str) -> OptimizationSpec | None:
@@ -254,15 +255,6 @@ def load_case_set_file(path: str | Path, overrides: list[str] | tuple[str, ...] 
     return cases
 
 
-def _run_load_case(arg: tuple[str, str, np.ndarray, bool]) -> dict[str, tuple[Any, np.ndarray | None]]:
-    """Executor task: one load case (travelling as its YAML text) at one design."""
-    from ..executor import cached_case
-    from ..simulation import run_case
-    text, source, x, sensitivities = arg
-    res = run_case(cached_case(text, source), x, sensitivities=sensitivities, history=())
-    return {r: (v.value, v.gradient) for r, v in res.responses.items()}
-
-
 def _simulate_load_case(arg: tuple[str, str, bool | None]) -> Any:
     """Executor task: the whole run (histories, responses, gradients) of one load case."""
     from ..executor import cached_case
@@ -297,14 +289,14 @@ def evaluate_load_cases(cases: LoadCaseSet, x: np.ndarray, *, sensitivities: boo
     for case in cases.cases.values():
         remember_case(case)   # the serial path re-uses the loaded case, no re-parse
         args.append((case.text, case.source, x, sensitivities))
-    results = (executor or SerialExecutor()).map(_run_load_case, args)
+    results = (executor or SerialExecutor()).map(_load_case_responses, args)
     values: dict[str, Any] = {}
     grads: dict[str, np.ndarray] = {}
     for name, responses in zip(cases.cases, results):
-        for r, (value, gradient) in responses.items():
-            values[f"{r}{SEPARATOR}{name}"] = value
-            if gradient is not None:
-                grads[f"{r}{SEPARATOR}{name}"] = np.asarray(gradient)
+        for r, v in responses.items():
+            values[f"{r}{SEPARATOR}{name}"] = v.value
+            if v.gradient is not None:
+                grads[f"{r}{SEPARATOR}{name}"] = np.asarray(v.gradient)
     return values, grads
 
 

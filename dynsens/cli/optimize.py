@@ -87,6 +87,18 @@ def format_verdict(o: StartOutcome) -> str:
     return f"{conv} {feas}"
 
 
+def _prepare_load_cases(case: LoadCaseSet, case_file: str, plots: str | None, starts: int | None,
+                        workers: int | None, scheduler: str | None) -> None:
+    """Refuse what load cases cannot do yet; with one start, run its load cases in parallel on
+    ``--workers``/``--scheduler`` (with several starts the starts run in parallel instead)."""
+    if plots:
+        raise click.UsageError(f"--plots: not available for a case with load_cases yet ({case_file})")
+    if (starts or 1) == 1 and (scheduler or (workers or 1) > 1):
+        from ..executor import make_executor
+        case.executor = make_executor(workers, scheduler, tasks=len(case.cases))
+        click.echo(f"load cases {', '.join(case.cases)} in parallel on {case.executor.description}")
+
+
 @cli.command()
 @case_argument
 @click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
@@ -152,8 +164,8 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         output = default_output(case, "_opt.h5")
         check_output(output)
     several = isinstance(case, LoadCaseSet)
-    if several and plots:
-        raise click.UsageError(f"--plots: not available for a case with load_cases yet ({case_file})")
+    if several:
+        _prepare_load_cases(case, case_file, plots, starts, workers, scheduler)
     if plots:
         from ..io.paths import check_output_folder
         from ..optimize.plots import plot_files
@@ -196,11 +208,6 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
             click.echo(f"round {k + 1}: re-optimizing from the optimum with the failing bounds tightened")
 
     n_rounds = case.optimization.verification.rounds if rounds is None else rounds
-    if several and (starts or 1) == 1 and (scheduler or (workers or 1) > 1):
-        # one start: its load cases run in parallel instead (several starts: the starts do)
-        from ..executor import make_executor
-        case.executor = make_executor(workers, scheduler, tasks=len(case.cases))
-        click.echo(f"load cases {', '.join(case.cases)} in parallel on {case.executor.description}")
     try:
         result, verification = optimize_verified(
             case, output, verify=verify, rounds=rounds, on_round=on_round, starts=starts, seed=seed, x0=x0,
