@@ -58,11 +58,11 @@ def publish(message: Any) -> None:
 
 def cached_case(text: str, source: str) -> Any:
     """The case parsed from its YAML ``text``, cached per worker process (cases travel as text)."""
-    from .case.load import load_case_text
+    from .case.load_cases import load_any_text
     key = (text, source)
     case = _CASES.get(key)
     if case is None:
-        case = load_case_text(text, source)
+        case = load_any_text(text, source)
         _CASES[key] = case
         while len(_CASES) > _CASE_CACHE_SIZE:
             _CASES.popitem(last=False)

@@ -20,7 +20,7 @@ from click.testing import CliRunner
 import dynsens.cli.examples  # noqa: F401  (registers the command)
 import dynsens.cli.simulate  # noqa: F401
 from conftest import CASES, ROOT
-from dynsens.case.load import load_case
+from dynsens.case.load_cases import load_any_case
 from dynsens.cli.main import cli
 
 SHIPPED = sorted(p.relative_to(CASES) for p in CASES.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
@@ -42,7 +42,7 @@ def test_every_case_file_and_record_is_copied_and_the_cases_load(tmp_path: Path)
     yamls = sorted(out.glob("*.yaml"))
     assert len(yamls) == len(list(CASES.glob("*.yaml"))) >= 10
     for y in yamls:
-        case = load_case(y)
+        case = load_any_case(y)          # a case with load_cases loads as its LoadCaseSet
         assert case.name, y
     assert f"copied {len(SHIPPED)} files ({len(yamls)} cases)" in res.output
     assert f"dynsens simulate {out / 'sdof_step.yaml'}" in res.output

@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
-from ..errors import CaseError, ProblemCollector
+from ..errors import CaseError, Problem, ProblemCollector
 from ..expressions.restricted import RESERVED_NAMES
 from ..integrators.newmark import SCHEMES, Newmark, make_scheme
 from ..timeloop.march import HISTORY_FIELDS, RunPlan, adjoint_obstacles
@@ -146,6 +146,11 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
         text = None
     if text is None:
         text = yaml.safe_dump(raw, sort_keys=False)
+    if "load_cases" in raw:   # one transient per load case: `load_cases.load_case_set` splits them
+        raise CaseError([Problem("load_cases", "expected a single-load-case case here, found named load "
+                                 "cases: load them with dynsens.case.load_cases.load_case_set (the "
+                                 "simulate, optimize and check-gradients commands run them; this "
+                                 "command does not yet; see docs/load_cases.md)")], source)
     pc = ProblemCollector(source)
     check_keys(raw, "", TOP_KEYS, pc, required=("model", "integrator"))
     pc.problems = [type(p)(p.path.lstrip("."), p.message) for p in pc.problems]

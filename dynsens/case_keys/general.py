@@ -44,6 +44,10 @@ GENERAL_SECTIONS: dict[str, Section] = {
         _k("responses", "list", "responses: values, maxima, integrals, event times, expressions",
            item=tuple(f"response.{t}" for t in RESPONSE_TYPES)),
         _k("optimization", "section", "objective and constraints for `dynsens optimize`", item="optimization"),
+        _k("load_cases", "map", "named load cases: name -> {key path: value}, each the case with these "
+           "overrides of model.loads, model.forces, model.initial, integrator.t_end or integrator.dt; "
+           "responses become RESPONSE@NAME; simulate, optimize and check-gradients run every load case "
+           "(see docs/load_cases.md)", item="any"),
     )),
     "design": Section("design", "The design variables x.", (
         _k("variables", "list", "one entry per design variable, in the order of x", item="design.variable"),
@@ -151,7 +155,7 @@ GENERAL_SECTIONS: dict[str, Section] = {
            values=("interpolate", "step"), default="integrator.event_location"),
     )),
     "optimization": Section("optimization", "Objective and constraints for `dynsens optimize`.", (
-        _req("objective", "name", "response to minimize"),
+        _req("objective", "name", "response to minimize (with load_cases: RESPONSE@LOADCASE)"),
         _k("constraints", "list", "lower <= response <= upper", item="optimization.constraint"),
         _k("method", "enum", "optimizer: SLSQP (dense quasi-Newton, tens of variables), MMA or CCSAQ (Svanberg's "
            "moving asymptotes, many variables; `pip install 'dynsens[mma]'`), trust-constr (interior point), "
@@ -181,7 +185,8 @@ GENERAL_SECTIONS: dict[str, Section] = {
         )),
     "optimization.constraint": Section("optimization.constraints[i]", "One constraint (either bound may be omitted; "
                                        "lower == upper is an equality).", (
-        _req("response", "name", "constrained response"),
+        _req("response", "name", "constrained response (with load_cases: RESPONSE@LOADCASE, or RESPONSE@all "
+             "for one constraint per load case)"),
         _k("lower", "number", "lower bound (the response's unit)"),
         _k("upper", "number", "upper bound"),
     )),

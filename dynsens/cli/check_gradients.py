@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..case.load import load_case
+from ..case.load_cases import has_load_cases, load_case_set_file
 from ..derivatives.gradcheck import SCHEMES, STEP_RANGE, check_gradients, step_problem, to_json, to_markdown
 from ..io.paths import atomic_write_text, check_output_path
 from ..derivatives.partials_audit import audit_json, audit_markdown
@@ -54,30 +55,48 @@ def check_gradients_cmd(case_file: str, steps: list[float], scheme: str, rtol: f
         stem = Path(report)
         stem = stem.with_suffix("") if stem.suffix in (".md", ".json") else stem
         paths = [check_output_path(stem.with_name(stem.name + ext), overwrite) for ext in (".md", ".json")]
-    case = load_case(case_file, overrides)
-    with Progress(1, f"checking gradients of {case.name}") as bar:
-        def progress(done: int, total: int) -> None:
-            bar.total = total
-            bar.update(done, f"simulation {done} of {total}", force=True)
-        rep = check_gradients(case, steps, scheme, workers=workers, scheduler=scheduler, progress=progress)
-    md = to_markdown(rep)
-    data = to_json(rep)
+    # a case with load cases: every load case is checked, one report section each
+    if has_load_cases(case_file):
+        cases = load_case_set_file(case_file, overrides).cases
+    else:
+        case = load_case(case_file, overrides)
+        cases = {case.name: case}
+    reports = {}
+    for name, case in cases.items():
+        with Progress(1, f"checking gradients of {name}") as bar:
+            def progress(done: int, total: int) -> None:
+                bar.total = total
+                bar.update(done, f"simulation {done} of {total}", force=True)
+            reports[name] = check_gradients(case, steps, scheme, workers=workers, scheduler=scheduler,
+                                            progress=progress)
+    several = len(cases) > 1
+    md = "\n\n".join((f"## load case {n}\n\n" if several else "") + to_markdown(r) for n, r in reports.items())
+    data: dict = {n: to_json(r) for n, r in reports.items()} if several else to_json(next(iter(reports.values())))
     if audit_partials:
-        audit = audit_partials_of(case)
-        md += "\n\n" + audit_markdown(audit)
-        data["partials_audit"] = audit_json(audit)
+        for name, case in cases.items():
+            audit = audit_partials_of(case)
+            md += "\n\n" + (f"## partials of load case {name}\n\n" if several else "") + audit_markdown(audit)
+            (data[name] if several else data)["partials_audit"] = audit_json(audit)
     click.echo(md)
     if paths:
         atomic_write_text(paths[0], md, overwrite)
         atomic_write_text(paths[1], json.dumps(data, indent=2), overwrite)
         click.echo(f"written: {paths[0]}, {paths[1]}")
     if rtol is not None:
-        failing = rep.failing(rtol)
-        if failing:
-            click.echo(f"gradient check FAILED at rtol = {rtol:g}: " + "; ".join(
-                f"{n} (best relative difference {rep.best_rel_diff(n):.2e} at h = {rep.best_step(n):g})"
-                for n in failing), err=True)
-            sys.exit(1)
+        _judge(reports, rtol, several)
+
+
+def _judge(reports: dict, rtol: float, several: bool) -> None:
+    """Exit 1 naming every gradient (and its load case) off by more than ``rtol``."""
+    def at(name: str) -> str:
+        return f" in load case {name}" if several else ""
+    failing = [(c, n, r) for c, r in reports.items() for n in r.failing(rtol)]
+    if failing:
+        click.echo(f"gradient check FAILED at rtol = {rtol:g}: " + "; ".join(
+            f"{n}{at(c)} (best relative difference {r.best_rel_diff(n):.2e} at h = {r.best_step(n):g})"
+            for c, n, r in failing), err=True)
+        sys.exit(1)
+    for c, rep in reports.items():
         skipped = [n for n in rep.responses if n in rep.fixed_time or n in rep.missing]
-        click.echo(f"gradient check passed at rtol = {rtol:g} ({len(rep.responses) - len(skipped)} responses"
-                   + (f"; not compared: {', '.join(skipped)}" if skipped else "") + ")")
+        click.echo(f"gradient check{at(c)} passed at rtol = {rtol:g} ({len(rep.responses) - len(skipped)} "
+                   "responses" + (f"; not compared: {', '.join(skipped)}" if skipped else "") + ")")

@@ -62,6 +62,17 @@ def _contents(f: h5py.File) -> list[str]:
     if "design/names" in f:
         names = [_text(n) for n in f["design/names"][()]]
         out.append(f"  design: {len(names)} variable(s)" + (f": {', '.join(names)}" if len(names) <= 8 else ""))
+    if isinstance(f.get("load_cases"), h5py.Group):   # simulate of a case with load cases
+        for name, g in f["load_cases"].items():
+            out.append(f"  load case {name} (/load_cases/{name}): status {_text(g.attrs.get('status', ''))}")
+            out += ["  " + line for line in _run_contents(g)]
+        return out
+    return out + _run_contents(f)
+
+
+def _run_contents(f: h5py.Group) -> list[str]:
+    """Time, histories, responses and optimization of one run's group (the file's root, or a load case's)."""
+    out: list[str] = []
     if "time" in f:
         t = f["time"][()]
         out.append(f"  time: {t.size} instants, {t[0]:.6g} to {t[-1]:.6g} s")

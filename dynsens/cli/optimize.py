@@ -9,7 +9,7 @@ from typing import Any
 import click
 import numpy as np
 
-from ..case.load import load_case
+from ..case.load_cases import LoadCaseSet, load_any_case
 from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, plot_optimization
 from ..optimize.verified import optimize_verified
 from ..optimize.verify import Verification, format_verification
@@ -87,6 +87,18 @@ def format_verdict(o: StartOutcome) -> str:
     return f"{conv} {feas}"
 
 
+def _prepare_load_cases(case: LoadCaseSet, case_file: str, plots: str | None, starts: int | None,
+                        workers: int | None, scheduler: str | None) -> None:
+    """Refuse what load cases cannot do yet; with one start, run its load cases in parallel on
+    ``--workers``/``--scheduler`` (with several starts the starts run in parallel instead)."""
+    if plots:
+        raise click.UsageError(f"--plots: not available for a case with load_cases yet ({case_file})")
+    if (starts or 1) == 1 and (scheduler or (workers or 1) > 1):
+        from ..executor import make_executor
+        case.executor = make_executor(workers, scheduler, tasks=len(case.cases))
+        click.echo(f"load cases {', '.join(case.cases)} in parallel on {case.executor.description}")
+
+
 @cli.command()
 @case_argument
 @click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
@@ -105,7 +117,8 @@ def format_verdict(o: StartOutcome) -> str:
               help="Number of starts: x0, then a Latin hypercube in the bounds [default: 1].")
 @seed_option("the Latin hypercube")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Worker processes for several starts [default: min(starts, CPUs)].")
+              help="Worker processes for several starts [default: min(starts, CPUs)]; with one start and "
+                   "load_cases, for its load cases.")
 @scheduler_option
 @click.option("--resume", is_flag=True, help="Continue the unfinished starts recorded in OUTPUT.")
 @click.option("--verify/--no-verify", "verify", default=None,
@@ -145,10 +158,14 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
     if output is not None:
         check_output(output)                        # before the case is read
-    case = load_case(case_file, overrides)
+    # a case with load cases stands in for one case (its design, RESPONSE@LOADCASE responses)
+    case: Any = load_any_case(case_file, overrides)
     if output is None:
         output = default_output(case, "_opt.h5")
         check_output(output)
+    several = isinstance(case, LoadCaseSet)
+    if several:
+        _prepare_load_cases(case, case_file, plots, starts, workers, scheduler)
     if plots:
         from ..io.paths import check_output_folder
         from ..optimize.plots import plot_files
@@ -200,6 +217,9 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         bar.close()
         click.echo(f"interrupted: the history so far is in {output}; continue with --resume", err=True)
         sys.exit(130)
+    finally:
+        if several and case.executor is not None:
+            case.executor.close()
     bar.close()
     click.echo("")
     click.echo(format_table(result, case.design_names, objective))
@@ -213,6 +233,9 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
     if plots:
         for p in plot_optimization(output, plots):
             click.echo(f"plot: {p}")
+    if several:
+        click.echo(f"load cases {', '.join(case.cases)}: not verified at a refined step (not available for "
+                   "load cases yet); their runs at the optimum are in /optimization/load_cases/NAME/optimum")
     if verification is not None:
         click.echo("verified: the optimum passes the verification" if verification.passed else
                    "NOT VERIFIED: the optimum fails the verification (see above and /verification in the file)")

@@ -9,12 +9,14 @@ import click
 import numpy as np
 
 from ..case.load import load_case
-from ..io.hdf5 import redundant_equations, write_result
+from ..case.load_cases import has_load_cases, load_case_set_file, simulate_load_cases
+from ..io.hdf5 import redundant_equations, write_load_case_results, write_result
 from ..timeloop.progress import Progress
 from ..io.paths import check_output_folder, check_output_path
 from ..simulation import run_case
 from .main import cli
-from .options import case_argument, default_output, overwrite_option, set_option, verbosity_options
+from .options import (case_argument, default_output, overwrite_option, scheduler_option, set_option,
+                      verbosity_options, workers_option)
 from .views import DRAWN_HISTORIES, check_views, view_options, write_views
 
 log = logging.getLogger("dynsens.cli")
@@ -109,13 +111,25 @@ def _aggregate_notes(extra: dict) -> list[str]:
               help="Write a PNG of the recorded quantities (output.quantities) with units, events and "
                    "the responses that read them to DIR.")
 @view_options
+@workers_option("1")
+@scheduler_option
 @verbosity_options
 def simulate(case_file: str, output: str | None, overwrite: bool, overrides: tuple[str, ...],
              no_sensitivities: bool, plots: str | None, vtk: str | None, vtk_every: int,
-             animation: str | None) -> None:
-    """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT."""
+             animation: str | None, workers: int | None, scheduler: str | None) -> None:
+    """Simulate CASE_FILE and write time histories, responses and gradients to OUTPUT.
+
+    A case with load_cases runs each load case (in parallel with --workers or --scheduler)
+    and writes each one's run under /load_cases/NAME of OUTPUT."""
     if output is not None:
         check_output_path(output, overwrite)     # before the case is read and run
+    if has_load_cases(case_file):
+        drawn = [opt for opt, v in (("--plots", plots), ("--vtk", vtk), ("--animation", animation)) if v]
+        if drawn:
+            raise click.UsageError(f"{', '.join(drawn)}: not available for a case with load_cases yet "
+                                   f"({case_file}); simulate one load case with --set instead")
+        simulate_load_case_set(case_file, output, overwrite, overrides, no_sensitivities, workers, scheduler)
+        return
     case = load_case(case_file, overrides)
     if output is None:
         output = default_output(case, ".h5")
@@ -160,3 +174,23 @@ def simulate(case_file: str, output: str | None, overwrite: bool, overrides: tup
                    "(nothing in the model or responses depends on it at this design)")
     click.echo(f"written: {output}")
     write_views(output, vtk, animation, overwrite, vtk_every)
+
+
+def simulate_load_case_set(case_file: str, output: str | None, overwrite: bool, overrides: tuple[str, ...],
+                           no_sensitivities: bool, workers: int | None, scheduler: str | None) -> None:
+    """``simulate`` of a case with load cases: every load case, one HDF5 group each."""
+    from ..executor import make_executor
+    cases = load_case_set_file(case_file, overrides)
+    if output is None:
+        output = default_output(cases, ".h5")
+        check_output_path(output, overwrite)
+    log.info("case %s: %d load cases (%s)", cases.name, len(cases.cases), ", ".join(cases.cases))
+    with make_executor(workers, scheduler, tasks=len(cases.cases), default_workers=1) as ex:
+        click.echo(f"simulating {len(cases.cases)} load cases of {cases.name}"
+                   + (f" on {ex.description}" if getattr(ex, "description", "") else ""))
+        results = simulate_load_cases(cases, sensitivities=False if no_sensitivities else None, executor=ex)
+    write_load_case_results(output, results, cases, overwrite=overwrite)
+    for name, result in results.items():
+        click.echo(f"\nload case {name}:")
+        click.echo(format_summary(result, cases.design_names))
+    click.echo(f"\nwritten: {output} (one group per load case: /load_cases/NAME)")

@@ -82,26 +82,60 @@ def write_design(f: h5py.File, names: tuple[str, ...], values: np.ndarray,
                 attach(g[k], f["design_variable"])
 
 
+def _status(result: Any) -> str:
+    missing = [n for n, r in result.responses.items() if r.missing]
+    return result.status if not missing else f"{result.status}; missing responses: {', '.join(missing)}"
+
+
 def write_result(path: str | Path, result: Any, case: Any, overwrite: bool = False) -> None:
     """Write one simulation result (a :class:`~dynsens.timeloop.march.RunResult`) atomically."""
-    missing = [n for n, r in result.responses.items() if r.missing]
-    status = result.status if not missing else f"{result.status}; missing responses: {', '.join(missing)}"
     with atomic_h5(path, overwrite) as f:
-        write_header(f, case.text, case.source, status, result.message)
+        write_header(f, case.text, case.source, _status(result), result.message)
         write_series(f, result, case.design_names)
         write_design(f, case.design_names, result.x, case.lower, case.upper)
-        write_responses(f.create_group("responses"), result.responses)
-        st = f.create_group("stats")
-        for k, v in result.counters.items():
-            st.attrs[k] = v
-        st.attrs["wall_time_s"] = result.wall_time
-        dropped = redundant_equations(case.model)
-        if dropped:
-            f.attrs["redundant_equations"] = json.dumps(dropped)
-            f.attrs["dependent_joints"] = json.dumps(list(getattr(case.model, "dependent_joints", [])))
-        if getattr(result, "method", ""):
-            st.attrs["derivative_method"] = result.method
-            st.attrs["derivative_method_reason"] = result.method_reason
+        _write_run(f, result, case)
+
+
+def _write_run(g: h5py.Group, result: Any, case: Any) -> None:
+    """``responses``, ``stats`` and the redundant joint equations of one run into group ``g``."""
+    write_responses(g.create_group("responses"), result.responses)
+    st = g.create_group("stats")
+    for k, v in result.counters.items():
+        st.attrs[k] = v
+    st.attrs["wall_time_s"] = result.wall_time
+    dropped = redundant_equations(case.model)
+    if dropped:
+        g.attrs["redundant_equations"] = json.dumps(dropped)
+        g.attrs["dependent_joints"] = json.dumps(list(getattr(case.model, "dependent_joints", [])))
+    if getattr(result, "method", ""):
+        st.attrs["derivative_method"] = result.method
+        st.attrs["derivative_method_reason"] = result.method_reason
+
+
+def write_load_case_results(path: str | Path, results: dict[str, Any], cases: Any,
+                            overwrite: bool = False) -> None:
+    """Write the runs of a case's load cases (a `~dynsens.case.load_cases.LoadCaseSet`) atomically:
+    the root has the header and ``/design``; each load case's run has the usual layout (time
+    histories, ``responses``, ``stats``) under ``/load_cases/<name>``, with its ``status`` and
+    ``message`` as attributes.  The root ``status`` is the load cases' common status, or each
+    load case's (``impact: completed; gust: terminated``)."""
+    statuses = {n: _status(r) for n, r in results.items()}
+    common = set(statuses.values())
+    first = next(iter(cases.cases.values()))
+    with atomic_h5(path, overwrite) as f:
+        write_header(f, cases.text, cases.source, common.pop() if len(common) == 1 else
+                     "; ".join(f"{n}: {s}" for n, s in statuses.items()),
+                     f"{len(results)} load cases")
+        f.attrs["load_cases"] = json.dumps(list(results))
+        write_design(f, first.design_names, next(iter(results.values())).x, first.lower, first.upper)
+        top = f.create_group("load_cases")
+        for name, result in results.items():
+            g = top.create_group(name)
+            g.attrs["status"] = statuses[name]
+            g.attrs["message"] = result.message
+            g.attrs["case"] = cases.cases[name].text
+            write_series(g, result, first.design_names)
+            _write_run(g, result, cases.cases[name])
 
 
 def redundant_equations(model: Any) -> list[str]:
@@ -117,8 +151,9 @@ def write_responses(g: h5py.Group, responses: dict[str, Any]) -> None:
         rg.create_dataset("value", data=float(np.real(r.value)))
         if r.gradient is not None:
             gd = rg.create_dataset("gradient", data=np.real(r.gradient))
-            if "design_variable" in g.file and len(gd) == len(g.file["design_variable"]):
-                attach(gd, g.file["design_variable"])
+            run = g.parent     # the run's group holds its design_variable scale
+            if "design_variable" in run and len(gd) == len(run["design_variable"]):
+                attach(gd, run["design_variable"])
         rg.attrs["unit"] = r.unit
         rg.attrs["units"] = r.unit
         rg.attrs["missing"] = r.missing or ""
@@ -139,15 +174,17 @@ def read_result_dict(path: str | Path, group: str = "/") -> dict[str, Any]:
         if "names" in out["design"]:
             out["design"]["names"] = decode(out["design"]["names"])
         out["responses"] = {}
-        if g.name != "/" and "responses" in g:      # a stored run: values only, as attributes
+        rs = g["responses"] if "responses" in g else f.get("responses")
+        if g.name != "/" and "responses" in g and not len(rs):   # a stored run: values as attributes
             out["responses"] = {n: {"value": v, "gradient": None, "unit": "", "missing": ""}
-                                for n, v in g["responses"].attrs.items()}
-        elif "responses" in f:
-            for name, rg in f["responses"].items():
+                                for n, v in rs.attrs.items()}
+        elif rs is not None:      # the file's run, or a load case's (/load_cases/<name>)
+            for name, rg in rs.items():
                 out["responses"][name] = {
                     "value": rg["value"][()], "gradient": rg["gradient"][()] if "gradient" in rg else None,
                     "unit": rg.attrs.get("unit", ""), "missing": rg.attrs.get("missing", "")}
-        out["stats"] = dict(f["stats"].attrs) if "stats" in f else {}
+        st = g["stats"] if "stats" in g else f.get("stats")
+        out["stats"] = dict(st.attrs) if st is not None else {}
     return out
 
 

@@ -165,14 +165,20 @@ class Evaluation:
 
 
 def simulate(case: Case, x: np.ndarray) -> tuple[Any, str, float]:
-    """One primal + sensitivity run at physical design ``x`` (m,).
+    """One primal + sensitivity run at physical design ``x`` (m,) (one per load case of a
+    `~dynsens.case.load_cases.LoadCaseSet`).
 
     Returns ``(result, "", wall_time)`` or ``(None, message, wall_time)`` when the simulation
     failed (wall time in s); never raises for a simulation failure.
     """
+    from ..case.load_cases import LoadCaseSet
     t0 = time.perf_counter()
+    res: Any
     try:
-        res = run_case(case, np.asarray(x, dtype=float), sensitivities=True, history=())
+        if isinstance(case, LoadCaseSet):     # every load case: responses RESPONSE@LOADCASE
+            res = case.run(np.asarray(x, dtype=float))
+        else:
+            res = run_case(case, np.asarray(x, dtype=float), sensitivities=True, history=())
     except SIM_ERRORS as exc:
         return None, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
     return res, "", time.perf_counter() - t0

@@ -188,12 +188,17 @@ def _store_run(path: Path, case: Case, x: np.ndarray, group: str) -> bool:
 
 def _store_optimum(path: Path, case: Case, x: np.ndarray) -> None:
     """The best design's run in ``/optimization/optimum`` and the start design's in
-    ``/optimization/initial`` (for the start-vs-optimum plots and ``dynsens export``)."""
-    _store_run(path, case, x, "optimization/optimum")
+    ``/optimization/initial`` (for the start-vs-optimum plots and ``dynsens export``); with load
+    cases, each one's in ``/optimization/load_cases/<name>/{optimum, initial}``."""
+    from ..case.load_cases import LoadCaseSet
+    runs = ({n: (c, f"optimization/load_cases/{n}/") for n, c in case.cases.items()}
+            if isinstance(case, LoadCaseSet) else {"": (case, "optimization/")})
     with h5py.File(path, "r") as f:
         x0 = f["design/x0"][()] if "design/x0" in f else None
-    if x0 is not None:
-        _store_run(path, case, x0, "optimization/initial")
+    for one, prefix in runs.values():
+        _store_run(path, one, x, prefix + "optimum")
+        if x0 is not None:
+            _store_run(path, one, x0, prefix + "initial")
 
 
 def read_history(path: str | Path, start: int = 0) -> dict[str, np.ndarray]:

@@ -53,7 +53,8 @@ def optimize_verified(case: Case, output: str | Path, *, verify: bool | None = N
     assert case.optimization is not None
     spec = case.optimization.verification
     result = optimize_case(case, output, **optimize_kwargs)
-    if not (spec.enabled if verify is None else verify):
+    if not (spec.enabled if verify is None else verify) or not isinstance(case, Case):
+        # a case with load cases (LoadCaseSet) has no verification run yet: docs/load_cases.md
         return result, None
     n_rounds = spec.rounds if rounds is None else int(rounds)
     problem0 = result.problem             # the case's own bounds and scaling judge every round
