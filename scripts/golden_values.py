@@ -4,7 +4,8 @@ of their bits), so that a restructuring of the code can show that no number move
 (tests/test_golden_values.py).
 
 Each case runs over its first ``STEPS`` steps (t_end shortened; a case that ends sooner runs
-whole), once per derivative mode that applies to it.
+whole), once per derivative mode that applies to it; a file with load cases, once per load case
+(`stem@name`).
 
     python scripts/golden_values.py --write      # after a change that is meant to move numbers
     python scripts/golden_values.py              # compare, print the differences
@@ -16,11 +17,12 @@ import hashlib
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 import dynsens
+from dynsens.case.load_cases import has_load_cases, load_case_set_file
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
@@ -44,11 +46,20 @@ def _digest(a: Any) -> str:
     return hashlib.sha256(repr((a.dtype.str, a.shape)).encode() + a.tobytes()).hexdigest()
 
 
-def case_values(path: Path, method: str) -> dict[str, Any]:
-    """The golden record of one case and derivative mode."""
-    case = dynsens.load_case(path)
+def loaders(path: Path) -> dict[str, Callable[[list[str]], Any]]:
+    """The runs a case file holds, by label: the case (its stem), or each of its load cases
+    (``stem@name``), each a loader taking ``--set`` overrides (applied to the base case)."""
+    if not has_load_cases(path):
+        return {path.stem: lambda ov: dynsens.load_case(path, ov)}
+    names = list(load_case_set_file(path).cases)
+    return {f"{path.stem}@{n}": (lambda ov, n=n: load_case_set_file(path, ov).cases[n]) for n in names}
+
+
+def case_values(load: Callable[[list[str]], Any], method: str) -> dict[str, Any]:
+    """The golden record of one case (``load``: its loader) and derivative mode."""
+    case = load([])
     t_end = min(case.plan.t_end, case.plan.t0 + STEPS * case.plan.dt)
-    case = dynsens.load_case(path, [f"integrator.t_end={t_end!r}", f"sensitivity.method={method}"])
+    case = load([f"integrator.t_end={t_end!r}", f"sensitivity.method={method}"])
     res = dynsens.run_case(case, history=("q",))
     return {
         "status": res.status,
@@ -62,13 +73,13 @@ def case_values(path: Path, method: str) -> dict[str, Any]:
     }
 
 
-def methods(path: Path) -> list[str]:
+def methods(load: Callable[[list[str]], Any]) -> list[str]:
     """direct, and adjoint where the case allows it (its responses have adjoint seeds)."""
-    case = dynsens.load_case(path)
+    case = load([])
     if not case.plan.sensitivities:
         return ["direct"]
     try:
-        dynsens.load_case(path, ["sensitivity.method=adjoint"])
+        load(["sensitivity.method=adjoint"])
     except dynsens.CaseError:
         return ["direct"]
     return ["direct", "adjoint"]
@@ -77,8 +88,9 @@ def methods(path: Path) -> list[str]:
 def all_values() -> dict[str, Any]:
     out: dict[str, Any] = {}
     for path in sorted(CASES.glob("*.yaml")):
-        for method in methods(path):
-            out[f"{path.stem}/{method}"] = case_values(path, method)
+        for label, load in loaders(path).items():
+            for method in methods(load):
+                out[f"{label}/{method}"] = case_values(load, method)
     return out
 
 

@@ -18,6 +18,7 @@ from ..models.parameters import finite_float, number_text
 from ..models.base import Model, Output
 from ..responses.base import EventSpec, EventTime, ExpressionIntegral, Response, TimeIntegral, ValueAt
 from ..responses.final import Combination, StructuralMass
+from ..responses.types import load_response_types, response_type_names
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
 from .member_checks import beam_names, interaction_maker
@@ -48,7 +49,7 @@ def read_number(value: Any, path: str, pc: ProblemCollector, *, positive: bool =
     return v
 
 
-def _component(out: Output, comp: Any, path: str, pc: ProblemCollector) -> int | None:
+def quantity_component(out: Output, comp: Any, path: str, pc: ProblemCollector) -> int | None:
     if comp is None:
         if len(out.labels) != 1:
             pc.add(path, f"the quantity has {len(out.labels)} components {list(out.labels)}: name one with 'component'")
@@ -91,7 +92,7 @@ def read_events(spec: Any, output_id: Callable, outputs: list[Output], default_l
             pc.add(f"{p}.location", f"expected interpolate or step, found {loc!r}")
         if oid is None or level is None:
             continue
-        comp = _component(outputs[oid], ev.get("component"), f"{p}.component", pc)
+        comp = quantity_component(outputs[oid], ev.get("component"), f"{p}.component", pc)
         if comp is not None:
             events.append(EventSpec(str(ename), oid, comp, level, direction, loc))
     return events, names
@@ -119,7 +120,7 @@ def _expression_integral(r: dict, p: str, name: str, unit: str, output_id: Calla
                 pc.add(sp, f"expected an identifier as the symbol, found {sname!r}")
             continue
         oid = output_id(sspec.get("quantity"), f"{sp}.quantity")
-        comp = None if oid is None else _component(outputs[oid], sspec.get("component"), f"{sp}.component", pc)
+        comp = None if oid is None else quantity_component(outputs[oid], sspec.get("component"), f"{sp}.component", pc)
         if comp is not None:
             table.append((sname, oid, comp))   # type: ignore[arg-type]
     try:
@@ -166,7 +167,7 @@ def _modal(r: dict, p: str, name: str, kind: str, unit: str, model: Model | None
 
 
 @dataclass
-class _Context:
+class ResponseContext:
     """What every response reader needs besides its entry: the loader's outputs, the events, the
     design and the model, the problems, and the names read so far (this response's last)."""
 
@@ -183,7 +184,7 @@ class _Context:
 Maker = Callable[[], Response]
 
 
-def _value(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _value(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: value``: a quantity's component at the end, at a time or at an event."""
     pc, plan = ctx.pc, ctx.plan
     check_keys(r, p, allowed("response.value"), pc, required=("quantity",))
@@ -202,25 +203,25 @@ def _value(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None
         pc.add(f"{p}.at", f"expected 'end' (use 'time: T' or 'event: NAME' otherwise), found {at!r}")
     if oid is None:
         return None
-    comp = _component(ctx.outputs[oid], r.get("component"), f"{p}.component", pc)
+    comp = quantity_component(ctx.outputs[oid], r.get("component"), f"{p}.component", pc)
     if comp is None:
         return None
     u = unit or ctx.outputs[oid].unit
     return lambda: ValueAt(name, oid, comp, u, time=time, event=event, fixed_time=(deriv == "fixed_time"))
 
 
-def _aggregate(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _aggregate(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """The aggregates over time and components (:mod:`.aggregates`)."""
     return aggregate_maker(name, str(r.get("type")), r, p, ctx.output_id, ctx.outputs, ctx.pc,
                            beams=beam_names(ctx.model))
 
 
-def _interaction(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _interaction(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: interaction_ratio``: the beam-column check (:mod:`.member_checks`)."""
     return interaction_maker(name, r, p, ctx.output_id, ctx.outputs, ctx.model, ctx.pc)
 
 
-def _integral(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _integral(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: integral`` of a quantity's component, or of an expression of quantities."""
     if "expression" in r:
         return _expression_integral(r, p, name, unit, ctx.output_id, ctx.outputs, ctx.pc)
@@ -228,14 +229,14 @@ def _integral(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | N
     oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
     if oid is None:
         return None
-    comp = _component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
+    comp = quantity_component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
     if comp is None:
         return None
     u = unit or f"{ctx.outputs[oid].unit}*s"
     return lambda: TimeIntegral(name, oid, comp, u)
 
 
-def _event_time(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _event_time(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: event_time`` / ``end_time``."""
     kind = r.get("type")
     check_keys(r, p, allowed(f"response.{kind}"), ctx.pc, required=("event",) if kind == "event_time" else ())
@@ -245,7 +246,7 @@ def _event_time(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker |
     return lambda: EventTime(name, event)
 
 
-def _mass(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _mass(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: mass``: the model's structural mass."""
     check_keys(r, p, allowed("response.mass"), ctx.pc)
     if ctx.model is not None and type(ctx.model).structural_mass is Model.structural_mass:
@@ -253,12 +254,12 @@ def _mass(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
     return lambda: StructuralMass(name, unit or "mass")
 
 
-def _modal_entry(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _modal_entry(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: frequency`` / ``buckling_factor``."""
     return _modal(r, p, name, str(r.get("type")), unit, ctx.model, ctx.plan, ctx.design_names, ctx.pc)
 
 
-def _expression(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker | None:
+def _expression(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Maker | None:
     """``type: expression`` of earlier responses and design variables."""
     check_keys(r, p, allowed("response.expression"), ctx.pc, required=("expression",))
     try:
@@ -270,14 +271,17 @@ def _expression(r: dict, p: str, name: str, unit: str, ctx: _Context) -> Maker |
     return lambda: Combination(name, expr, unit, design_names)
 
 
-_READERS: dict[str, Callable[[dict, str, str, str, _Context], "Maker | None"]] = {
+#: the readers of the types whose sections are in :mod:`dynsens.case_keys.general`, registered in
+#: :mod:`dynsens.responses.types.builtin` (in the order of ``RESPONSE_TYPES``)
+READERS: dict[str, Callable[[dict, str, str, str, ResponseContext], "Maker | None"]] = {
     "value": _value, **{k: _aggregate for k in AGGREGATE_TYPES}, "interaction_ratio": _interaction,
     "integral": _integral, "event_time": _event_time, "end_time": _event_time, "mass": _mass,
     "frequency": _modal_entry, "buckling_factor": _modal_entry, "expression": _expression,
 }
+assert tuple(READERS) == RESPONSE_TYPES
 
 
-def _name_and_unit(r: dict, p: str, ctx: _Context) -> tuple[str, str] | None:
+def _name_and_unit(r: dict, p: str, ctx: ResponseContext) -> tuple[str, str] | None:
     """The response's name (registered in ``ctx.names``) and unit, or None (no usable name)."""
     pc, names, name = ctx.pc, ctx.names, r.get("name")
     if not isinstance(name, str) or not _IDENT.match(name):
@@ -303,8 +307,10 @@ def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_
     if not isinstance(spec, list):
         pc.add("responses", "expected a list")
         spec = []
+    registry = load_response_types()
+    known = response_type_names()
     makers: list[Maker] = []
-    ctx = _Context(output_id, outputs, event_names, design_names, model, plan, pc, [])
+    ctx = ResponseContext(output_id, outputs, event_names, design_names, model, plan, pc, [])
     for i, r in enumerate(spec):
         p = f"responses[{i}]"
         if not isinstance(r, dict):
@@ -314,12 +320,12 @@ def read_responses(spec: Any, output_id: Callable, outputs: list[Output], event_
         if named is None:
             continue
         kind = r.get("type")
-        reader = _READERS.get(kind) if isinstance(kind, str) else None
-        if reader is None:
-            pc.add(f"{p}.type", f"unknown response type {kind!r}{did_you_mean(kind, RESPONSE_TYPES)} "
-                                f"(known: {', '.join(RESPONSE_TYPES)})")
+        rtype = registry.get(kind) if isinstance(kind, str) else None
+        if rtype is None:
+            pc.add(f"{p}.type", f"unknown response type {kind!r}{did_you_mean(kind, known)} "
+                                f"(known: {', '.join(known)})")
             continue
-        maker = reader(r, p, named[0], named[1], ctx)
+        maker = rtype.read(r, p, named[0], named[1], ctx)
         if maker is not None:
             makers.append(maker)
     return (lambda: [mk() for mk in makers]), tuple(ctx.names)

@@ -142,11 +142,14 @@ def reference_markdown() -> str:
 
 
 def generated() -> dict[Path, str]:
-    """The generated files and their contents (with the key sections the element kinds declare)."""
+    """The generated files and their contents (with the key sections the element kinds, the force
+    laws and the response types declare)."""
     from ..models.multibody.force_law import load_laws
     from ..models.structural.elements import load_kinds
+    from ..responses.types import load_response_types
     load_kinds()
     load_laws()
+    load_response_types()
     return {SCHEMA_PATH: json.dumps(json_schema(), indent=1, ensure_ascii=False) + "\n",
             REFERENCE_PATH: reference_markdown()}
 

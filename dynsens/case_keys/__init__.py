@@ -47,6 +47,27 @@ def add_force_section(name: str, section: Section, force_sections: list[str]) ->
     SECTIONS["model.multibody"] = replace(model, keys=keys)
 
 
+def add_response_section(type_name: str, section: Section, types: tuple[str, ...]) -> None:
+    """Add the key section ``response.<type_name>`` of a response type that declares its keys in its
+    own module (:mod:`dynsens.responses.types`), placed after the section of the type before it in
+    ``types`` (all response types, in order); the ``type`` enum of every response section and the
+    item list of ``case.responses`` become ``types``."""
+    name = f"response.{type_name}"
+    before = types[:types.index(type_name)]
+    anchor = next((f"response.{t}" for t in reversed(before) if f"response.{t}" in SECTIONS), None)
+    entries = [(k, v) for k, v in SECTIONS.items() if k != name]
+    at = next((i + 1 for i, (k, _) in enumerate(entries) if k == anchor), len(entries))
+    entries.insert(at, (name, section))
+    SECTIONS.clear()
+    for key, sec in entries:
+        if key.startswith("response."):
+            sec = replace(sec, keys=tuple(replace(k, values=types) if k.name == "type" else k for k in sec.keys))
+        elif key == "case":
+            sec = replace(sec, keys=tuple(replace(k, item=tuple(f"response.{t}" for t in types))
+                                          if k.name == "responses" else k for k in sec.keys))
+        SECTIONS[key] = sec
+
+
 def required(section: str) -> tuple[str, ...]:
     """The keys ``section`` requires."""
     return tuple(k.name for k in SECTIONS[section].keys if k.required)
@@ -54,4 +75,4 @@ def required(section: str) -> tuple[str, ...]:
 
 __all__ = ["AGGREGATE_TYPES", "BEAM_SECTION_SHAPES", "JOINT_TYPES", "KINDS", "NO_DEFAULT",
            "RESPONSE_TYPES", "SECTIONS", "STRUCTURAL_ELEMENT_TYPES", "TIME_FUNCTION_TYPES", "Key", "Section",
-           "add_element_section", "add_force_section", "allowed", "required"]
+           "add_element_section", "add_force_section", "add_response_section", "allowed", "required"]
