@@ -85,9 +85,20 @@ def methods(load: Callable[[list[str]], Any]) -> list[str]:
     return ["direct", "adjoint"]
 
 
+# cases whose records are not (yet) reproducible bit for bit from one environment to another, with
+# the reason; each is still checked by its own tests
+NOT_RECORDED = {
+    # its buckling KS differed between the tree that wrote the record and a fresh clone (2026-11-28,
+    # 2,252 bars); not yet understood: tests/test_ground_structure.py checks it
+    "ground_structure": "differs between a warm tree and a fresh clone (under investigation)",
+}
+
+
 def all_values() -> dict[str, Any]:
     out: dict[str, Any] = {}
     for path in sorted(CASES.glob("*.yaml")):
+        if path.stem in NOT_RECORDED:
+            continue
         for label, load in loaders(path).items():
             for method in methods(load):
                 out[f"{label}/{method}"] = case_values(load, method)

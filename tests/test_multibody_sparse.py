@@ -53,8 +53,9 @@ def test_block_sparse_linearization_equals_the_dense_one(name):
 
 
 # the weir's iteration matrix (stiff hydraulic states) has a condition number near 1e13: the two
-# factorizations (LAPACK's dense LU, the band LU after reordering) differ by 1.4e-9 there
-GRADIENT_TOL = {"tyrolean_weir": 1e-8}
+# factorizations (LAPACK's dense LU, the band LU after reordering) differ by 1.4e-9 there; the
+# flexible weir has the same hydraulic states (1.6e-10 measured on a fresh clone)
+GRADIENT_TOL = {"tyrolean_weir": 1e-8, "tyrolean_weir_flexible": 1e-8}
 
 
 @pytest.mark.parametrize("name", MECHANISMS)
