@@ -61,6 +61,18 @@ def quantity_component(out: Output, comp: Any, path: str, pc: ProblemCollector) 
     return i
 
 
+def quantity_and_component(r: dict, p: str, ctx: "ResponseContext") -> tuple[int, int] | None:
+    """The output id and component index that the entry ``r`` (at key path ``p``) names with its
+    ``quantity`` and ``component`` keys; None (problems recorded) when either is wrong."""
+    oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
+    if oid is None:
+        return None
+    comp = quantity_component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
+    if comp is None:
+        return None
+    return oid, comp
+
+
 def read_events(spec: Any, output_id: Callable, outputs: list[Output], default_loc: str,
             pc: ProblemCollector) -> tuple[list[EventSpec], list[str]]:
     if not isinstance(spec, list):
@@ -226,12 +238,10 @@ def _integral(r: dict, p: str, name: str, unit: str, ctx: ResponseContext) -> Ma
     if "expression" in r:
         return _expression_integral(r, p, name, unit, ctx.output_id, ctx.outputs, ctx.pc)
     check_keys(r, p, _INTEGRAL_OF_QUANTITY, ctx.pc, required=("quantity",))
-    oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
-    if oid is None:
+    found = quantity_and_component(r, p, ctx)
+    if found is None:
         return None
-    comp = quantity_component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
-    if comp is None:
-        return None
+    oid, comp = found
     u = unit or f"{ctx.outputs[oid].unit}*s"
     return lambda: TimeIntegral(name, oid, comp, u)
 

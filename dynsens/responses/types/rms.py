@@ -71,14 +71,12 @@ class RootMeanSquare(TimeIntegral):
 
 def read(r: dict, p: str, name: str, unit: str, ctx: Any) -> Maker | None:
     """The entry ``{type: rms, quantity: ..., component: ...}``."""
-    from ...case.responses_spec import quantity_component
+    from ...case.responses_spec import quantity_and_component
     check_keys(r, p, allowed("response.rms"), ctx.pc, required=("quantity",))
-    oid = ctx.output_id(r.get("quantity"), f"{p}.quantity")
-    if oid is None:
+    found = quantity_and_component(r, p, ctx)
+    if found is None:
         return None
-    comp = quantity_component(ctx.outputs[oid], r.get("component"), f"{p}.component", ctx.pc)
-    if comp is None:
-        return None
+    oid, comp = found
     u = unit or ctx.outputs[oid].unit
 
     def make() -> Response:
