@@ -11,8 +11,11 @@ linearization, for the sensitivities.
 Its runs are bit for bit those of the Python iteration (tests/test_structural_step.py).  A dense
 model's products (f_int, D q̇, the round-off test's |S| |z|) are numpy's BLAS calls, which a loop
 cannot repeat (summed in a loop, the last bits moved a Newton iteration count of a 100-mass chain,
-and its gradients by 3e-11): the step calls BLAS too, through numba, and serves a design only
-where its F_R equals the model's bit for bit at two probe states.
+and its gradients by 3e-11): the step calls BLAS too, through numba.  Whether the step serves a
+model is decided by its kinds (declared) and by how the Python path factors S (its pattern), never
+by comparing numbers at run time; that numba's BLAS sums as numpy's does is an assumption of the
+installation, checked by tests/test_structural_step.py (the compiled F_R against the model's at
+random states, and whole runs bit for bit).
 """
 from __future__ import annotations
 
@@ -21,14 +24,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from ...integrators.newmark import correct_arrays
 from ...solver._jit import enabled
 from ...solver.banded import BandPlan, TridiagonalFactor
 from ...solver.compiled_iteration import REGULAR, CompiledStep, read_only
 from ...solver.linalg import Counters, Factor, SingularMatrixError
 from ..base import StepState
 from ..sparse_assembly import on_pattern
-from .step_kernels import SpringStepData, iteration, probe_residual
+from .step_kernels import SpringStepData, iteration
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import StructuralModel
@@ -104,9 +106,8 @@ class _Design:
 def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
     """For :meth:`.structural.StructuralModel.compiled_step`: the :class:`CompiledSpringStep` of a
     step, or None for a step it does not serve (complex data; a design whose S the Python path
-    does not factor as tridiagonal, or whose compiled F_R is not the model's bit for bit: it
-    iterates in Python); None for a model it does not serve (not a spring network, see
-    :func:`serves`)."""
+    does not factor as tridiagonal: it iterates in Python); None for a model it does not serve
+    (not a spring network, see :func:`serves`)."""
     if not (newton and refactor and enabled() and serves(model)):
         return None
     kept: dict[int, tuple[Any, Any]] = {}       # per parameter set: its _Design (None: not served)
@@ -129,22 +130,8 @@ def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
         if not isinstance(lu, TridiagonalFactor):
             return None
         d = _Design(model, params, lu.plan, S, lin.R_q)
-        if _same_residual(d, t, pred, params, coeffs):
-            kept[id(params)] = (params, d)
-        return kept[id(params)][1]
-
-    def _same_residual(d: _Design, t: float, pred: Any, params: dict[str, Any],
-                       coeffs: tuple[float, float, float]) -> bool:
-        """Whether the compiled F_R is the model's bit for bit at two probe states (a dense
-        model's products are BLAS's: numba's must sum as numpy's do)."""
-        data = _step_data(t, pred, params, coeffs, d)
-        rng = np.random.default_rng(0)
-        for _ in range(2):
-            z = rng.standard_normal(model.n)
-            s = StepState(*correct_arrays(pred.q, pred.qd, pred.p, *coeffs, z, empty)[:2], z, empty, pred.p, empty)
-            if not np.array_equal(probe_residual(data, z), model.residual(t, s, params)):
-                return False
-        return True
+        kept[id(params)] = (params, d)
+        return d
 
     def _step_data(t: float, pred: Any, params: dict[str, Any], coeffs: tuple[float, float, float],
                    d: _Design) -> SpringStepData:

@@ -225,23 +225,23 @@ def _stamp() -> str:
 iteration = LazyIteration(_register, _stamp)
 
 
-def _compiled_probe(stamp: str) -> Any:
-    """F_R at the unknowns z, compiled (the serving test of :func:`step_factory`), its cache
-    entries keyed by ``stamp`` as the iteration's."""
+def _compiled_residual(stamp: str) -> Any:
+    """F_R at the unknowns z, compiled, its cache entries keyed by ``stamp`` as the iteration's."""
 
-    def probe(ops, z):  # type: ignore[no-untyped-def]
+    def residual(ops, z):  # type: ignore[no-untyped-def]
         stamp          # noqa: B018 - a closure variable: part of numba's cache key
         return core.step_residual(ops, core.step_correct(ops, z))[0]
-    return jit(probe)
+    return jit(residual)
 
 
-_PROBE: Any = None
+_RESIDUAL: Any = None
 
 
-def probe_residual(ops: SpringStepData, z: np.ndarray) -> np.ndarray:
-    """F_R at the unknowns z, compiled (the serving test of :mod:`.step`)."""
-    global _PROBE
-    if _PROBE is None:
+def compiled_residual(ops: SpringStepData, z: np.ndarray) -> np.ndarray:
+    """F_R at the unknowns z as the compiled iteration forms it (not used by a run: the check
+    that it is the model's bit for bit, tests/test_structural_step.py)."""
+    global _RESIDUAL
+    if _RESIDUAL is None:
         iteration()                 # the overloads first
-        _PROBE = _compiled_probe(_stamp())
-    return _PROBE(ops, z)
+        _RESIDUAL = _compiled_residual(_stamp())
+    return _RESIDUAL(ops, z)
