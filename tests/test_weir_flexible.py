@@ -18,14 +18,14 @@ def _weir(t_end):
     raw["integrator"]["t_end"] = t_end
     raw["sensitivity"]["partials"] = "complex"
     raw["responses"] = [r for r in raw["responses"] if r["name"] in (
-        "stroke", "ks_force", "theta_0", "rack_mass", "sigma_ZB", "sigma_ZL", "sigma_BL",
+        "stroke", "ks_force", "theta_0", "rack_mass", "sigma_ZL", "sigma_BL",
         "sigma_c_BL", "buckling_BL", "f", "g1", "g2")]
     raw.pop("optimization")
     return load_case_dict(raw)
 
 
 def test_flexible_weir_gradients_match_complex_step_and_adjoint():
-    """Geometry (θ_AZ, l_AZ, l_BZ), pump flow V_S and the three bar sections through the coupled
+    """Geometry (θ_AZ, l_AZ, l_BZ), pump flow V_S and the two bar sections through the coupled
     rack–cylinder–mechanism run of 20 steps: direct = complex step of the whole run (rtol 1e-7)
     = adjoint (rtol 1e-8). The window covers the start transient, in which every bar is loaded."""
     case = _weir(0.02)
@@ -48,7 +48,7 @@ def _rigid_equivalent(t_end):
     # node points in the rack frame (x along Z -> L), origin at Z
     pts = {"Z": np.array([0.0, 0.0]), "L": np.array([1500.0, 0.0]),
            "B": x["l_BZ"] * np.array([np.cos(-0.18151424220741028), np.sin(-0.18151424220741028)])}
-    m = {"Z": fb["rack"]["mass"], "B": fb["rack_B"]["mass"], "L": fb["rack_L"]["mass"]}
+    m = {"Z": 0.02, "B": 0.005, "L": fb["rack_L"]["mass"]}     # the lever's hub and pin (its 0.025 t), the grate
     M = sum(m.values())
     c = sum(m[k] * pts[k] for k in m) / M
     r = {k: pts[k] - c for k in m}
@@ -101,16 +101,18 @@ def _stiff_and_rigid(t_end, scheme):
 
 def test_very_stiff_rack_reproduces_the_rigid_rack():
     """Rigid limit: massless bars of E = 2.1e10 MPa against the rigid weir whose rack is the rigid
-    body of the same node masses.  With the case's Newmark scheme, piston pressure and stroke at
-    0.1 s agree within 1e-5 relative; the joint reactions do not (to 0.7 % at A, by a factor at B),
-    since the bars' axial modes (~1e6 rad/s, unresolved at dt = 1 ms and undamped by Newmark) ring in
-    them.  With generalized-alpha (rho_inf = 0) damping those modes, every joint reaction at 0.3 s
-    (the explicit start pressures' transient has decayed) agrees within 5e-4 relative."""
+    body of the same masses (the lever's hub and pin, the grate at L).  The bars' axial modes
+    (~1e6 rad/s, unresolved at dt = 1 ms and undamped by Newmark) ring in the undamped run: with the
+    case's Newmark scheme, piston pressure and stroke at 0.1 s agree within 1e-3 relative (measured
+    6e-4 and 5e-5) and the joint reactions not at all.  With generalized-alpha (rho_inf = 0) damping
+    those modes, the pressure (measured 2e-5) and every joint reaction (at most 1.2e-4) at 0.3 s,
+    when the explicit start pressures' transient has decayed, agree within 1e-4 and 5e-4."""
     rf, rr = _stiff_and_rigid(0.1, {})
     for name in ("p1", "stroke"):
-        assert abs(rf[name].value / rr[name].value - 1) < 1e-5, name
+        assert abs(rf[name].value / rr[name].value - 1) < 1e-3, name
     rf, rr = _stiff_and_rigid(0.3, {"scheme": "generalized_alpha", "rho_inf": 0.0})
-    for name in ("p1", "FZx", "FZy", "FAx", "FAy", "FBx", "FBy"):
+    assert abs(rf["p1"].value / rr["p1"].value - 1) < 1e-4
+    for name in ("FZx", "FZy", "FAx", "FAy", "FBx", "FBy"):
         assert abs(rf[name].value / rr[name].value - 1) < 5e-4, name
     # the prismatic joint's transverse reaction is small (~20 N): absolute, against the pin's force
     for name in ("FPx", "FPy"):

@@ -1,0 +1,174 @@
+"""The virtuous circle of lightweight design on the weir with a flexible rack (issue 33).
+
+Three optimizations, each verified by ``dynsens optimize``'s own check (the optimum re-run at half
+the step and on a longer window):
+
+* **joint**: cases/tyrolean_weir_flexible.yaml as shipped: geometry, pump flow and the two bar
+  sections together, every member constraint and the paper's three;
+* **rigid**: cases/tyrolean_weir.yaml, the rigid mechanism alone (Table 1's problem);
+* **sizing**: the rack's sections alone, in the flexible model, for the rigid optimum's geometry
+  and pump flow (the sequential design: mechanism first, then its members for its loads).
+
+Then four designs are simulated in the flexible model over the whole cycle: the start, the rigid
+optimum with the rack as started, the rigid optimum with the rack sized for it (sequential) and
+the joint optimum.  Printed (and written to ``OUT/table.md``, ``OUT/table.json``): rack mass,
+peak joint force (largest |F| of the joints Z, A, B, P over the cycle), peak piston-side pressure,
+cleaning time t_F, the objective, the largest member stress and buckling ratios, the paper's
+constraints, feasibility, and each optimization's iterations, simulations and wall time.  The
+plot goes to ``docs/virtuous_circle.png``.
+
+Usage: python scripts/virtuous_circle.py [--out results/virtuous_circle] [--reuse] [--maxiter N]
+(``--reuse`` takes an optimization already recorded in OUT/<name>.json instead of running it.)
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+import dynsens
+
+ROOT = Path(__file__).resolve().parents[1]
+FLEXIBLE = ROOT / "cases" / "tyrolean_weir_flexible.yaml"
+RIGID = ROOT / "cases" / "tyrolean_weir.yaml"
+FIGURE = ROOT / "docs" / "virtuous_circle.png"
+GEOMETRY = ("theta_AZ", "l_AZ", "l_BZ", "V_S")        # the mechanism's variables (both cases)
+SECTIONS = ("A_ZL", "A_BL")
+BARS = ("ZL", "BL")
+JOINTS = ("reaction_Z", "reaction_A", "reaction_B", "reaction_P")
+MEMBER_RATIOS = tuple(f"{kind}_{bar}" for kind in ("stress", "buckling") for bar in BARS)
+PAPER = ("g1", "g2", "g3")
+
+
+def flexible_raw() -> dict:
+    """The shipped flexible case as a mapping."""
+    return yaml.safe_load(FLEXIBLE.read_text(encoding="utf-8"))
+
+
+def with_fixed(raw: dict, fixed: dict[str, float]) -> dict:
+    """``raw`` with the design variables ``fixed`` (name -> value) made constants: removed from
+    ``design.variables`` and their names replaced by their values in every expression string."""
+    out = copy.deepcopy(raw)
+    out["design"]["variables"] = [v for v in out["design"]["variables"] if v["name"] not in fixed]
+    patterns = [(re.compile(rf"\b{re.escape(k)}\b"), f"({v!r})") for k, v in fixed.items()]
+
+    def subst(node: Any) -> Any:
+        if isinstance(node, str):
+            for pat, val in patterns:
+                node = pat.sub(val, node)
+            return node
+        if isinstance(node, list):
+            return [subst(n) for n in node]
+        if isinstance(node, dict):
+            return {k: (v if k == "design" else subst(v)) for k, v in node.items()}
+        return node
+    return subst(out)
+
+
+def optimize(name: str, case: Any, out: Path, reuse: bool, maxiter: int | None) -> dict:
+    """One verified optimization (or its record with ``reuse``): x by name, objective,
+    iterations, simulations, verdicts and wall time (s)."""
+    record = out / f"{name}.json"
+    if reuse and record.exists():
+        return dict(json.loads(record.read_text()))
+    t0 = time.perf_counter()
+    res = dynsens.optimize(case, out / f"{name}_opt.h5", overwrite=True, maxiter=maxiter)
+    rec = {"x": dict(zip(res.design_names, map(float, res.x))), "fun": float(res.fun), "nit": int(res.nit),
+           "nfev": int(res.nfev), "success": bool(res.success), "feasible": bool(res.feasible),
+           "verified": res.verified, "wall_s": time.perf_counter() - t0, "message": res.message}
+    record.write_text(json.dumps(rec, indent=1))
+    return rec
+
+
+def evaluate(x: dict[str, float]) -> dict[str, float]:
+    """The flexible weir at design ``x`` (every variable of the shipped case), whole cycle,
+    without sensitivities: the table's quantities."""
+    sim = dynsens.simulate(FLEXIBLE, [x[v["name"]] for v in flexible_raw()["design"]["variables"]],
+                           sensitivity__enabled=False, output__history=["q"])
+    q, v = sim.run.quantities, sim.values
+    row = {"rack_mass_t": v["rack_mass"], "peak_joint_force_N": max(float(np.max(q[j].value)) for j in JOINTS),
+           "peak_pressure_MPa": float(np.max(q["pressure_1"].value)), "t_F_s": v["t_F"], "f_N": v["f"],
+           "max_stress_ratio": max(v[f"stress_{b}"] for b in BARS),
+           "max_buckling_ratio": max(v[f"buckling_{b}"] for b in BARS)}
+    row.update({g: v[g] for g in PAPER})
+    row["feasible"] = bool(all(v[g] <= 1e-6 for g in PAPER) and all(v[r] <= 1.0 + 1e-6 for r in MEMBER_RATIOS))
+    return {k: (float(val) if not isinstance(val, bool) else val) for k, val in row.items()}
+
+
+def table(rows: dict[str, dict], runs: dict[str, dict]) -> str:
+    """The markdown table of the designs (columns) and the optimizations' costs."""
+    names = list(rows)
+    fmt = {"rack_mass_t": ("rack mass [t]", "{:.4f}"), "peak_joint_force_N": ("peak joint force [N]", "{:,.0f}"),
+           "peak_pressure_MPa": ("peak pressure p1 [MPa]", "{:.2f}"), "t_F_s": ("cleaning time t_F [s]", "{:.3f}"),
+           "f_N": ("objective f [N]", "{:,.0f}"), "max_stress_ratio": ("largest stress ratio", "{:.3f}"),
+           "max_buckling_ratio": ("largest buckling ratio", "{:.3f}"), "g1": ("g1", "{:+.4f}"),
+           "g2": ("g2", "{:+.4f}"), "g3": ("g3", "{:+.4f}"), "feasible": ("feasible", "{}")}
+    lines = ["| | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for key, (label, f) in fmt.items():
+        lines.append(f"| {label} | " + " | ".join(f.format(rows[n][key]) for n in names) + " |")
+    lines += ["", "| optimization | iterations | simulations | wall [s] | feasible | verified |",
+              "|---|---|---|---|---|---|"]
+    for name, r in runs.items():
+        lines.append(f"| {name} | {r['nit']} | {r['nfev']} | {r['wall_s']:.0f} | {r['feasible']} | {r['verified']} |")
+    return "\n".join(lines)
+
+
+def plot(rows: dict[str, dict], path: Path) -> None:
+    """Four panels (rack mass, peak joint force, peak pressure, cleaning time), one bar per design."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    panels = (("rack_mass_t", "rack mass [t]"), ("peak_joint_force_N", "peak joint force [kN]"),
+              ("peak_pressure_MPa", "peak pressure p1 [MPa]"), ("t_F_s", "cleaning time t_F [s]"))
+    names = list(rows)
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.8))
+    for ax, (key, label) in zip(axes, panels):
+        vals = [rows[n][key] / (1e3 if key == "peak_joint_force_N" else 1.0) for n in names]
+        ax.bar(range(len(names)), vals, color=["0.6", "tab:blue", "tab:orange", "tab:green"][:len(names)])
+        ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
+        ax.set_title(label, fontsize=10)
+        if key == "t_F_s":
+            ax.axhline(8.0, color="k", lw=0.8, ls="--")      # the paper's g3: t_F <= 8 s
+    fig.suptitle("Weir with a flexible rack: start, rigid optimum, sequential sizing, joint optimum")
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "results" / "virtuous_circle")
+    ap.add_argument("--reuse", action="store_true", help="take optimizations recorded in OUT")
+    ap.add_argument("--maxiter", type=int, default=None, help="iteration limit of each optimization")
+    ap.add_argument("--figure", type=Path, default=FIGURE)
+    args = ap.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    raw = flexible_raw()
+    start = {v["name"]: float(v["value"]) for v in raw["design"]["variables"]}
+    runs = {"joint": optimize("joint", FLEXIBLE, args.out, args.reuse, args.maxiter),
+            "rigid": optimize("rigid", RIGID, args.out, args.reuse, args.maxiter)}
+    geometry = {k: runs["rigid"]["x"][k] for k in GEOMETRY}
+    runs["sizing"] = optimize("sizing", with_fixed(raw, geometry), args.out, args.reuse, args.maxiter)
+    designs = {"start": start,
+               "rigid optimum": {**start, **geometry},
+               "rigid, then sized": {**start, **geometry, **runs["sizing"]["x"]},
+               "joint optimum": runs["joint"]["x"]}
+    rows = {name: evaluate(x) for name, x in designs.items()}
+    text = table(rows, runs)
+    print(text)
+    (args.out / "table.md").write_text(text + "\n")
+    (args.out / "table.json").write_text(json.dumps({"designs": designs, "rows": rows, "runs": runs}, indent=1))
+    plot(rows, args.figure)
+
+
+if __name__ == "__main__":
+    main()
