@@ -22,6 +22,7 @@ class StructuralMatrices:
     dim: int
     traits: Any
     sets: list[Any]
+    active: list[Any]
     rayleigh: Any
     followers: Any
     rotating_mass: bool
@@ -54,7 +55,7 @@ class StructuralMatrices:
         """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse); without ``corotated`` that of the
         springs and linear beams only (the part of Rayleigh's β K that does not turn)."""
         rows, cols, vals = [], [], []
-        for k in self.sets:
+        for k in self.active:
             for r, c, v in k.tangent(q, params, corotated):
                 rows.append(r)
                 cols.append(c)
@@ -121,7 +122,7 @@ class StructuralMatrices:
         # the 3D frames' consistent mass is constant (small rotations): kept with the parameters
         Ms = [params["M0"] if self.frame_mass and not self.rotating_mass else self._diagonal_mass(params)]
         Ds = [params["D"]] if self.traits.has_damping else []
-        triplets = [t for k in self.sets for t in k.damping_tangent(s.qd, params)]
+        triplets = [t for k in self.active for t in k.damping_tangent(s.qd, params)]
         if triplets:
             rows, cols, vals = (list(x) for x in zip(*triplets))
             Ds.append(self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"])))
