@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -366,15 +366,17 @@ def excesses(v: Any, problem: ScaledProblem) -> dict[int, float]:
     return out
 
 
-def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] | None = None) -> None:
-    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced), in the
-    layout of :func:`write_verification`, with :func:`write_rounds` when the bounds were tightened."""
+def store_verification(path: Any, v: Any, rounds: list[dict[str, Any]] | None = None,
+                       write: Callable[[Any, Any], None] | None = None) -> None:
+    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced), by
+    ``write(group, v)`` (default :func:`write_verification`), with :func:`write_rounds` when the
+    bounds were tightened."""
     import h5py
     with h5py.File(path, "a") as f:
         if "verification" in f:
             del f["verification"]
         g = f.create_group("verification")
-        write_verification(g, v)
+        (write or write_verification)(g, v)
         if rounds:
             write_rounds(g, rounds)
 

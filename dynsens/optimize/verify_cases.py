@@ -19,7 +19,7 @@ import numpy as np
 from ..case.load_cases import SEPARATOR, LoadCaseSet
 from .problem import OptimizationError, ScaledProblem, build_problem
 from .verify import (ConstraintCheck, Verification, base_run, check_verification_settings, format_verification,
-                     verify_from, write_constraint_table, write_rounds, write_verification)
+                     store_verification, verify_from, write_constraint_table, write_verification)
 
 
 @dataclass
@@ -116,34 +116,29 @@ def format_any_verification(v: AnyVerification) -> str:
 
 
 def store_any_verification(path: Any, v: AnyVerification, rounds: list[dict[str, Any]] | None = None) -> None:
-    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced).
+    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced): one
+    case in the layout of :func:`~dynsens.optimize.verify.write_verification`, load cases in that
+    of :func:`write_over_cases`; ``rounds/`` when the bounds were tightened."""
+    store_verification(path, v, rounds, write=write_verification if isinstance(v, Verification) else write_over_cases)
 
-    One case: the layout of :func:`~dynsens.optimize.verify.write_verification`.  Load cases:
-    attributes ``passed`` (in every load case), ``refine``, ``warnings`` (JSON, each prefixed by
+
+def write_over_cases(g: Any, v: LoadCaseVerification) -> None:
+    """Write the verification over load cases ``v`` into the (empty) HDF5 group ``g``.
+
+    Attributes ``passed`` (in every load case), ``refine``, ``warnings`` (JSON, each prefixed by
     its load case), ``x``, ``load_cases`` (JSON list of names) and ``failing`` (JSON list);
     ``constraints/{label, status, note, load_case}`` and ``value_<run>``, ``margin_<run>``: every
     constraint in the optimizer's order, each from its own load case's runs (NaN where a load case
-    has no such run); ``load_cases/<name>/``: that load case's verification in the one-case
-    layout; ``rounds/`` as for one case.
+    has no such run); ``load_cases/<name>/``: that load case's verification in the one-case layout.
     """
     import h5py
-    with h5py.File(path, "a") as f:
-        if "verification" in f:
-            del f["verification"]
-        g = f.create_group("verification")
-        if isinstance(v, Verification):
-            write_verification(g, v)
-        else:
-            g.attrs.update({"passed": v.passed, "refine": v.refine, "warnings": json.dumps(v.warnings),
-                            "x": np.asarray(v.x, dtype=float), "load_cases": json.dumps(list(v.cases)),
-                            "failing": json.dumps(v.failing)})
-            runs = list(dict.fromkeys(r.name for cv in v.cases.values() for r in cv.runs))
-            c = g.create_group("constraints")
-            write_constraint_table(c, v.constraints, runs)
-            case_of = {id(k): n for n, cv in v.cases.items() for k in cv.constraints}
-            c.create_dataset("load_case", data=np.array([case_of[id(k)] for k in v.constraints],
-                                                        dtype=h5py.string_dtype()))
-            for name, cv in v.cases.items():
-                write_verification(g.create_group(f"load_cases/{name}"), cv)
-        if rounds:
-            write_rounds(g, rounds)
+    g.attrs.update({"passed": v.passed, "refine": v.refine, "warnings": json.dumps(v.warnings),
+                    "x": np.asarray(v.x, dtype=float), "load_cases": json.dumps(list(v.cases)),
+                    "failing": json.dumps(v.failing)})
+    runs = list(dict.fromkeys(r.name for cv in v.cases.values() for r in cv.runs))
+    c = g.create_group("constraints")
+    write_constraint_table(c, v.constraints, runs)
+    case_of = {id(k): n for n, cv in v.cases.items() for k in cv.constraints}
+    c.create_dataset("load_case", data=np.array([case_of[id(k)] for k in v.constraints], dtype=h5py.string_dtype()))
+    for name, cv in v.cases.items():
+        write_verification(g.create_group(f"load_cases/{name}"), cv)
