@@ -98,11 +98,21 @@ def _run_contents(f: h5py.Group) -> list[str]:
     if "verification" in f:
         v = f["verification"]
         out.append(f"  verification: {'passed' if bool(v.attrs['passed']) else 'NOT passed'}"
-                   + (f" after {len(v['rounds/f']) - 1} tightening round(s)" if "rounds" in v else ""))
+                   + (f" after {len(v['rounds/f']) - 1} tightening round(s)" if "rounds" in v else "")
+                   + _per_load_case(v))
     if "modes/frequencies" in f:
         fr = f["modes/frequencies"][()]
         out.append("  modes: " + ", ".join(f"{x:.6g}" for x in fr) + " Hz")
     return out
+
+
+def _per_load_case(v: h5py.Group) -> str:
+    """', in load cases impact (passed), gust (NOT passed)' for a verification over load cases."""
+    if "load_cases" not in v.attrs:
+        return ""
+    failing = set(json.loads(_text(v.attrs["failing"])))
+    return ", in load cases " + ", ".join(f"{n} ({'NOT passed' if n in failing else 'passed'})"
+                                         for n in json.loads(_text(v.attrs["load_cases"])))
 
 
 @cli.command("info")

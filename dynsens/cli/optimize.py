@@ -12,7 +12,7 @@ import numpy as np
 from ..case.load_cases import LoadCaseSet, load_any_case
 from ..optimize import FEAS_TOL, OptimizationError, OptimizationResult, StartOutcome, plot_optimization
 from ..optimize.verified import optimize_verified
-from ..optimize.verify import Verification, format_verification
+from ..optimize.verify_cases import AnyVerification, format_any_verification
 from ..optimize.summary import decision_summary
 from ..timeloop.progress import Progress
 from .main import cli
@@ -87,12 +87,9 @@ def format_verdict(o: StartOutcome) -> str:
     return f"{conv} {feas}"
 
 
-def _prepare_load_cases(case: LoadCaseSet, case_file: str, plots: str | None, starts: int | None,
-                        workers: int | None, scheduler: str | None) -> None:
-    """Refuse what load cases cannot do yet; with one start, run its load cases in parallel on
-    ``--workers``/``--scheduler`` (with several starts the starts run in parallel instead)."""
-    if plots:
-        raise click.UsageError(f"--plots: not available for a case with load_cases yet ({case_file})")
+def _prepare_load_cases(case: LoadCaseSet, starts: int | None, workers: int | None, scheduler: str | None) -> None:
+    """With one start, run the load cases in parallel on ``--workers``/``--scheduler`` (with
+    several starts the starts run in parallel instead)."""
     if (starts or 1) == 1 and (scheduler or (workers or 1) > 1):
         from ..executor import make_executor
         case.executor = make_executor(workers, scheduler, tasks=len(case.cases))
@@ -129,7 +126,8 @@ def _prepare_load_cases(case: LoadCaseSet, case_file: str, plots: str | None, st
                    "shortfall, at most this many times [default: the case's optimization.verification.rounds].")
 @click.option("--plots", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write PNG plots to DIR: history (objective, violation, KKT), design variables and "
-                   "constraints against their bounds in units, recorded quantities at start and optimum.")
+                   "constraints against their bounds in units, recorded quantities at start and optimum "
+                   "(per load case for a case with load_cases).")
 @verbosity_options
 def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tuple[str, ...], x0: dict[str, float],
              maxiter: int | None, ftol: float | None, starts: int | None, seed: int | None,
@@ -165,11 +163,12 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         check_output(output)
     several = isinstance(case, LoadCaseSet)
     if several:
-        _prepare_load_cases(case, case_file, plots, starts, workers, scheduler)
+        _prepare_load_cases(case, starts, workers, scheduler)
     if plots:
         from ..io.paths import check_output_folder
         from ..optimize.plots import plot_files
-        check_output_folder(plots, plot_files(output, plots), overwrite or resume, option="--plots")
+        check_output_folder(plots, plot_files(output, plots, list(case.cases) if several else ()),
+                            overwrite or resume, option="--plots")
     if case.optimization is None:
         raise OptimizationError(f"{case_file} has no 'optimization' section: add one with an objective "
                                 "and constraints (see docs/case-files.md and docs/optimization.md)")
@@ -199,11 +198,11 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
                    f"({o.message}), {'feasible' if o.feasible else 'infeasible'}, {o.nit} iterations, "
                    f"{o.n_sim} simulations ({o.n_failed} failed)")
 
-    def on_round(k: int, v: Verification) -> None:
+    def on_round(k: int, v: AnyVerification) -> None:
         bar.close()
         click.echo("")
         click.echo(f"verification of the optimum{'' if k == 0 else f' (round {k}, bounds tightened)'}:")
-        click.echo(format_verification(v))
+        click.echo(format_any_verification(v))
         if not v.passed and k < n_rounds:
             click.echo(f"round {k + 1}: re-optimizing from the optimum with the failing bounds tightened")
 
@@ -233,9 +232,6 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
     if plots:
         for p in plot_optimization(output, plots):
             click.echo(f"plot: {p}")
-    if several:
-        click.echo(f"load cases {', '.join(case.cases)}: not verified at a refined step (not available for "
-                   "load cases yet); their runs at the optimum are in /optimization/load_cases/NAME/optimum")
     if verification is not None:
         click.echo("verified: the optimum passes the verification" if verification.passed else
                    "NOT VERIFIED: the optimum fails the verification (see above and /verification in the file)")

@@ -7,9 +7,10 @@ import click
 import h5py
 import numpy as np
 
-from ..case.load import load_case
+from ..case.load_cases import LoadCaseSet, load_any_case
 from ..optimize.problem import OptimizationError
-from ..optimize.verify import format_verification, verify_design
+from ..optimize.verify import verify_design
+from ..optimize.verify_cases import AnyVerification, format_any_verification, verify_load_cases
 from .main import cli
 from .optimize import _parse_x0
 from .options import case_argument, set_option, verbosity_options
@@ -48,11 +49,13 @@ def verify(case_file: str, overrides: tuple[str, ...], from_file: str | None, x0
 
     Runs the design as the case says, at dt/2, on a window extended until the constrained peaks
     settle, and on the window less its last tenth; prints every constraint in each run and, for
-    structural models with bars, every member's largest stress and buckling ratio.  Exit status
-    0 when every constraint and member holds in every run, 1 otherwise.
+    structural models with bars, every member's largest stress and buckling ratio.  A case with
+    load_cases is verified in each load case (at its own step and window), every constraint
+    RESPONSE@CASE in its own load case.  Exit status 0 when every constraint and member holds in
+    every run, 1 otherwise.
     """
     from ..optimize.runner import resolve_x0
-    case = load_case(case_file, overrides)
+    case = load_any_case(case_file, overrides)
     if case.optimization is None:
         raise OptimizationError(f"{case_file} has no 'optimization' section: the verification checks its "
                                 "constraints")
@@ -61,8 +64,12 @@ def verify(case_file: str, overrides: tuple[str, ...], from_file: str | None, x0
     h: float | str | None = spec.horizon
     if horizon is not None:
         h = None if horizon == "none" else "auto" if horizon == "auto" else _time(horizon)
-    v = verify_design(case, x, refine=refine or spec.refine, horizon=h, tail=spec.tail)
-    click.echo(format_verification(v))
+    v: AnyVerification
+    if isinstance(case, LoadCaseSet):
+        v = verify_load_cases(case, x, refine=refine or spec.refine, horizon=h, tail=spec.tail)
+    else:
+        v = verify_design(case, x, refine=refine or spec.refine, horizon=h, tail=spec.tail)
+    click.echo(format_any_verification(v))
     if not v.passed:
         sys.exit(1)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import h5py
 import numpy as np
@@ -18,10 +18,12 @@ from ..io.paths import atomic_path
 # --------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------
-def plot_files(path: str | Path, outdir: str | Path) -> list[Path]:
-    """The files :func:`plot_optimization` may write for the optimization file ``path``."""
+def plot_files(path: str | Path, outdir: str | Path, load_cases: Sequence[str] = ()) -> list[Path]:
+    """The files :func:`plot_optimization` may write for the optimization file ``path`` (of a
+    case with ``load_cases``: one optimum plot per load case)."""
     stem = Path(path).stem
-    return [Path(outdir) / f"{stem}_{kind}.png" for kind in ("history", "design", "constraints", "optimum")]
+    runs = [f"optimum_{n}" for n in load_cases] or ["optimum"]
+    return [Path(outdir) / f"{stem}_{kind}.png" for kind in ("history", "design", "constraints", *runs)]
 
 
 def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
@@ -33,7 +35,9 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
     iterations with its bounds, in its unit), ``<stem>_constraints.png`` (each constrained
     response over the iterations against its bound, in its unit) and ``<stem>_optimum.png``
     (the recorded quantities at the start and at the optimum, with events; without recorded
-    quantities the ``max_lines`` largest coordinate histories q(t) of the best design).
+    quantities the ``max_lines`` largest coordinate histories q(t) of the best design); with
+    load cases one ``<stem>_optimum_<load case>.png`` per load case, from its runs in
+    ``/optimization/load_cases/<name>/``.
     Returns the files written (each atomically; an existing one is replaced only with
     ``overwrite``).
     """
@@ -72,37 +76,51 @@ def plot_optimization(path: str | Path, outdir: str | Path, max_lines: int = 8,
         plt.close(fig)
         written.append(p)
         written += _bounds_plots(f, path, outdir, plt)
-        runs = [r for r in (_stored_run(opt, "initial", "start"), _stored_run(opt, "optimum", "optimum"))
-                if r is not None and r.quantities]
-        if len(runs) == 2:
-            drawn = plot_runs(runs, outdir / f"{path.stem}_optimum.png",
-                              f"{path.name}: recorded quantities at the start (solid) and the optimum (dashed)")
-            if drawn is not None:
-                written.append(drawn)
-        elif "optimum" in opt and "state" in opt["optimum"] and "q" in opt["optimum/state"]:
-            t = opt["optimum/time"][()]
-            q = opt["optimum/state/q"][()]
-            labels = [lb.decode() if isinstance(lb, bytes) else lb for lb in opt["optimum/state"].attrs["q_labels"]]
-            order = np.argsort(-np.max(np.abs(q), axis=0))[:max_lines]
-            fig, ax = plt.subplots(figsize=(7, 4))
-            for j in order:
-                ax.plot(t, q[:, j], label=labels[j] if j < len(labels) else f"q[{j}]")
-            ax.set_xlabel("t [s]")
-            ax.set_ylabel("coordinates q (case units)")
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=8, ncol=2)
-            ax.set_title(f"the {len(order)} largest coordinates at the optimum (no recorded quantities)\n"
-                         + _named_design(f, opt["optimum/x"][()]), fontsize=8)
-            fig.tight_layout()
-            p = outdir / f"{path.stem}_optimum.png"
-            with atomic_path(p, overwrite) as tmp:
-                fig.savefig(tmp, dpi=100, format="png")
-            plt.close(fig)
-            written.append(p)
+        if "load_cases" in opt:        # each load case's start and optimum runs
+            for name in opt["load_cases"]:
+                p_run = _runs_plot(f, opt["load_cases"][name], path, outdir / f"{path.stem}_optimum_{name}.png",
+                                   f"load case {name}", max_lines, overwrite, plt)
+                written += [p_run] if p_run is not None else []
+        else:
+            p_run = _runs_plot(f, opt, path, outdir / f"{path.stem}_optimum.png", "", max_lines, overwrite, plt)
+            written += [p_run] if p_run is not None else []
     return written
 
 
 ZERO_LABEL = "zero (feasible / converged)"
+
+
+def _runs_plot(f: h5py.File, group: h5py.Group, path: Path, out: Path, what: str, max_lines: int,
+               overwrite: bool, plt: Any) -> Path | None:
+    """The recorded quantities of ``group``'s ``initial`` and ``optimum`` runs (without recorded
+    quantities, the ``max_lines`` largest coordinates at the optimum) into ``out``; None when
+    ``group`` holds neither.  ``what`` names the load case in the title ("" for none)."""
+    of = f" ({what})" if what else ""
+    runs = [r for r in (_stored_run(group, "initial", "start"), _stored_run(group, "optimum", "optimum"))
+            if r is not None and r.quantities]
+    if len(runs) == 2:
+        return plot_runs(runs, out, f"{path.name}{of}: recorded quantities at the start (solid) and the "
+                                    "optimum (dashed)")
+    if not ("optimum" in group and "state" in group["optimum"] and "q" in group["optimum/state"]):
+        return None
+    t = group["optimum/time"][()]
+    q = group["optimum/state/q"][()]
+    labels = [lb.decode() if isinstance(lb, bytes) else lb for lb in group["optimum/state"].attrs["q_labels"]]
+    order = np.argsort(-np.max(np.abs(q), axis=0))[:max_lines]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for j in order:
+        ax.plot(t, q[:, j], label=labels[j] if j < len(labels) else f"q[{j}]")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("coordinates q (case units)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, ncol=2)
+    ax.set_title(f"the {len(order)} largest coordinates at the optimum{of} (no recorded quantities)\n"
+                 + _named_design(f, group["optimum/x"][()]), fontsize=8)
+    fig.tight_layout()
+    with atomic_path(out, overwrite) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return out
 
 
 def _positive_on_log(ax: Any, it: np.ndarray, v: np.ndarray, colour: str) -> None:

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -130,21 +130,23 @@ def _has_members(case: Case) -> bool:
 
 
 @dataclass
-class _Run:
+class VerificationRun:
+    """One run's record: how it ended, its response values and sampled peaks, its member check."""
+
     info: RunInfo
     responses: dict[str, float]
     peaks: dict[str, float]          # the sampled extreme of a KS (its value for the others)
     members: MemberCheck | None
 
 
-def _run(case: Case, x: np.ndarray, name: str, members: bool) -> _Run:
+def _run(case: Case, x: np.ndarray, name: str, members: bool) -> VerificationRun:
     t0 = time.perf_counter()
     try:
         res = run_case(case, x, sensitivities=False, history=("q",) if members else ())
     except DynsensError as exc:
         info = RunInfo(name, case.plan.dt, case.plan.t_end, time.perf_counter() - t0,
                        f"{type(exc).__name__}: {exc}", failed=True)
-        return _Run(info, {}, {}, None)
+        return VerificationRun(info, {}, {}, None)
     values = {k: (float(np.real(v.value)) if not v.missing else float("nan")) for k, v in res.responses.items()}
     # a KS grows with the number of samples it sums (up to ln(N)/rho), so a longer window or a
     # finer step raises it without any larger peak: where the peaks are compared, compare the
@@ -153,7 +155,7 @@ def _run(case: Case, x: np.ndarray, name: str, members: bool) -> _Run:
              if v.extra else values[k] for k, v in res.responses.items()}
     chk = check_members(case, x, result=res) if members else None
     info = RunInfo(name, case.plan.dt, case.plan.t_end, time.perf_counter() - t0, res.message)
-    return _Run(info, values, peaks, chk)
+    return VerificationRun(info, values, peaks, chk)
 
 
 def _margin(term: Any, value: float) -> float:
@@ -178,20 +180,39 @@ def verify_design(case: Case, x: Any = None, *, refine: int = 2, horizon: float 
 
     Raises DynsensError when the case has no ``optimization`` section or its own run fails.
     """
+    check_verification_settings(refine, tail)
+    x = case.x0 if x is None else np.asarray(x, dtype=float)
+    base = base_run(case, x)
+    if problem is None:
+        problem = build_problem(case, base.responses)
+    return verify_from(case, x, base, problem, refine=refine, horizon=horizon, tail=tail)
+
+
+def check_verification_settings(refine: int, tail: float) -> None:
+    """OptimizationError unless ``refine`` ≥ 2 and 0 ≤ ``tail`` < 1."""
     if refine < 2:
         raise OptimizationError(f"the verification's refine must be an integer >= 2, found {refine}")
     if not 0.0 <= tail < 1.0:
         raise OptimizationError(f"the verification's tail must lie in [0, 1), found {tail}")
-    x = case.x0 if x is None else np.asarray(x, dtype=float)
-    members = _has_members(case)
-    base = _run(case, x, "case", members)
+
+
+def base_run(case: Case, x: np.ndarray, what: str = "the design") -> VerificationRun:
+    """The ``case`` run of the verification (the case as it stands at ``x``); OptimizationError
+    when it fails (``what`` names the design, or the load case, in the message)."""
+    base = _run(case, x, "case", _has_members(case))
     if base.info.failed:
-        raise OptimizationError(f"the design cannot be verified: its own run failed: {base.info.message}")
-    if problem is None:
-        problem = build_problem(case, base.responses)
+        raise OptimizationError(f"{what} cannot be verified: its own run failed: {base.info.message}")
+    return base
+
+
+def verify_from(case: Case, x: np.ndarray, base: VerificationRun, problem: ScaledProblem, *, refine: int,
+                horizon: float | str | None, tail: float) -> Verification:
+    """The verification runs after the case's own run ``base``, and every constraint of
+    ``problem`` checked in them (see :func:`verify_design`)."""
+    members = base.members is not None
     peaks = peak_type_responses(case)
-    runs: dict[str, _Run] = {"case": base,
-                             "refined": _run(_variant(case, dt_factor=refine), x, "refined", members)}
+    runs: dict[str, VerificationRun] = {"case": base,
+                                        "refined": _run(_variant(case, dt_factor=refine), x, "refined", members)}
     warnings: list[str] = []
     plan = case.plan
     window = plan.t_end - plan.t0
@@ -210,8 +231,8 @@ def verify_design(case: Case, x: Any = None, *, refine: int = 2, horizon: float 
                         member_checks, warnings)
 
 
-def _extend(case: Case, x: np.ndarray, base: _Run, terms: list[Any], horizon: float | str, members: bool,
-            warnings: list[str]) -> _Run:
+def _extend(case: Case, x: np.ndarray, base: VerificationRun, terms: list[Any], horizon: float | str,
+            members: bool, warnings: list[str]) -> VerificationRun:
     """The ``horizon`` run: a stated end time, or windows added until the peaks settle."""
     plan = case.plan
     if horizon != "auto":
@@ -235,7 +256,7 @@ def _extend(case: Case, x: np.ndarray, base: _Run, terms: list[Any], horizon: fl
     return prev
 
 
-def _check(term: Any, runs: dict[str, _Run], peak_type: bool, tail: float) -> ConstraintCheck:
+def _check(term: Any, runs: dict[str, VerificationRun], peak_type: bool, tail: float) -> ConstraintCheck:
     """The constraint ``term`` in every run: the case's run as the optimizer saw it, the others by
     their sampled peaks (a KS rises with its number of samples, so a finer step or a longer
     window would raise it with no larger peak; the requirement is on the peak)."""
@@ -271,8 +292,9 @@ def _check(term: Any, runs: dict[str, _Run], peak_type: bool, tail: float) -> Co
                            runs["case"].peaks.get(term.response, float("nan")), term.divisor)
 
 
-def format_verification(v: Verification) -> str:
-    """The verification as a table and plain sentences, for the terminal."""
+def format_verification(v: Verification, verdict: bool = True) -> str:
+    """The verification as a table and plain sentences, for the terminal (``verdict``: end with
+    the sentence whether the design passes)."""
     head = {"case": "case", "refined": f"dt/{v.refine}", "horizon": "horizon", "tail": "no tail"}
     lines = ["verification runs: " + "; ".join(
         f"{head[r.name]}: dt = {r.dt:.4g} s, t_end = {r.t_end:.4g} s ({r.wall_time:.1f} s"
@@ -286,6 +308,8 @@ def format_verification(v: Verification) -> str:
     late = [c.label for c in v.constraints if c.status == "late peak"]
     if late:
         lines.append("warning: the peak of " + ", ".join(late) + " lies in the last part of the window")
+    if not verdict:
+        return "\n".join(lines)
     lines.append("The design PASSES the verification." if v.passed else
                  "The design does NOT pass the verification: a constraint that holds only on the optimizer's "
                  "time grid and window is not a result (see docs/optimization.md).")
@@ -329,8 +353,9 @@ def _peak_change(c: ConstraintCheck) -> float:
     return max((abs(w - ref) for w in later), default=0.0) / c.divisor if np.isfinite(ref) else 0.0
 
 
-def excesses(v: Verification, problem: ScaledProblem) -> dict[int, float]:
-    """For each constraint term (its index) the verification found violated: how far its worst
+def excesses(v: Any, problem: ScaledProblem) -> dict[int, float]:
+    """For each constraint term (its index) the verification ``v`` (a `Verification`, or one over
+    load cases: its ``constraints`` in the optimizer's order) found violated: how far its worst
     run goes beyond the bound, in the response's unit (> 0)."""
     out: dict[int, float] = {}
     for i, (term, c) in enumerate(zip(problem.constraints, v.constraints)):
@@ -341,54 +366,74 @@ def excesses(v: Verification, problem: ScaledProblem) -> dict[int, float]:
     return out
 
 
-def store_verification(path: Any, v: Verification, rounds: list[dict[str, Any]] | None = None) -> None:
-    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced).
+def store_verification(path: Any, v: Any, rounds: list[dict[str, Any]] | None = None,
+                       write: Callable[[Any, Any], None] | None = None) -> None:
+    """Write ``v`` into the HDF5 file at ``path`` as the group ``/verification`` (replaced), by
+    ``write(group, v)`` (default :func:`write_verification`), with :func:`write_rounds` when the
+    bounds were tightened."""
+    import h5py
+    with h5py.File(path, "a") as f:
+        if "verification" in f:
+            del f["verification"]
+        g = f.create_group("verification")
+        (write or write_verification)(g, v)
+        if rounds:
+            write_rounds(g, rounds)
+
+
+def write_verification(g: Any, v: Verification) -> None:
+    """Write ``v`` into the (empty) HDF5 group ``g``.
 
     Attributes: ``passed``, ``refine``, ``warnings`` (JSON), ``x``; datasets ``runs/{name, dt,
     t_end, wall_time, failed, message}``, ``constraints/{label, status, note}`` and one
     ``constraints/value_<run>`` and ``constraints/margin_<run>`` per run (NaN where not
     applicable), ``members/<run>/{tension, compression, buckling}`` and ``interaction`` where a
-    beam has one (per member, the largest ratio over the stored steps) with attribute ``names``;
-    ``rounds/{bounds, f, passed, x, nit, n_sim, wall_time}``, one row per round, when the bounds
-    were tightened.
+    beam has one (per member, the largest ratio over the stored steps) with attribute ``names``.
     """
     import json
 
     import h5py
     text = h5py.string_dtype()
-    with h5py.File(path, "a") as f:
-        if "verification" in f:
-            del f["verification"]
-        g = f.create_group("verification")
-        g.attrs.update({"passed": v.passed, "refine": v.refine, "warnings": json.dumps(v.warnings),
-                        "x": np.asarray(v.x, dtype=float)})
-        r = g.create_group("runs")
-        r.create_dataset("name", data=np.array([i.name for i in v.runs], dtype=text))
-        r.create_dataset("dt", data=np.array([i.dt for i in v.runs], dtype=float))
-        r.create_dataset("t_end", data=np.array([i.t_end for i in v.runs], dtype=float))
-        r.create_dataset("wall_time", data=np.array([i.wall_time for i in v.runs], dtype=float))
-        r.create_dataset("failed", data=np.array([i.failed for i in v.runs]))
-        r.create_dataset("message", data=np.array([i.message for i in v.runs], dtype=text))
-        c = g.create_group("constraints")
-        c.create_dataset("label", data=np.array([k.label for k in v.constraints], dtype=text))
-        c.create_dataset("status", data=np.array([k.status for k in v.constraints], dtype=text))
-        c.create_dataset("note", data=np.array([k.note for k in v.constraints], dtype=text))
-        for run in (i.name for i in v.runs):
-            c.create_dataset(f"value_{run}", data=np.array([k.values.get(run, np.nan) for k in v.constraints]))
-            c.create_dataset(f"margin_{run}", data=np.array([k.margins.get(run, np.nan) for k in v.constraints]))
-        for run, m in v.members.items():
-            mg = g.create_group(f"members/{run}")
-            mg.attrs["names"] = np.array(m.names, dtype=text)
-            mg.attrs["steps"] = m.steps
-            for kind in ("tension", "compression", "buckling"):
-                mg.create_dataset(kind, data=np.asarray(getattr(m, kind), dtype=float))
-            if np.isfinite(m.interaction).any():       # only beams with a yield stress have one
-                mg.create_dataset("interaction", data=np.asarray(m.interaction, dtype=float))
-        if rounds:
-            rg = g.create_group("rounds")
-            rg.create_dataset("bounds", data=np.array([row["bounds"] for row in rounds], dtype=float))
-            rg.create_dataset("f", data=np.array([row["f"] for row in rounds], dtype=float))
-            rg.create_dataset("passed", data=np.array([row["passed"] for row in rounds]))
-            rg.create_dataset("x", data=np.array([row["x"] for row in rounds], dtype=float))
-            for key in ("nit", "n_sim", "wall_time"):
-                rg.create_dataset(key, data=np.array([row[key] for row in rounds]))
+    g.attrs.update({"passed": v.passed, "refine": v.refine, "warnings": json.dumps(v.warnings),
+                    "x": np.asarray(v.x, dtype=float)})
+    r = g.create_group("runs")
+    r.create_dataset("name", data=np.array([i.name for i in v.runs], dtype=text))
+    r.create_dataset("dt", data=np.array([i.dt for i in v.runs], dtype=float))
+    r.create_dataset("t_end", data=np.array([i.t_end for i in v.runs], dtype=float))
+    r.create_dataset("wall_time", data=np.array([i.wall_time for i in v.runs], dtype=float))
+    r.create_dataset("failed", data=np.array([i.failed for i in v.runs]))
+    r.create_dataset("message", data=np.array([i.message for i in v.runs], dtype=text))
+    write_constraint_table(g.create_group("constraints"), v.constraints, [i.name for i in v.runs])
+    for run, m in v.members.items():
+        mg = g.create_group(f"members/{run}")
+        mg.attrs["names"] = np.array(m.names, dtype=text)
+        mg.attrs["steps"] = m.steps
+        for kind in ("tension", "compression", "buckling"):
+            mg.create_dataset(kind, data=np.asarray(getattr(m, kind), dtype=float))
+        if np.isfinite(m.interaction).any():       # only beams with a yield stress have one
+            mg.create_dataset("interaction", data=np.asarray(m.interaction, dtype=float))
+
+
+def write_constraint_table(c: Any, constraints: list[ConstraintCheck], runs: list[str]) -> None:
+    """Datasets ``label``, ``status``, ``note`` and ``value_<run>``, ``margin_<run>`` per run
+    (NaN where the constraint has no value in that run) into the HDF5 group ``c``."""
+    import h5py
+    text = h5py.string_dtype()
+    c.create_dataset("label", data=np.array([k.label for k in constraints], dtype=text))
+    c.create_dataset("status", data=np.array([k.status for k in constraints], dtype=text))
+    c.create_dataset("note", data=np.array([k.note for k in constraints], dtype=text))
+    for run in runs:
+        c.create_dataset(f"value_{run}", data=np.array([k.values.get(run, np.nan) for k in constraints]))
+        c.create_dataset(f"margin_{run}", data=np.array([k.margins.get(run, np.nan) for k in constraints]))
+
+
+def write_rounds(g: Any, rounds: list[dict[str, Any]]) -> None:
+    """``rounds/{bounds, f, passed, x, nit, n_sim, wall_time}`` into the HDF5 group ``g``: one row
+    per optimization round (the bounds of every constraint term, the optimum and its verdict)."""
+    rg = g.create_group("rounds")
+    rg.create_dataset("bounds", data=np.array([row["bounds"] for row in rounds], dtype=float))
+    rg.create_dataset("f", data=np.array([row["f"] for row in rounds], dtype=float))
+    rg.create_dataset("passed", data=np.array([row["passed"] for row in rounds]))
+    rg.create_dataset("x", data=np.array([row["x"] for row in rounds], dtype=float))
+    for key in ("nit", "n_sim", "wall_time"):
+        rg.create_dataset(key, data=np.array([row[key] for row in rounds]))
