@@ -17,7 +17,7 @@ cleaning time t_F, the objective, the largest member stress and buckling ratios,
 constraints, feasibility, and each optimization's iterations, simulations and wall time.  The
 plot goes to ``docs/virtuous_circle.png``.
 
-Usage: python scripts/virtuous_circle.py [--out results/virtuous_circle] [--reuse] [--maxiter N]
+Usage: python scripts/virtuous_circle.py [--out results/virtuous_circle] [--reuse] [--maxiter N] [--only NAME]
 (``--reuse`` takes an optimization already recorded in OUT/<name>.json instead of running it.)
 """
 from __future__ import annotations
@@ -150,14 +150,24 @@ def main() -> None:
     ap.add_argument("--reuse", action="store_true", help="take optimizations recorded in OUT")
     ap.add_argument("--maxiter", type=int, default=None, help="iteration limit of each optimization")
     ap.add_argument("--figure", type=Path, default=FIGURE)
+    ap.add_argument("--only", action="append", choices=("joint", "rigid", "sizing"),
+                    help="run (or reuse) only these optimizations and stop (repeatable; sizing needs rigid)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     raw = flexible_raw()
     start = {v["name"]: float(v["value"]) for v in raw["design"]["variables"]}
-    runs = {"joint": optimize("joint", FLEXIBLE, args.out, args.reuse, args.maxiter),
-            "rigid": optimize("rigid", RIGID, args.out, args.reuse, args.maxiter)}
+    wanted = args.only or ["joint", "rigid", "sizing"]
+    runs = {}
+    if "joint" in wanted:
+        runs["joint"] = optimize("joint", FLEXIBLE, args.out, args.reuse, args.maxiter)
+    if "rigid" in wanted or "sizing" in wanted:
+        runs["rigid"] = optimize("rigid", RIGID, args.out, args.reuse or "rigid" not in wanted, args.maxiter)
+    if "sizing" in wanted:
+        geometry = {k: runs["rigid"]["x"][k] for k in GEOMETRY}
+        runs["sizing"] = optimize("sizing", with_fixed(raw, geometry), args.out, args.reuse, args.maxiter)
+    if args.only:
+        return
     geometry = {k: runs["rigid"]["x"][k] for k in GEOMETRY}
-    runs["sizing"] = optimize("sizing", with_fixed(raw, geometry), args.out, args.reuse, args.maxiter)
     designs = {"start": start,
                "rigid optimum": {**start, **geometry},
                "rigid, then sized": {**start, **geometry, **runs["sizing"]["x"]},
