@@ -256,3 +256,20 @@ def ipopt_missing() -> bool:
                            "(apt-get install coinor-libipopt-dev liblapack-dev libblas-dev pkg-config; "
                            "pip install 'dynsens[ipopt]')")
     return missing
+
+
+def ctrl_c_after_rows(monkeypatch, rows: int = 3):  # type: ignore[no-untyped-def]
+    """Make ``dynsens optimize`` stop as Ctrl-C does once ``rows`` iteration rows are written (its
+    progress callback raises KeyboardInterrupt); returns the real callback, to restore."""
+    import dynsens.cli.optimize as cli_opt
+    real, seen = cli_opt.progress_line, []
+
+    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
+        if msg["kind"] == "iteration":
+            seen.append(msg["row"]["iteration"])
+            if len(seen) == rows:                 # rows 0 .. rows-1 are written: Ctrl-C now
+                raise KeyboardInterrupt
+        return real(msg, objective)
+
+    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    return real

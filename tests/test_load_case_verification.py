@@ -25,7 +25,7 @@ from dynsens.cli.main import cli
 from dynsens.optimize.verify_cases import format_any_verification, store_any_verification, verify_load_cases
 from dynsens.postcheck import check_members
 from dynsens.simulation import run_case
-from helpers import SDOF_DESIGN
+from helpers import SDOF_DESIGN, ctrl_c_after_rows
 
 REPO = Path(__file__).resolve().parents[1]
 TWO_LOADS = REPO / "cases" / "truss_two_loads.yaml"
@@ -187,17 +187,7 @@ def test_resume_of_an_interrupted_two_load_optimization_reaches_the_same_optimum
         x_ref, f_ref = f["verification"].attrs["x"], float(f["optimization/summary/f"][0])
         x_round0 = f["verification/rounds/x"][0]
     out = tmp_path / "opt.h5"
-    real = cli_opt.progress_line
-    seen = []
-
-    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
-        if msg["kind"] == "iteration":
-            seen.append(msg["row"]["iteration"])
-            if len(seen) == 3:                    # rows 0, 1, 2 are written: Ctrl-C now
-                raise KeyboardInterrupt
-        return real(msg, objective)
-
-    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    real = ctrl_c_after_rows(monkeypatch)
     r = invoke("optimize", TWO_LOADS, "-o", out)
     assert r.exit_code == 130 and "--resume" in r.output, r.output
     with h5py.File(out, "r") as f:

@@ -26,7 +26,7 @@ from dynsens.cli.main import cli
 from dynsens.errors import ConvergenceError, ModelError
 from dynsens.postcheck import check_members
 from dynsens.responses.base import ResponseValue
-from helpers import SDOF_DESIGN
+from helpers import SDOF_DESIGN, ctrl_c_after_rows
 
 REPO = Path(__file__).resolve().parents[1]
 TRUSS = REPO / "cases" / "truss_lightweight.yaml"
@@ -97,17 +97,7 @@ def test_interrupted_run_keeps_history_and_resume_finishes(tmp_path: Path, monke
     ref, r_ref = truss_optimum
     assert r_ref.exit_code == 0
     f_ref = history(ref)["f"][-1]
-    real = cli_opt.progress_line
-    seen = []
-
-    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
-        if msg["kind"] == "iteration":
-            seen.append(msg["row"]["iteration"])
-            if len(seen) == 3:                    # rows 0, 1, 2 are written: Ctrl-C now
-                raise KeyboardInterrupt
-        return real(msg, objective)
-
-    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    real = ctrl_c_after_rows(monkeypatch)
     r = invoke("optimize", TRUSS, "-o", out, "--no-verify")
     assert r.exit_code == 130 and "--resume" in r.output
     with h5py.File(out, "r") as f:                # readable, nothing lost

@@ -18,7 +18,7 @@ import dynsens
 from dynsens.case.load import load_case_dict
 from dynsens.errors import CaseError
 from dynsens.optimize.problem import OptimizationError
-from helpers import ipopt_missing
+from helpers import ctrl_c_after_rows, ipopt_missing
 
 REPO = Path(__file__).resolve().parents[1]
 F1, F2, A1, A2 = 10.0, 30.0, 0.2, 0.3
@@ -147,16 +147,7 @@ def test_ipopt_is_interrupted_resumed_and_multi_started_like_the_others(tmp_path
     case = tmp_path / "pair.yaml"
     case.write_text(yaml.safe_dump(pair(method)))
     out = tmp_path / "opt.h5"
-    real, seen = cli_opt.progress_line, []
-
-    def interrupting(msg, objective):  # type: ignore[no-untyped-def]
-        if msg["kind"] == "iteration":
-            seen.append(1)
-            if len(seen) == 3:
-                raise KeyboardInterrupt
-        return real(msg, objective)
-
-    monkeypatch.setattr(cli_opt, "progress_line", interrupting)
+    real = ctrl_c_after_rows(monkeypatch)
     r = CliRunner().invoke(main, ["optimize", str(case), "-o", str(out), "--no-verify"])
     assert r.exit_code == 130 and "--resume" in r.output, r.output
     with h5py.File(out, "r") as f:
