@@ -23,6 +23,7 @@ class StructuralMatrices:
     traits: Any
     sets: list[Any]
     active: list[Any]
+    providing: dict[str, list[Any]]
     rayleigh: Any
     followers: Any
     rotating_mass: bool
@@ -54,12 +55,8 @@ class StructuralMatrices:
     def _tangent(self, q: np.ndarray, params: dict[str, Any], corotated: bool = True) -> Any:
         """Tangent stiffness K_t = ∂f_int/∂q (dense or sparse); without ``corotated`` that of the
         springs and linear beams only (the part of Rayleigh's β K that does not turn)."""
-        rows, cols, vals = [], [], []
-        for k in self.active:
-            for r, c, v in k.tangent(q, params, corotated):
-                rows.append(r)
-                cols.append(c)
-                vals.append(v)
+        triplets = [t for k in self.providing["tangent"] for t in k.tangent(q, params, corotated)]
+        rows, cols, vals = [t[0] for t in triplets], [t[1] for t in triplets], [t[2] for t in triplets]
         return self._assemble("tangent" if corotated else "tangent_linear", rows, cols, vals,
                               np.result_type(q, params["pv"]))
 
@@ -122,7 +119,7 @@ class StructuralMatrices:
         # the 3D frames' consistent mass is constant (small rotations): kept with the parameters
         Ms = [params["M0"] if self.frame_mass and not self.rotating_mass else self._diagonal_mass(params)]
         Ds = [params["D"]] if self.traits.has_damping else []
-        triplets = [t for k in self.active for t in k.damping_tangent(s.qd, params)]
+        triplets = [t for k in self.providing["damping_tangent"] for t in k.damping_tangent(s.qd, params)]
         if triplets:
             rows, cols, vals = (list(x) for x in zip(*triplets))
             Ds.append(self._assemble("nl_damping", rows, cols, vals, np.result_type(s.qd, params["pv"])))

@@ -87,8 +87,12 @@ class StructuralModel(StructuralMatrices, Model):
         context = ModelContext(n, dim, self._scatter, not nonlinear)
         for k in self.sets:
             k.freeze(context)
-        # the sets with elements: the per-iteration loops visit only these (an empty set adds nothing)
+        # the sets with elements; per contribution, those whose kind provides it: the per-iteration
+        # loops visit only these (an empty set, or the protocol's default, adds nothing)
         self.active = [k for k in self.sets if len(k)]
+        self.providing = {name: [k for k in self.active if getattr(type(k), name) is not getattr(ElementKind, name)]
+                          for name in ("internal_force", "damping_force", "inertia_force", "tangent",
+                                       "damping_tangent", "range_problem")}
         self.compiled_kinds = all(k.served_compiled() for k in self.sets)   # declared by the kinds
         # Rayleigh's β K on the deformation rates of the elements that turn (K₀ keeps the others)
         kinds = [d for d in (k.damped_kind() for k in self.sets) if d is not None]
@@ -202,7 +206,7 @@ class StructuralModel(StructuralMatrices, Model):
         f = params["mass"] * s.qdd
         if self.rotating_mass or self.frame_mass:
             qe, qde, qdde = self._ext(s.q), self._ext(s.qd), self._ext(s.qdd)
-            for k in self.active:
+            for k in self.providing["inertia_force"]:
                 fk = k.inertia_force(qe, qde, qdde, params)
                 if fk is not None:
                     f = f + fk
@@ -262,7 +266,7 @@ class StructuralModel(StructuralMatrices, Model):
     def _velocity_forces(self, qd: np.ndarray, params: dict[str, Any]) -> Any:
         """Nodal forces (..., n) of the nonlinear dampers, summed in the sets' order; None without any."""
         f = None
-        for k in self.active:
+        for k in self.providing["damping_force"]:
             fk = k.damping_force(qd, params)
             if fk is not None:
                 f = fk if f is None else f + fk
@@ -273,7 +277,7 @@ class StructuralModel(StructuralMatrices, Model):
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n,), dtype=np.result_type(q, pv))
         first = True
-        for k in self.active:
+        for k in self.providing["internal_force"]:
             fk = k.internal_force(q, params)
             if fk is None:
                 continue
@@ -342,13 +346,12 @@ class StructuralModel(StructuralMatrices, Model):
     def check_state(self, t: float, s: StepState, params: dict[str, Any]) -> None:
         """Raise ModelError when an element leaves its range (e.g. :meth:`Beam3DSet.range_problem`)."""
         qe = None
-        for k in self.active:
-            if type(k).range_problem is not ElementKind.range_problem:
-                qe = self._ext(s.q) if qe is None else qe
-                why = k.range_problem(qe, params)
-                if why:
-                    from ...errors import ModelError
-                    raise ModelError(f"t = {np.real(t):.6g} s: {why}")
+        for k in self.providing["range_problem"]:
+            qe = self._ext(s.q) if qe is None else qe
+            why = k.range_problem(qe, params)
+            if why:
+                from ...errors import ModelError
+                raise ModelError(f"t = {np.real(t):.6g} s: {why}")
 
     def dof_labels(self) -> list[str]:
         return list(self.dof_names)
