@@ -56,6 +56,9 @@ def test_block_sparse_linearization_equals_the_dense_one(name):
 # factorizations (LAPACK's dense LU, the band LU after reordering) differ by 1.4e-9 there; the
 # flexible weir has the same hydraulic states (1.6e-10 measured on a fresh clone)
 GRADIENT_TOL = {"tyrolean_weir": 1e-8, "tyrolean_weir_flexible": 1e-8}
+# the flexible weir's response values, through the same conditioning: 1.6e-12 measured (its KS of
+# the joint forces, the lever model); every other mechanism's values agree to 1e-12
+VALUE_TOL = {"tyrolean_weir_flexible": 1e-11}
 
 
 @pytest.mark.parametrize("name", MECHANISMS)
@@ -68,7 +71,7 @@ def test_sparse_runs_give_the_dense_responses_and_gradients(name):
         if not np.isfinite(r.value):                 # an event not reached within 0.2 s
             assert not np.isfinite(s.value)
             continue
-        assert abs(s.value - r.value) <= 1e-12 * max(abs(r.value), 1e-12), key
+        assert abs(s.value - r.value) <= VALUE_TOL.get(name, 1e-12) * max(abs(r.value), 1e-12), key
         gap = np.linalg.norm(np.asarray(s.gradient) - r.gradient)
         assert gap <= GRADIENT_TOL.get(name, 1e-10) * max(np.linalg.norm(r.gradient), 1e-300), key
 
