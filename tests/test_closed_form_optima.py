@@ -65,10 +65,15 @@ def _methods() -> list:
     return ["SLSQP", "MMA", ipopt]
 
 
-def sdof(method: str) -> dict:
-    raw = copy.deepcopy(SDOF)
+def with_method(case: dict, method: str) -> dict:
+    """A copy of ``case`` optimized by ``method``."""
+    raw = copy.deepcopy(case)
     raw["optimization"]["method"] = method
     return raw
+
+
+def sdof(method: str) -> dict:
+    return with_method(SDOF, method)
 
 
 def test_the_sdof_gradient_matches_central_differences() -> None:
@@ -108,9 +113,7 @@ TMD = {
 
 
 def tmd(method: str) -> dict:
-    raw = copy.deepcopy(TMD)
-    raw["optimization"]["method"] = method
-    return raw
+    return with_method(TMD, method)
 
 
 def test_the_tmd_gradient_matches_central_differences() -> None:
