@@ -59,3 +59,21 @@ def test_a_driven_and_a_free_mechanism_share_the_compiled_linearization():
         for x in (x0, x0 + 1e-3j):
             _linearize(name, x)
     assert _duplicates() == {}
+
+
+def test_a_read_only_state_adds_no_compiled_kinematics():
+    """A state that arrives as a read-only view (a broadcast batch, as the Python force elements'
+    batched path makes) is evaluated by the kinematics already compiled for writeable arrays."""
+    from dynsens.models.multibody.kernel import kernel_params
+    from dynsens.models.multibody.kernel_compiled import CompiledKin
+    case = dynsens.load_case(CASES / "bricard.yaml")
+    model = case.model
+    params = model.parameters(case.x0)
+    q0, qd0, _ = model.initial_state(params)
+    kp = kernel_params(model.layout, params)
+    writeable = CompiledKin(model.layout, kp, q0[None, :], qd0[None, :], np.zeros((1, q0.size)))
+    views = [np.broadcast_to(v, (1, q0.size)) for v in (q0, qd0, np.zeros(q0.size))]   # contiguous
+    assert views[1].flags.c_contiguous and not views[1].flags.writeable
+    read_only = CompiledKin(model.layout, kp, *views)
+    np.testing.assert_array_equal(read_only.Lp[0], writeable.Lp[0])
+    assert _duplicates() == {}

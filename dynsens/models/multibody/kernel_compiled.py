@@ -62,6 +62,11 @@ def _is_block(n_states: int, n_sets: int) -> bool:
     return max(n_states, n_sets) >= POOL_MIN_ENTRIES
 
 
+def _writeable(a: Array) -> Array:
+    """``a``, or a copy of it where it is read-only (the same numbers)."""
+    return a if a.flags.writeable else a.copy()
+
+
 class CompiledKin(Kin):
     """:class:`Kin` of states and parameter sets (real or complex) evaluated by the compiled
     kernel (:mod:`.compiled`); same attributes and shapes (leading axis B = max(Bs, Bp)).  With
@@ -73,8 +78,9 @@ class CompiledKin(Kin):
         self.dtype = dt = np.result_type(q, qd, qdd, kp.pv)          # float64 or complex128
         self.arrays = lay.compiled_arrays()
         self.params = compiled_params(kp, dt)
-        # contiguous, in one dtype: one compiled specialization per dtype
-        q, qd, qdd = np.ascontiguousarray(q, dt), np.ascontiguousarray(qd, dt), np.ascontiguousarray(qdd, dt)
+        # contiguous, writeable, in one dtype: one compiled specialization per dtype (numba types a
+        # read-only view, e.g. a broadcast state, as another array: tests/test_one_signature.py)
+        q, qd, qdd = (_writeable(np.ascontiguousarray(a, dt)) for a in (q, qd, qdd))
         self.q, self.qd = q, qd
         if computed is None:
             computed = self._compute(q, qd, qdd, pool)
