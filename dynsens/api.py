@@ -12,6 +12,7 @@ Keyword names may also use ``__`` for the dots (``integrator__t_end=2.0``).
 """
 from __future__ import annotations
 
+import copy
 import json
 import tempfile
 from dataclasses import dataclass
@@ -96,6 +97,25 @@ def as_case(case: CaseLike, overrides: Mapping[str, Any] | None = None) -> Case:
     if isinstance(case, Mapping):
         return load_case_dict(dict(case), "<dict>", sets)
     raise TypeError(f"expected a Case, a path or a mapping, found {type(case).__name__}")
+
+
+def as_any_case(case: Any, overrides: Mapping[str, Any] | None = None) -> Any:
+    """As `as_case`, but a case with named ``load_cases`` (a path, a mapping or a
+    `~dynsens.case.load_cases.LoadCaseSet`) gives its `LoadCaseSet`, for `optimize`."""
+    from .case.load_cases import LoadCaseSet, apply_overrides, has_load_cases, load_case_set, load_case_set_file
+    sets = _override_strings(overrides or {})
+    if isinstance(case, LoadCaseSet):
+        if not sets:
+            return case
+        case = yaml.safe_load(case.text)
+    if isinstance(case, (str, Path)) and has_load_cases(case):
+        return load_case_set_file(case, sets)
+    if isinstance(case, Mapping) and "load_cases" in case:
+        raw = copy.deepcopy(dict(case))
+        if sets:
+            apply_overrides(raw, sets, "<dict>")
+        return load_case_set(raw, "<dict>")
+    return as_case(case, overrides)
 
 
 @dataclass
@@ -259,7 +279,8 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     Parameters
     ----------
     case
-        A case with an ``optimization`` section (Case, path or mapping).
+        A case with an ``optimization`` section (Case, path or mapping); a case with named
+        ``load_cases`` optimizes over them (``RESPONSE@CASE``, docs/load_cases.md).
     output
         OPT.h5 to write as ``dynsens optimize -o`` does; None runs in memory (the file is
         kept in a temporary directory for the run and removed afterwards).
@@ -284,7 +305,7 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
         raise ValueError(f"ftol: expected a finite number > 0, found {ftol!r}")
     if resume and output is None:
         raise ValueError("resume=True continues the run recorded in an output file: give output")
-    c = as_case(case, overrides)
+    c = as_any_case(case, overrides)
     tmp = tempfile.TemporaryDirectory(prefix="dynsens-opt-") if output is None else None
     path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
     try:

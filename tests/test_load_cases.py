@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
+import dynsens
+
 from dynsens.case.load import load_case_dict
 from dynsens.case.load_cases import aggregate_over_cases, evaluate_load_cases, load_case_set
 from dynsens.errors import CaseError
@@ -203,6 +205,14 @@ def test_optimize_the_shipped_two_load_case_truss_to_a_feasible_design_active_in
     res = _cli(["optimize", str(TWO_LOADS), "-o", str(tmp_path / "parallel.h5"), "--workers", "2", "--no-verify"])
     assert res.exit_code == 0 and "in parallel on 2 local processes" in res.output, res.output
     assert np.array_equal(_optimum(tmp_path / "parallel.h5", "impact")[0], x)
+    # the Python API optimizes the same load cases (a path; and a mapping with an override) to
+    # the same design (it refused load cases before)
+    api = dynsens.optimize(TWO_LOADS, verify=False)
+    assert api.success and api.feasible and np.array_equal(api.x, x)
+    assert abs(api.constraints["stress_ks@gust"] - gust["stress_ks"]) == 0.0
+    raw = yaml.safe_load(TWO_LOADS.read_text(encoding="utf-8"))
+    short = dynsens.optimize(raw, verify=False, maxiter=1)
+    assert short.nit <= 1 and set(short.constraints) == set(api.constraints)
 
 
 def test_a_dominated_load_case_stays_inactive_and_the_optimum_is_the_single_case_one(tmp_path: Path):

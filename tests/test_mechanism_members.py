@@ -67,6 +67,38 @@ def test_hanging_mass_stretches_the_bar_by_m_g_L_over_E_A():
     assert abs(r["mass"].gradient[0] / (rho * L) - 1) < 1e-14
 
 
+def test_a_bar_given_its_static_initial_force_starts_in_equilibrium():
+    """``initial_force: N0`` sets the free length L0 = Li E A/(E A + N0): with N0 = m_node g (an
+    expression of the design A, as a case written for a static start gives it) the hanging mass
+    holds at its initial pose −L for the whole second, at every A, so y, force and strain are the
+    closed forms y = −L, N = m_node g, ε = N/(EA) and dy/dA = 0; the mass counts the bar at its
+    initial length.  (Without ``initial_force`` the same bar stretches by δ, the test above.)"""
+    E, m, L, rho, A = 2.0e9, 2.0, 1.0, 7800.0, 1.0e-6
+    raw = _hanging(E, m, L, rho, A)
+    raw["model"]["members"][0].update(damping=0.0, initial_force=f"({m} + {rho}*A*{L}/2)*{G}")
+    res = dynsens.run_case(load_case_dict(raw))
+    r = res.responses
+    m_node = m + rho * A * L / 2
+    assert abs(r["y_end"].value + L) < 1e-12 * L
+    assert abs(r["y_end"].gradient[0]) < 1e-12 * m * G * L / (E * A * A)
+    assert abs(r["force_end"].value / (m_node * G) - 1) < 1e-12
+    assert abs(r["strain_end"].value / (m_node * G / (E * A)) - 1) < 1e-9
+    assert abs(r["mass"].value - (m + rho * A * L)) < 1e-15
+
+
+def test_gradients_through_a_bar_pretension():
+    """A pretension that does not balance the load (half the weight, an expression of A) makes
+    the mass oscillate: the gradients through the free length L0(A, N0(A)) against the complex
+    step of the whole run (1e-8) and the adjoint (1e-10)."""
+    raw = _hanging()
+    raw["integrator"]["t_end"] = 0.05
+    raw["model"]["members"][0].update(initial_force=f"0.5*(2.0 + 7800.0*A/2)*{G}*A/1.0e-6")
+    case = load_case_dict(raw)
+    res = dynsens.run_case(case)
+    assert abs(res.responses["y_end"].value + 1.0) > 1e-7          # it moved
+    assert_gradients_match_complex_step_and_adjoint(case, res, rtol_cs=1e-8, rtol_adjoint=1e-10)
+
+
 def _pendulum(dt, rod):
     """cases/point_pendulum.yaml at step dt with its distance joint ('joint') or a bar of E A = 1e12 N
     ('bar') as the rod; the rod force response reads the joint's multiplier or the bar's tension."""
@@ -123,6 +155,7 @@ def _raw():
     (lambda m: m[0].pop("area"), "model.members[0].area", "missing"),
     (lambda m: m[0].update(E=-1.0), "model.members[0].E", ""),
     (lambda m: m[0].update(aera=1.0), "model.members[0].aera", "did you mean 'area'"),
+    (lambda m: m[0].update(initial_force=-1e15), "model.members[0].initial_force", "initial force > -E A"),
     (lambda m: m.append(dict(m[0])), "model.members[1].name", "duplicate"),
     (lambda m: m[0].update(type="beam", G=1.0, Iy=1.0, Iz=1.0, J=1.0), "model.members[0].nodes[1]",
      "no orientation"),

@@ -191,6 +191,9 @@ MODEL_SECTIONS: dict[str, Section] = {
         _req("E", "expr", "Young's modulus"), _req("area", "expr", "cross-section area"),
         _k("density", "expr", "density (mass lumped on the nodes)", default=0.0),
         _k("damping", "expr", "axial dashpot c (force·time/length)", default=0.0),
+        _k("initial_force", "expr", "tension N0 (force) the bar carries at the initial pose: its free length "
+           "becomes L0 = Li E A/(E A + N0), Li the initial length (a pretension, or the static force of a "
+           "start from equilibrium)", default=0.0),
     ), type_value="bar"),
     "multibody.member.beam": Section("members[i], type: beam", "A 3D co-rotational Euler–Bernoulli beam between two "
                                      "node frames (rigid bodies or ground markers); lumped mass and rotary "

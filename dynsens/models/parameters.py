@@ -55,6 +55,8 @@ class ParameterTable:
         self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
         # hollow sections whose wall must leave a hole: (wall index, {width name: index}, path)
         self._walls: list[tuple[int, dict[str, int], str]] = []
+        # bar pretensions that must leave a positive free length, N0 > −E A: (N0, E, A, path)
+        self._pretensions: list[tuple[int, int, int, str]] = []
         # symmetric matrices that must be positive definite: (index matrix, path, what)
         self._definite: list[tuple[tuple[tuple[int, ...], ...], str, str]] = []
 
@@ -122,6 +124,12 @@ class ParameterTable:
         if wall >= 0 and all(i >= 0 for i in widths.values()):
             self._walls.append((wall, dict(widths), path))
 
+    def require_pretension(self, force: int, modulus: int, area: int, path: str) -> None:
+        """A bar's initial tension (entry ``force``) must exceed −E A at every design, so that
+        its free length L0 = Li E A/(E A + N0) is positive and finite."""
+        if min(force, modulus, area) >= 0:
+            self._pretensions.append((force, modulus, area, path))
+
     def require_positive_definite(self, matrix: Sequence[Sequence[int]], path: str, what: str) -> None:
         """The symmetric matrix of entries ``matrix`` (an index per row and column, e.g. an
         inertia tensor) must be positive definite at every design."""
@@ -136,7 +144,8 @@ class ParameterTable:
         values, out, bad = self._evaluated(env)
         out += self._derivative_problems(env, bad)
         # the rules, each on the entries that have a value (an entry in ``bad`` is reported above)
-        for rule in (self._range_problems, self._nonzero_problems, self._definite_problems, self._wall_problems):
+        for rule in (self._range_problems, self._nonzero_problems, self._definite_problems, self._wall_problems,
+                     self._pretension_problems):
             out += rule(values, bad, env)
         return out
 
@@ -217,6 +226,18 @@ class ParameterTable:
                 found = ", ".join(f"{n} = {v:.6g}" for n, v in thick.items())
                 out.append((path, f"expected a wall t <= {' and '.join(f'{n}/2' for n in widths)} "
                                   f"(a section that exists), found t = {t:.6g} with {found}"))
+        return out
+
+    def _pretension_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Bar pretensions N0 <= −E A (no positive free length)."""
+        out = []
+        for force, modulus, area, path in self._pretensions:
+            if bad.intersection([force, modulus, area]):
+                continue
+            EA = values[modulus] * values[area]
+            if values[force] <= -EA:
+                out.append((path, f"expected an initial force > -E A = {-EA:.6g} (a positive free length), "
+                                  f"found {values[force]:.6g}"))
         return out
 
     def depends_on_design(self, index: int) -> bool:

@@ -16,17 +16,21 @@ Bar (``type: bar``).  An axial element between the nodes' attachment points P_1,
 
     ε = (L − L0) / L0,      N = E A ε + c L̇,      σ = N / A,
 
-L = ‖P_2 − P_1‖, L0 the distance at the initial (guess) pose, N the tension (force unit), σ
-the nominal stress (force / length²), c an optional axial dashpot (force·time/length).  The
+L = ‖P_2 − P_1‖, N the tension (force unit), σ the nominal stress (force / length²), c an
+optional axial dashpot (force·time/length).  L0 is the free length: the distance Li at the initial
+(guess) pose, or, with ``initial_force: N0``, L0 = Li E A/(E A + N0), so that the bar carries N0
+at the initial pose — a pretension, or the static force that lets a mechanism with elastic
+members start from equilibrium (the start pressure ``static`` of a cylinder then holds it).  The
 engineering strain makes the bar an exact linear spring of stiffness EA/L0 along its current
 axis — geometrically nonlinear (large rotations), materially linear in L — so a hanging mass
 stretches it by exactly m g L0/(E A).  The law is the spring-damper's (:func:`.forces.spring_law`
 with k = EA/L0), which both kernels (numpy and compiled) know with its exact Jacobian.
 
-Mass.  Each member's mass ρ A L0 is lumped onto its end nodes, ρ A L0/2 each, added to the
-node body's mass at its COM (exact for a point-mass node or a marker at the COM; a half on the
-ground does not move, but the ``mass`` response counts it).  The node masses therefore depend on
-the design (A, ρ, L0), and so do the weight, the inertia forces and the ``mass`` response.  For
+Mass.  Each member's mass ρ A Li (Li its length at the initial pose; Li = L0 without a
+pretension) is lumped onto its end nodes, ρ A Li/2 each, added to the node body's mass at its COM
+(exact for a point-mass node or a marker at the COM; a half on the ground does not move, but the
+``mass`` response counts it).  The node masses therefore depend on the design (A, ρ, Li), and so
+do the weight, the inertia forces and the ``mass`` response.  For
 a bar hanging under its own weight the lumping is exact at the free end: the continuous bar's
 end displacement ρ g L²/(2E) equals (ρ A L/2) g L/(E A).
 
@@ -69,6 +73,7 @@ class Bar(SpringDamper):
     A: int = -1
     rho: int = -1
     nodes: tuple[int, int] = (GROUND, GROUND)
+    initial_length: str = ""     # the key of Li in params.scal ("": Li = L0, no pretension)
 
     law_kind = 0       # the spring-damper's law (compiled kernel too)
 
@@ -79,8 +84,8 @@ class Bar(SpringDamper):
         return np.array([pv[self.E] * pv[self.A] / L0, 0.0 * L0, pv[self.c], L0])
 
     def half_mass(self, prm: MBParams) -> Any:
-        """ρ A L0 / 2 (mass unit): the share of each end node."""
-        return 0.5 * prm.pv[self.rho] * prm.pv[self.A] * prm.scal[self.free_length]
+        """ρ A Li / 2 (mass unit): the share of each end node."""
+        return 0.5 * prm.pv[self.rho] * prm.pv[self.A] * prm.scal[self.initial_length or self.free_length]
 
     def lump_mass(self, prm: MBParams) -> None:
         """Add ρ A L0 / 2 to the mass of each moving end node."""
@@ -92,6 +97,13 @@ class Bar(SpringDamper):
         """The member mass lumped on the ground (not in any body; counted by the ``mass``
         response)."""
         return sum(self.half_mass(prm) for b in self.nodes if b == GROUND)
+
+
+def _free_length(prm: MBParams, length: Any, iE: int, iA: int, iN: int) -> Any:
+    """L0 = Li E A / (E A + N0) (length unit): the free length of a bar that carries the tension
+    N0 at its initial length Li (complex-safe)."""
+    EA = prm.pv[iE] * prm.pv[iA]
+    return length(prm) * EA / (EA + prm.pv[iN])
 
 
 def read_members(rd: Reader, spec: Any, path: str, springs: list, forces: list) -> list[Any]:
@@ -145,9 +157,18 @@ def read_members(rd: Reader, spec: Any, path: str, springs: list, forces: list) 
             rd.attached(b, k, f"node {end} of member '{name}'")
         g1, g2 = rd.global_point_recipe(b1, k1), rd.global_point_recipe(b2, k2)
         key = f"{name}.L0"
-        rd.scal.append((key, lambda prm, _a=g1, _b=g2: np.sqrt(np.sum((_b(prm) - _a(prm)) ** 2))))
+        length = lambda prm, _a=g1, _b=g2: np.sqrt(np.sum((_b(prm) - _a(prm)) ** 2))   # noqa: E731
+        initial = ""
+        if m.get("initial_force") is None:
+            rd.scal.append((key, length))
+        else:
+            iN = rd.num(m.get("initial_force"), f"{mp}.initial_force")
+            rd.table.require_pretension(iN, iE, iA, f"{mp}.initial_force")
+            initial = f"{name}.Li"
+            rd.scal.append((initial, length))
+            rd.scal.append((key, lambda prm, _L=length, _E=iE, _A=iA, _N=iN: _free_length(prm, _L, _E, _A, _N)))
         bar = Bar(name, Diff(Point(b2.index, k2), Point(b1.index, k1)), -1, -1, ic, key,
-                  E=iE, A=iA, rho=irho, nodes=(b1.index, b2.index))
+                  E=iE, A=iA, rho=irho, nodes=(b1.index, b2.index), initial_length=initial)
         springs.append(bar)
         bars.append(bar)
     return bars
