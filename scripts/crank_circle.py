@@ -19,14 +19,13 @@ Usage: python scripts/crank_circle.py [--out results/crank_circle] [--reuse] [--
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 import dynsens
-from virtuous_circle import optimize, table, with_fixed
+from virtuous_circle import bar_panels, optimize, table, with_fixed, write_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "crank_circle.yaml"
@@ -57,25 +56,9 @@ FORMAT = {"A_rod_mm2": ("rod section [mm²]", "{:.1f}"), "rod_mass_kg": ("rod ma
 
 def plot(rows: dict[str, dict], path: Path) -> None:
     """Four panels (rod mass, counterweight, peak bearing force, objective), one bar per design."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    panels = (("rod_mass_kg", "rod mass [kg]"), ("m_cw_kg", "counterweight [kg]"),
-              ("peak_bearing_N", "peak bearing force [kN]"), ("f_N", "objective f [kN]"))
-    names = list(rows)
-    fig, axes = plt.subplots(1, len(panels), figsize=(13, 3.8))
-    for ax, (key, label) in zip(axes, panels):
-        scale = 1e3 if key in ("peak_bearing_N", "f_N") else 1.0
-        ax.bar(range(len(names)), [rows[n][key] / scale for n in names],
-               color=["0.6", "tab:blue", "tab:orange", "tab:green"][:len(names)])
-        ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
-        ax.set_title(label, fontsize=10)
-    fig.suptitle("Slider crank with a sized rod: start, balanced, then sized (sequential), joint optimum")
-    fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    bar_panels(rows, (("rod_mass_kg", "rod mass [kg]", 1.0), ("m_cw_kg", "counterweight [kg]", 1.0),
+                      ("peak_bearing_N", "peak bearing force [kN]", 1e3), ("f_N", "objective f [kN]", 1e3)),
+               "Slider crank with a sized rod: start, balanced, then sized (sequential), joint optimum", path)
 
 
 def main() -> None:
@@ -95,10 +78,7 @@ def main() -> None:
                "balanced, then sized": {"A_rod": runs["then sized"]["x"]["A_rod"], "m_cw": m_cw},
                "joint optimum": runs["joint"]["x"]}
     rows = {name: evaluate(x) for name, x in designs.items()}
-    text = table(rows, runs, FORMAT)
-    print(text)
-    (args.out / "table.md").write_text(text + "\n")
-    (args.out / "table.json").write_text(json.dumps({"designs": designs, "rows": rows, "runs": runs}, indent=1))
+    write_tables(args.out, table(rows, runs, FORMAT), {"designs": designs, "rows": rows, "runs": runs})
     plot(rows, args.figure)
 
 
