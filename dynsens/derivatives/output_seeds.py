@@ -50,6 +50,8 @@ class _Dependence:
         self.cols = cols            # the design variables of the differences
         self.entries = entries      # the batch entries (into the partials' batch)
         self.copies: dict[int, Any] = {}    # the batch stacked B times, by B (:meth:`stacked_copies`)
+        self.pattern = np.zeros((0, state.size), bool)   # which outputs depend on which of ``state``
+        self.colour = np.zeros(state.size, int)          # probe colour of each of ``state``
 
     def stacked_copies(self, model: Any, B: int) -> Any:
         """The output's reduced parameter sets stacked B times by ``model`` (kept per B)."""
@@ -135,12 +137,14 @@ class OutputSeeds:
         o, p = self.outputs[oid], self.partials
         every = np.arange(y.size)
         hit = np.zeros(y.size, bool)
+        pattern = np.zeros((len(o.labels), y.size), bool)
         probes = []
         for size in PROBE_SIZES:
             yp = np.real(y) + size * (1.0 + np.abs(y)) * self._rng.uniform(-1.0, 1.0, y.size)
             probes.append(yp)
             J = self._state_jacobian(o, t, yp, sizes, every)
-            hit |= np.any(J != 0.0, axis=0)          # NaN counts as a dependence
+            pattern |= J != 0.0                      # NaN counts as a dependence
+        hit = np.any(pattern, axis=0)
         state = np.flatnonzero(hit)
         cols = np.zeros(0, int)
         if not o.linear:
@@ -153,8 +157,11 @@ class OutputSeeds:
         entries = self._entries(cols)
         batch = [p._batch[e] for e in entries]
         stacked = self.model.stack_parameters(batch) if cols.size else None
-        self._deps[oid] = _Dependence(state, batch, stacked, cols, entries)
-        return self._deps[oid]
+        dep = _Dependence(state, batch, stacked, cols, entries)
+        dep.pattern = pattern[:, state]
+        dep.colour = probe_colours(dep.pattern)
+        self._deps[oid] = dep
+        return dep
 
     def _entries(self, cols: np.ndarray) -> np.ndarray:
         """The partials' batch entries of the design variables ``cols`` (and the base entry of
@@ -209,10 +216,15 @@ class OutputSeeds:
             W = np.stack(Ws[start:start + per])                                   # (B, k, r)
             B = Y0.shape[0]
             if D:
-                Y = np.repeat(Y0.astype(complex), D, axis=0)                      # (B·D, n_y)
-                Y[np.arange(B * D), np.tile(dep.state, B)] += 1j * STATE_STEP
+                # one probe per colour: components of a colour share no output, so each output's
+                # imaginary part is its derivative along the one component of the colour it has
+                C = int(dep.colour.max()) + 1
+                Y = np.repeat(Y0.astype(complex), C, axis=0)                      # (B·C, n_y)
+                rows = np.repeat(np.arange(B) * C, D) + np.tile(dep.colour, B)
+                Y[rows, np.tile(dep.state, B)] += 1j * STATE_STEP
                 F = self._eval(o, 0.0, self._split(Y, sizes), [], self.stacked_one)
-                J = (np.imag(F) / STATE_STEP).reshape(B, D, -1)                   # (B, D, k)
+                Jc = (np.imag(F) / STATE_STEP).reshape(B, C, -1)                  # (B, C, k)
+                J = Jc[:, dep.colour, :] * dep.pattern.T[None]                    # (B, D, k)
                 ybar = np.einsum("bdk,bkr->bdr", J, W)
                 for b in range(B):
                     out[start + b][0][dep.state] += ybar[b]
@@ -223,3 +235,23 @@ class OutputSeeds:
                 for b in range(B):
                     Dx = self._design_partial(F[b], dep)                          # (k, cols)
                     out[start + b][1][dep.cols] += np.real(Dx).T @ W[b]
+
+
+def probe_colours(pattern: np.ndarray) -> np.ndarray:
+    """A colour per column of the dependence pattern (outputs × components, bool) such that no
+    output depends on two components of one colour (greedy, in column order): a complex step
+    along all components of a colour at once gives every output's derivative along its one."""
+    k, D = pattern.shape
+    colour = np.zeros(D, int)
+    taken: list[np.ndarray] = []            # the outputs touched by each colour
+    for d in range(D):
+        rows = pattern[:, d]
+        for c, used in enumerate(taken):
+            if not np.any(used & rows):
+                used |= rows
+                colour[d] = c
+                break
+        else:
+            colour[d] = len(taken)
+            taken.append(rows.copy())
+    return colour
