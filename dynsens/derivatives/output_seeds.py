@@ -180,7 +180,7 @@ class OutputSeeds:
         else:
             D = np.imag(F)
         div = 2.0 * p.h[part.cols] if p.method == "central" else p.h[part.cols]
-        return part.columns(np.real(D[part.colour] / div[:, None])[None])[0]
+        return part.columns(np.real(D)) / div[:, None]
 
     # ------------------------------------------------------------------ dependence
     def _dependence(self, oid: int, t: float, y: np.ndarray, sizes: list[int]) -> _Dependence:
