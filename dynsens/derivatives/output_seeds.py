@@ -19,14 +19,15 @@ needed at and at two random perturbations of it (generic points).  A dependence 
 at all three points (a branch, e.g. a contact, inactive there) would be missed: the shipped
 outputs have none, and the adjoint-against-direct tests on every shipped case would show one.
 
-The probes are coloured, as sparse Jacobians are (Curtis, Powell & Reid 1974): components (or
-design variables) on which no row depends together are stepped in one probe, and each row
-reads its derivative along its one component of the probe's colour.  An output of k elements
+The probes of a declared pattern are coloured, as sparse Jacobians are (Curtis, Powell & Reid
+1974): components (or design variables) on which no row depends together are stepped in one
+probe, and each row reads its derivative along its one component of the probe's colour.  An output of k elements
 that each read a few DOFs and their own design variables then costs a few probes per instant
 (the colours), not the size of the state plus the number of design variables.  A row depends
 on one member of a colour only, so its value in the probe is the one it has when that member is
-stepped alone: colouring gives the same numbers.  Outputs that evaluate batches take all the
-probes of a block of instants in one call.
+stepped alone: colouring gives the same numbers.  A probed pattern is not coloured (one probe
+per component and per variable): what the probes did not see would mix into another column.
+Outputs that evaluate batches take all the probes of a block of instants in one call.
 """
 from __future__ import annotations
 
@@ -67,13 +68,15 @@ class _Coloured:
         self.mask = mask | alone[:, None]
 
     @classmethod
-    def of(cls, rows: np.ndarray, cols: np.ndarray, k: int) -> _Coloured:
-        """From the (row, column) pairs of a pattern with k rows."""
+    def of(cls, rows: np.ndarray, cols: np.ndarray, k: int, coloured: bool) -> _Coloured:
+        """From the (row, column) pairs of a pattern with k rows; one probe per column unless
+        ``coloured``."""
         used = np.unique(cols)
         pos = np.searchsorted(used, cols)
         mask = np.zeros((used.size, k), bool)
         mask[pos, rows] = True
-        return cls(used, mask, colour_columns([np.flatnonzero(m) for m in mask], used.size))
+        groups = colour_columns([np.flatnonzero(m) for m in mask], used.size) if coloured else None
+        return cls(used, mask, groups)
 
     @property
     def n(self) -> int:
@@ -185,14 +188,18 @@ class OutputSeeds:
     # ------------------------------------------------------------------ dependence
     def _dependence(self, oid: int, t: float, y: np.ndarray, sizes: list[int]) -> _Dependence:
         """The output's pattern (declared, or found once at the state y and two random
-        perturbations of it), its colours and its design probes' parameter sets."""
+        perturbations of it), its probes' colours and its design probes' parameter sets."""
         if oid in self._deps:
             return self._deps[oid]
         o, p = self.outputs[oid], self.partials
         k = len(o.labels)
+        # a declared pattern colours the probes; a probed one does not: a row's dependence the
+        # probe points missed is still taken uncoloured wherever another row needs its column,
+        # coloured it would mix into the derivative along another member of the colour
+        declared = o.pattern is not None
         pattern = o.pattern() if o.pattern is not None else self._probed_pattern(o, t, y, sizes)
-        state = _Coloured.of(pattern.state_rows, pattern.state_cols, k)
-        design = _Coloured.of(pattern.design_rows, pattern.design_cols, k)
+        state = _Coloured.of(pattern.state_rows, pattern.state_cols, k, declared)
+        design = _Coloured.of(pattern.design_rows, pattern.design_cols, k, declared)
         batch = p.perturbed_sets([[int(design.cols[i]) for i in g] for g in design.groups]) \
             if design.cols.size else []
         stacked = self.model.stack_parameters(batch) if batch else None
