@@ -105,20 +105,34 @@ class DesignPartials:
         """The parameter sets of the coloured perturbations, and the index arrays that put
         each colour's difference quotients back into the columns of its variables."""
         assert self.colours is not None
-        model, m, h = self.model, self.m, self.h
-        dx = np.zeros((len(self.colours), m))
+        m = self.m
         colour_of = np.empty(m, int)
         for c, cols in enumerate(self.colours):
-            dx[c, cols] = h[cols]
             colour_of[cols] = c
         self._scatter_rows = np.concatenate([pattern[j] for j in range(m)]).astype(int)
         self._scatter_cols = np.concatenate([np.full(len(pattern[j]), j) for j in range(m)]).astype(int)
         self._scatter_colours = colour_of[self._scatter_cols]
+        return self.perturbed_sets(self.colours)
+
+    def perturbed_sets(self, groups: list[list[int]]) -> list[Any]:
+        """The parameter sets of the perturbations stepping each group of design variables at
+        once (by their steps h), in the batch layout :meth:`_differences` reads (forward: the
+        unperturbed set first; central: all + then all −; complex: imaginary steps).  A group
+        of one variable takes the run's own set of it."""
+        model, m, h = self.model, self.m, self.h
+
+        def step(group: list[int]) -> np.ndarray:
+            d = np.zeros(m)
+            d[group] = h[group]
+            return d
+        one = [g[0] if len(g) == 1 else -1 for g in groups]
         if self.method == "forward":
-            return [self.params0] + [model.parameters(self.x + d) for d in dx]
+            return [self.params0] + [self._plus[j] if j >= 0 else model.parameters(self.x + step(g))
+                                     for g, j in zip(groups, one)]
         if self.method == "central":
-            return [model.parameters(self.x + d) for d in dx] + [model.parameters(self.x - d) for d in dx]
-        return [model.parameters(self.x + 1j * d) for d in dx]
+            return [self._plus[j] if j >= 0 else model.parameters(self.x + step(g)) for g, j in zip(groups, one)] + \
+                [self._minus[j] if j >= 0 else model.parameters(self.x - step(g)) for g, j in zip(groups, one)]
+        return [self._plus[j] if j >= 0 else model.parameters(self.x + 1j * step(g)) for g, j in zip(groups, one)]
 
     def _differences(self, F: np.ndarray, groups: int) -> np.ndarray:
         """Undivided differences (..., groups) from the values (..., B) of a batch of ``groups``

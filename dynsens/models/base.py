@@ -240,6 +240,19 @@ OutputFn = Callable[..., Array]  # fn(t, state, params); "..." admits lambdas wi
 
 
 @dataclass(frozen=True)
+class OutputPattern:
+    """What each of an output's k rows can depend on, as (row, column) pairs of a superset of
+    the true dependence: ``state`` columns index the flat state (q, q̇, q̈, λ, p, ṗ stacked),
+    ``design`` columns the design variables.  The adjoint's output seeds colour their probes by
+    it (:mod:`dynsens.derivatives.output_seeds`): a pair left out would mix two derivatives."""
+
+    state_rows: Array
+    state_cols: Array
+    design_rows: Array
+    design_cols: Array
+
+
+@dataclass(frozen=True)
 class Output:
     """A quantity a response or event can read at every step.
 
@@ -251,6 +264,8 @@ class Output:
     parameters (``Model.stack_parameters``), so all gradient directions take one call.
     ``autonomous`` declares that fn depends on time only through the state, so a block of
     steps (a batch of states at different times) is evaluated in one call as well.
+    ``pattern`` (None: unknown) gives the output's :class:`OutputPattern`; it is called once
+    per run, when the design variables are known.
     """
 
     fn: OutputFn
@@ -259,6 +274,7 @@ class Output:
     linear: bool = False
     batched: bool = False
     autonomous: bool = False
+    pattern: Callable[[], OutputPattern] | None = None
 
 
 class Model(ABC):

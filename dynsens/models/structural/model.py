@@ -19,7 +19,7 @@ of q its data imply).  Elements of one kind are stored as arrays and evaluated t
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from ...case_keys import allowed
 from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
-from ..base import Linearization, Model, Output, StepState, Traits
+from ..base import Linearization, Model, Output, OutputPattern, StepState, Traits
 from ..parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
@@ -415,8 +415,10 @@ class StructuralModel(StructuralMatrices, Model):
         ia = np.array(idx)
         fld = field_of[kind]
         unit = ""  # the case's own unit system; a response may name it with 'unit'
+        offset = {"q": 0, "qd": self.n, "qdd": 2 * self.n}[fld]
         return Output(lambda t, s, prm, _f=fld, _i=ia: getattr(s, _f)[_i],
-                      tuple(f"{n}.{kind}" for n in names), unit, linear=True)
+                      tuple(f"{n}.{kind}" for n in names), unit, linear=True,
+                      pattern=self._output_pattern([([], [i]) for i in ia], offset))
 
     def _element_output(self, names: Any, kind: str, path: str, problems: ProblemCollector) -> Output | None:
         """Quantities of named elements (``all``: the members, bars and beams; else the springs),
@@ -441,12 +443,36 @@ class StructuralModel(StructuralMatrices, Model):
         if any(p is None for p in parts):
             return None
         unit = "-" if kind in ("strain", "buckling") else ""
+        reads = [self.sets[j].output_reads(np.array(idx), kind) for j, idx in sorted(picked.items())]
+        pattern = None if any(r is None for r in reads) else \
+            self._output_pattern([row for r in reads if r is not None for row in r])
         if len(parts) == 1:
-            return Output(parts[0][0], parts[0][1], unit, batched=True, autonomous=True)
+            return Output(parts[0][0], parts[0][1], unit, batched=True, autonomous=True, pattern=pattern)
 
         def joined(t: float, s: StepState, prm: dict[str, Any]) -> np.ndarray:
             return np.concatenate([fn(t, s, prm) for fn, _ in parts], axis=-1)
-        return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True)
+        return Output(joined, sum((lab for _, lab in parts), ()), unit, batched=True, autonomous=True,
+                      pattern=pattern)
+
+    def _output_pattern(self, rows: list[tuple[Any, Any]], offset: int = 0) -> Callable[[], OutputPattern]:
+        """The pattern of an output whose row i reads rows[i] = (parameter indices, DOFs): its
+        free DOFs (at ``offset`` in the flat state: 0 for q) and the design variables whose
+        expressions set those parameters (formed when called: the design is known by then)."""
+        def pattern() -> OutputPattern:
+            design_of: dict[int, list[int]] = {}
+            for j, entries in enumerate(self.table.design_dependents()):
+                for i in entries:
+                    design_of.setdefault(i, []).append(j)
+            state: list[tuple[int, int]] = []
+            design: list[tuple[int, int]] = []
+            for row, (params, dofs) in enumerate(rows):
+                state += [(row, offset + int(d)) for d in np.ravel(dofs) if d < self.n]
+                design += [(row, j) for j in sorted({j for i in np.ravel(params) if i >= 0
+                                                     for j in design_of.get(int(i), ())})]
+            s_rows, s_cols = np.array(state, int).reshape(-1, 2).T
+            d_rows, d_cols = np.array(design, int).reshape(-1, 2).T
+            return OutputPattern(s_rows, s_cols, d_rows, d_cols)
+        return pattern
 
     def _pick(self, names: list[Any], owner: dict[str, Any], kind: str, path: str,
               problems: ProblemCollector) -> dict[int, list[int]] | None:

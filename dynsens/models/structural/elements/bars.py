@@ -156,6 +156,15 @@ class Bars(ElementKind):
                 for e, dofs in enumerate(self.idx)] + \
             [([p for p in (self.I[e], self.K[e]) if p >= 0], []) for e in range(len(self))]
 
+    def output_reads(self, index: np.ndarray, kind: str) -> list[Touch]:
+        # every output reads the bar's geometry (D0, L0 from its nodes' coordinates) and its DOFs
+        return [([*np.ravel(self.X[e]), *self._output_parameters(e, kind)], self.idx[e]) for e in index]
+
+    def _output_parameters(self, e: int, kind: str) -> list[int]:
+        """The parameter indices of bar e the output ``kind`` reads beyond its geometry."""
+        return {"strain": [], "stress": [self.E[e]], "force": [self.A[e], self.E[e]],
+                "buckling": [self.A[e], self.E[e], self.I[e], self.K[e]]}[kind]
+
     def output(self, index: np.ndarray, kind: str, path: str, problems: ProblemCollector) -> Any:
         lacking = [self.names[b] for b in index if self.I[b] < 0]
         if kind == "buckling" and lacking:

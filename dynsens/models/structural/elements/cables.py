@@ -114,6 +114,11 @@ class Cables(Bars):
     def tangent(self, q: np.ndarray, params: dict[str, Any], corotated: bool) -> list[Triplets]:
         return super().tangent(q, params, corotated) if corotated else []
 
+    def _output_parameters(self, e: int, kind: str) -> list[int]:
+        # a cable's force and stress read its law's width; its stress N/A the area
+        own = [self.A[e], self.E[e], *([self.widths[e]] if self.widths[e] >= 0 else [])]
+        return own if kind in ("force", "stress") else []
+
     def design_touch(self) -> list[Any]:
         return super().design_touch() + [([w], dofs) for w, dofs in zip(self.widths, self.idx) if w >= 0]
 

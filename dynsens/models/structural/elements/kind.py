@@ -203,6 +203,12 @@ class ElementKind(ABC):
         ``index`` and its m labels; None with a problem listed when it cannot be formed."""
         return None
 
+    def output_reads(self, index: np.ndarray, kind: str) -> list[Touch] | None:
+        """Per row of the output ``kind`` of the elements ``index`` (in its order): the parameter
+        indices and the DOFs of q it reads, a superset (the adjoint colours its probes by it);
+        None where the kind does not declare them (the adjoint then finds them by probing)."""
+        return None
+
     def refusal(self, kind: str) -> str:
         """Why an output ``kind`` the elements do not report is refused."""
         return f"{self.type} elements report {', '.join(repr(k) for k in self.output_kinds)}"
