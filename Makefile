@@ -136,7 +136,7 @@ report: $(STAMP)
 
 # issue 35's target table (scripts/bench_targets.py; BENCHMARKS.md): dynsens against its step-cost
 # targets, beside a minimal numpy loop and a compiled JAX scan of the same chain, CPU medians, with
-# the machine and its load (≈ 15 min on 2 cores; `$(PY) scripts/bench_targets.py --quick` shortens
+# the machine and its load (≈ 20 min on 2 busy cores; `$(PY) scripts/bench_targets.py --quick` shortens
 # the four-bar and 10 000-DOF rows). JAX comes with the peers extra; without it the table says so
 PEERS_STAMP := $(VENV)/.peers-installed
 $(PEERS_STAMP): $(INSTALLED)
