@@ -156,16 +156,22 @@ def spread_rows(E: np.ndarray) -> np.ndarray:
     return out
 
 
-def dynsens_case(n: int, steps: int, partials: str = "forward"):
-    """The same chain as a dynsens case (scripts/make_cases.duffing_chain), no histories."""
-    import dynsens
+def dynsens_case_dict(n: int, steps: int, partials: str = "forward") -> dict:
+    """The same chain as a dynsens case dict (scripts/make_cases.duffing_chain), no histories,
+    responses tip_end and tip_integral."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from make_cases import duffing_chain
     d = duffing_chain(n, t_end=steps * DT)
     d["sensitivity"]["partials"] = partials
     d["output"] = {"history": "none"}
     d["responses"] = [r for r in d["responses"] if r["name"] in ("tip_end", "tip_integral")]
-    return dynsens.load_case_dict(d)
+    return d
+
+
+def dynsens_case(n: int, steps: int, partials: str = "forward"):
+    """:func:`dynsens_case_dict`, loaded."""
+    import dynsens
+    return dynsens.load_case_dict(dynsens_case_dict(n, steps, partials))
 
 
 def compare_with_dynsens(n: int, steps: int) -> dict[str, float]:
