@@ -144,15 +144,20 @@ def p1_row(n: int, steps: int, repeats: int) -> Row:
         for name, mine, peer in pairs:
             row.targets.append(Target(f"P1 N = {n}, {name}", "≤ 3× JAX scan",
                                       f"{mine:.3f} s, {fmt_ratio(mine / peer)} JAX", mine / peer <= 3.0))
-        res = last["dynsens + gradient"].responses["tip_end"]
-        value, grad = last["JAX + gradient (jacfwd)"]
-        row.notes.append(agreement_note(f"P1 N = {n}", value, res.value, grad, np.asarray(res.gradient)))
+        note_agreement(row, f"P1 N = {n}", last["dynsens + gradient"], last["JAX + gradient (jacfwd)"])
     else:
         for name, mine in (("primal", p), ("primal + gradient", g)):
             row.targets.append(Target(f"P1 N = {n}, {name}", "≤ 3× JAX scan",
                                       f"{mine:.3f} s; {jax_chain.MISSING}", None))
     row.targets.append(Target(f"P1 N = {n}, gradient ratio", "≤ 1.3", f"{g / p:.2f}", g / p <= 1.3))
     return row
+
+
+def note_agreement(row: Row, label: str, run: Any, jax_result: tuple[Any, Any]) -> None:
+    """Add to ``row`` the note comparing dynsens's tip_end (``run``) with JAX's (value, gradient)."""
+    res = run.responses["tip_end"]
+    value, grad = jax_result
+    row.notes.append(agreement_note(label, value, res.value, grad, np.asarray(res.gradient)))
 
 
 def adjoint_row(n: int, steps: int, repeats: int) -> Row:
@@ -180,9 +185,7 @@ def adjoint_row(n: int, steps: int, repeats: int) -> Row:
         peer = t["JAX + gradient (grad)"]
         row.targets.append(Target(f"m = N = {n}, adjoint vs JAX reverse mode", "≤ 1× JAX grad",
                                   f"{fmt_ratio(a / peer)} JAX ({peer:.3f} s)", a / peer <= 1.0))
-        res = last["dynsens + gradient (adjoint)"].responses["tip_end"]
-        value, grad = last["JAX + gradient (grad)"]
-        row.notes.append(agreement_note(f"m = N = {n}", value, res.value, grad, np.asarray(res.gradient)))
+        note_agreement(row, f"m = N = {n}", last["dynsens + gradient (adjoint)"], last["JAX + gradient (grad)"])
     else:
         row.targets.append(Target(f"m = N = {n}, adjoint vs JAX reverse mode", "≤ 1× JAX grad",
                                   jax_chain.MISSING, None))
