@@ -88,7 +88,7 @@ class Bar(SpringDamper):
         return 0.5 * prm.pv[self.rho] * prm.pv[self.A] * prm.scal[self.initial_length or self.free_length]
 
     def lump_mass(self, prm: MBParams) -> None:
-        """Add ρ A L0 / 2 to the mass of each moving end node."""
+        """Add ρ A Li / 2 to the mass of each moving end node."""
         for b in self.nodes:
             if b != GROUND:
                 prm.bodies[b].mass = prm.bodies[b].mass + self.half_mass(prm)
