@@ -125,14 +125,14 @@ class DesignPartials:
             d = np.zeros(m)
             d[group] = h[group]
             return d
-        one = [g[0] if len(g) == 1 else -1 for g in groups]
+        def sets(own: list[Any], sign: complex) -> list[Any]:
+            # a group of one variable reuses the run's own set (``own``), others are evaluated
+            return [own[g[0]] if len(g) == 1 else model.parameters(self.x + sign * step(g)) for g in groups]
         if self.method == "forward":
-            return [self.params0] + [self._plus[j] if j >= 0 else model.parameters(self.x + step(g))
-                                     for g, j in zip(groups, one)]
+            return [self.params0] + sets(self._plus, 1)
         if self.method == "central":
-            return [self._plus[j] if j >= 0 else model.parameters(self.x + step(g)) for g, j in zip(groups, one)] + \
-                [self._minus[j] if j >= 0 else model.parameters(self.x - step(g)) for g, j in zip(groups, one)]
-        return [self._plus[j] if j >= 0 else model.parameters(self.x + 1j * step(g)) for g, j in zip(groups, one)]
+            return sets(self._plus, 1) + sets(self._minus, -1)
+        return sets(self._plus, 1j)
 
     def _differences(self, F: np.ndarray, groups: int) -> np.ndarray:
         """Undivided differences (..., groups) from the values (..., B) of a batch of ``groups``
