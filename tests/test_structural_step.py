@@ -50,6 +50,24 @@ def _dense_chain() -> dict:
     return _chain(60, linear_algebra="dense")
 
 
+def _small_dense_chain() -> dict:
+    """The P1 chain at N = 10, stored dense (as ``linear_algebra: auto`` stores it): below the
+    band's break-even the Python path factors S with a dense LU (getrf), as the compiled step."""
+    return _chain(10, linear_algebra="dense")
+
+
+def _small_dense_network() -> dict:
+    """A dense network that is no chain: springs across two and five links and a second spring to
+    ground, Rayleigh damping (D on a wider pattern); the Python path's dense LU factors it."""
+    d = _chain(12, linear_algebra="dense")
+    d["model"]["elements"] += [
+        {"type": "spring", "name": "across2", "dofs": ["u2", "u4"], "k": 80.0, "k3": 2.0e4},
+        {"type": "spring", "name": "across5", "dofs": ["u9", "u4"], "k": 40.0, "k2": 1.0e3, "k3": -1.0e3},
+        {"type": "spring", "name": "s_extra", "dofs": ["u6", "ground"], "k": 300.0, "k3": 1.0e5}]
+    d["model"]["damping"] = {"rayleigh": {"alpha": 0.3, "beta": 1.0e-4}}
+    return d
+
+
 def _network(n: int = 24) -> dict:
     """A chain with what a spring network may have beyond it: quadratic and softening springs,
     a second spring to ground, a DOF without a damper, Rayleigh damping, initial conditions and
@@ -91,11 +109,20 @@ def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: i
     (_network, ["sensitivity.method=adjoint"]),
     (_dense_chain, []),
     (_dense_chain, ["sensitivity.method=adjoint"]),
+    (_small_dense_chain, []),
+    (_small_dense_chain, ["sensitivity.method=adjoint"]),
+    (_small_dense_chain, ["sensitivity.partials=complex"]),
+    (_small_dense_network, []),
+    (_small_dense_network, ["sensitivity.method=adjoint"]),
+    (_small_dense_chain, ["integrator.adaptive={rtol: 1.0e-6, atol: 1.0e-9}", "integrator.scheme=hht",
+                          "integrator.alpha=0.1"]),
     (_chain, ["integrator.adaptive={rtol: 1.0e-6, atol: 1.0e-9}", "integrator.scheme=hht",
               "integrator.alpha=0.1"]),
     (_chain, ["integrator.adaptive={rtol: 1.0e-6, atol: 1.0e-9}", "sensitivity.method=adjoint"]),
 ], ids=["chain", "chain-adjoint", "chain-complex-partials", "network", "network-adjoint", "dense-chain",
-        "dense-chain-adjoint", "adaptive-hht", "adaptive-adjoint"])
+        "dense-chain-adjoint", "small-dense-chain", "small-dense-chain-adjoint", "small-dense-chain-complex-partials",
+        "small-dense-network", "small-dense-network-adjoint", "small-dense-adaptive-hht", "adaptive-hht",
+        "adaptive-adjoint"])
 def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, build, sets):
     case = dynsens.load_case_dict(build(), "chain.yaml", sets)
     compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
@@ -111,10 +138,11 @@ def test_compiled_step_equals_the_python_iteration_bit_for_bit(monkeypatch, buil
 
 @compiled_only
 def test_which_models_are_served(monkeypatch):
-    """Spring networks whose S the Python path factors as tridiagonal: not a model with bars or
-    a linear one; for a small dense chain (dense LU) and a network with a spring across two links
-    (a wider band) the factory declines every step and the Python iteration runs, with the same
-    numbers."""
+    """Spring networks whose S the Python path factors as tridiagonal or by a dense LU: not a
+    model with bars or a linear one; for a sparse network with a spring across seven links (a
+    wider band, gbtrf) the factory declines every step and the Python iteration runs, with the
+    same numbers.  The shipped 20-mass chain (dense, below the band's break-even: a dense LU) is
+    served: every step compiled."""
     sparse = dynsens.load_case_dict(_chain(), "chain.yaml").model
     assert structural_step.step_factory(sparse, newton=True, refactor=True) is not None
     assert structural_step.step_factory(sparse, newton=False, refactor=True) is None
@@ -124,15 +152,19 @@ def test_which_models_are_served(monkeypatch):
     wide = _chain()
     wide["model"]["elements"].append({"type": "spring", "name": "across", "dofs": ["u2", "u9"], "k": 50.0,
                                       "k3": 1.0e3})
-    short = ["integrator.t_end=0.1"]
-    for case in (dynsens.load_case(CASES / "duffing_chain.yaml", short), dynsens.load_case_dict(wide, "wide.yaml")):
-        compiled, python, calls = _both(monkeypatch, case, sensitivities=True)
-        assert calls == 0
-        assert_identical_runs(compiled, python)
+    compiled, python, calls = _both(monkeypatch, dynsens.load_case_dict(wide, "wide.yaml"), sensitivities=True)
+    assert calls == 0
+    assert_identical_runs(compiled, python)
+    shipped = dynsens.load_case(CASES / "duffing_chain.yaml", ["integrator.t_end=0.1"])
+    assert not shipped.model.traits.sparse
+    compiled, python, calls = _both(monkeypatch, shipped, sensitivities=True)
+    assert calls == compiled.counters["steps"] > 0
+    assert_identical_runs(compiled, python)
 
 
 @compiled_only
-@pytest.mark.parametrize("build", [_chain, _dense_chain, _network], ids=["sparse", "dense", "network"])
+@pytest.mark.parametrize("build", [_chain, _dense_chain, _small_dense_chain, _small_dense_network, _network],
+                         ids=["sparse", "dense", "small-dense", "small-dense-network", "network"])
 def test_the_compiled_residual_is_the_models(build):
     """What serving a design without a run-time comparison assumes: the compiled F_R is the
     model's, bit for bit at random states where numba's BLAS is numpy's build (and within the

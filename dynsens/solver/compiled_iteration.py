@@ -20,7 +20,7 @@ import numpy as np
 
 from . import newton_core as core
 from ._jit import jit, register_jitable
-from .linalg import all_finite
+from .linalg import all_finite, pivot_test
 
 # regularity of S as an iteration leaves it in its last factor: (code, column or 0, pivot ratio)
 REGULAR, NON_FINITE_ENTRIES, ZERO_PIVOT, SMALL_PIVOT = 0, 1, 2, 3
@@ -67,6 +67,40 @@ def state_finite(s: Any) -> bool:
     """Whether every entry of the state s (the six leaves of a StepState) is finite."""
     return (all_finite(s[0]) and all_finite(s[1]) and all_finite(s[2]) and all_finite(s[3])
             and all_finite(s[4]) and all_finite(s[5]))
+
+
+def dense_solver() -> Any:
+    """A compiled step's dense LU (numba only; called where a family registers its overloads):
+    ``factor_solve(lu, piv, x)`` factors the real (n, n) matrix whose column-major array is lu
+    (C-ordered: its rows are the matrix's columns) in place, with pivots piv (n,) int32, solves
+    for x (n,) in place, and returns the test of regularity (code, column of a zero pivot, pivot
+    ratio), in the words of :class:`~.linalg.Factor`'s dense branch.  The routine is LAPACK's
+    dgesv as scipy exports it (numba calls scipy's cython_lapack): dgetrf, then dgetrs, the
+    routines scipy.linalg.lapack's getrf and getrs call for the Python path, so the factor and
+    the solution are the same numbers."""
+    from numba import types
+    from numba.np.linalg import _LAPACK, ensure_lapack
+
+    ensure_lapack()
+    gesv = _LAPACK().numba_xgesv(types.float64)
+    kind = ord("d")   # LAPACK's type character (passed as int8, as numba.np.linalg does)
+
+    @register_jitable
+    def factor_solve(lu, piv, x):  # type: ignore[no-untyped-def]
+        n = piv.shape[0]
+        test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
+        if not all_finite(lu):
+            test[0] = NON_FINITE_ENTRIES
+            return test
+        info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
+        if info > 0:
+            test[0], test[1] = ZERO_PIVOT, info
+        else:
+            regular, ratio = pivot_test(np.diag(lu))
+            if not regular:
+                test[0], test[2] = SMALL_PIVOT, ratio
+        return test
+    return factor_solve
 
 
 def compiled_iteration(stamp: str) -> Any:

@@ -9,7 +9,8 @@ The step operations are overloaded here for it:
 * F_R is :func:`.compiled.kinematics` and :func:`.compiled.forces_and_residual`, and its
   linearization and S are :mod:`.compiled_linearization`'s: the functions the Python path calls;
 * S is factored and solved by LAPACK gesv (getrf, then getrs: the calls, and so the numbers, of
-  the Python path's :class:`~dynsens.solver.linalg.Factor`), with the same tests of regularity.
+  the Python path's :class:`~dynsens.solver.linalg.Factor`), with the same tests of regularity
+  (:func:`~dynsens.solver.compiled_iteration.dense_solver`, shared with the spring networks').
 
 It serves a mechanism whose every force element has a compiled law (spring-dampers, cylinders,
 rotational spring-dampers; no Python force elements),
@@ -27,9 +28,9 @@ from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
 from ...solver.banded import DENSE_BAND_MIN_N
 from ...solver.compiled_iteration import CompiledStep as CompiledStepBase
-from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, is_step_data, read_only, sources_stamp, step_kept)
-from ...solver.linalg import Counters, Factor, all_finite, pivot_test
+from ...solver.compiled_iteration import (REGULAR, LazyIteration, dense_solver, is_step_data, read_only,
+                                         sources_stamp, step_kept)
+from ...solver.linalg import Counters, Factor
 from . import compiled as cc
 from . import compiled_linearization as clin
 from .residual import time_inputs
@@ -87,13 +88,9 @@ def _is_step_data(ops: Any) -> bool:
 
 def _register() -> None:
     """The overloads of the step operations for StepData (numba only)."""
-    from numba import types
     from numba.extending import overload
-    from numba.np.linalg import _LAPACK, ensure_lapack
 
-    ensure_lapack()
-    gesv = _LAPACK().numba_xgesv(types.float64)
-    kind = ord("d")   # LAPACK's type character (passed as int8, as numba.np.linalg does)
+    dense_factor_solve = dense_solver()
     correct = cc.inline(correct_arrays)
 
     @overload(core.step_correct)
@@ -172,17 +169,7 @@ def _register() -> None:
             lu = S.T.copy()                  # S in column-major order: LAPACK's
             piv = np.zeros(n, np.int32)
             x = rhs.copy()
-            test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
-            if not all_finite(S):
-                test[0] = NON_FINITE_ENTRIES
-            else:
-                info = gesv(np.int8(kind), n, 1, lu.ctypes, n, piv.ctypes, x.ctypes, n)
-                if info > 0:
-                    test[0], test[1] = ZERO_PIVOT, info
-                else:
-                    regular, ratio = pivot_test(np.diag(lu))
-                    if not regular:
-                        test[0], test[2] = SMALL_PIVOT, ratio
+            test = dense_factor_solve(lu, piv, x)
             return test[0] == REGULAR, (R_z, R_q, R_qd, R_p, S, lu, piv, x, test), x
         return impl
 

@@ -3,15 +3,17 @@ what becomes of its results.
 
 It serves a structural model of point masses, springs (:func:`.spring_law.spring_law`), viscous
 and Rayleigh damping and prescribed loads, whose iteration matrix S = M + c_q K_t + c_q̇ D the
-Python path factors as a tridiagonal band (a chain, after its reordering), in real arithmetic.
-The iteration runs compiled over the step operations of :mod:`.step_kernels`; its
+Python path factors either as a tridiagonal band (a chain, after its reordering) or as a dense
+matrix with LAPACK's getrf (a dense model below the band's break-even, any pattern), in real
+arithmetic.  The iteration runs compiled over the step operations of :mod:`.step_kernels`; its
 last factor becomes a :class:`~dynsens.solver.linalg.Factor` and its K_t the model's own
 linearization, for the sensitivities.
 
 Its runs are bit for bit those of the Python iteration (tests/test_structural_step.py).  A dense
 model's products (f_int, D q̇, the round-off test's |S| |z|) are numpy's BLAS calls, which a loop
 cannot repeat (summed in a loop, the last bits moved a Newton iteration count of a 100-mass chain,
-and its gradients by 3e-11): the step calls BLAS too, through numba.  Whether the step serves a
+and its gradients by 3e-11): the step calls BLAS too, through numba, and a dense S is factored by
+the LAPACK routines scipy's wrappers call (dgesv: dgetrf, then dgetrs).  Whether the step serves a
 model is decided by its kinds (declared) and by how the Python path factors S (its pattern), never
 by comparing numbers at run time; that numba's BLAS sums as numpy's does is an assumption of the
 installation, checked by tests/test_structural_step.py (the compiled F_R against the model's at
@@ -51,12 +53,32 @@ def _entries(A: sp.csc_matrix) -> tuple[Array, Array]:
     return A.indices, np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
 
 
-class _Design:
-    """The arrays of a model and design that every step reads (a run's: kept between steps)."""
+class DenseStorage:
+    """S stored whole, column by column (as LAPACK's getrf takes it): entry (i, j) at j n + i.
+    The counterpart, for a dense LU, of a :class:`~dynsens.solver.banded.BandPlan`'s storage."""
 
-    def __init__(self, model: "StructuralModel", params: dict[str, Any], plan: BandPlan, S: Any, K: Any):
+    perm = None
+
+    def __init__(self, n: int):
+        self.n = n
+
+    def storage_positions(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Where the entries (i, j) of S go in the column-major (n, n) array."""
+        return np.asarray(j) * self.n + np.asarray(i)
+
+
+class _Design:
+    """The arrays of a model and design that every step reads (a run's: kept between steps).
+
+    ``plan``: where S's entries are stored for its factorization, the tridiagonal band's
+    :class:`~dynsens.solver.banded.BandPlan` (3n − 2 entries) or :class:`DenseStorage` (n²)."""
+
+    def __init__(self, model: "StructuralModel", params: dict[str, Any], plan: "BandPlan | DenseStorage",
+                 S: Any, K: Any):
         n = model.n
         self.plan, self.n = plan, n
+        self.dense_lu = isinstance(plan, DenseStorage)
+        size = n * n if self.dense_lu else 3 * n - 2
         a, b = model.spring_dofs[:, 0], model.spring_dofs[:, 1]
         rows, cols = np.concatenate([a, b, a, b]), np.concatenate([a, b, b, a])
         grounded = (rows >= n) | (cols >= n)
@@ -68,17 +90,19 @@ class _Design:
         D.sort_indices()
         d_rows = np.repeat(np.arange(n), np.diff(D.indptr))
         diagonal = np.arange(n)
-        mass_band = np.zeros(3 * n - 2)
-        mass_band[plan.storage_positions(diagonal, diagonal)] = params["mass"]
-        damping_band = np.zeros(3 * n - 2)
-        damping_band[plan.storage_positions(d_rows, D.indices)] = D.data
+        mass_storage = np.zeros(size)
+        mass_storage[plan.storage_positions(diagonal, diagonal)] = params["mass"]
+        damping_storage = np.zeros(size)
+        damping_storage[plan.storage_positions(d_rows, D.indices)] = D.data
         self.dense = not sp.issparse(S)
         none = np.zeros((0, 0))
-        if self.dense:            # S's band, by columns; the products numpy forms, as arrays
-            s_col, s_row = np.nonzero(np.abs(diagonal[:, None] - diagonal[None, :]) <= 1)
+        if self.dense:            # the products numpy forms, as arrays; S's entries: those stored
+            within = np.ones((n, n), bool) if self.dense_lu else \
+                np.abs(diagonal[:, None] - diagonal[None, :]) <= 1
+            s_col, s_row = np.nonzero(within.T)
             G = model._spring_scatter.G
             D_dense = np.zeros((n, n)) if D_model is None else D_model
-            t_row, t_col = s_row, s_col       # K_t: dense, written on the whole band
+            t_row, t_col = s_row, s_col       # K_t: dense, written on the whole storage
         else:                     # the Python path's S: its stored entries, in CSC order
             s_row, s_col = _entries(S)
             G = D_dense = none
@@ -90,12 +114,12 @@ class _Design:
         perm = np.arange(n) if plan.perm is None else plan.perm
         self.fields = tuple(read_only(x) for x in (
             params["mass"], a, b, params["k1"], params["k2"], params["k3"], k_pos, G, D_dense,
-            D.indptr.astype(np.intp), D.indices.astype(np.intp), D.data, mass_band, damping_band, perm,
-            s_row.astype(np.intp), s_col.astype(np.intp), s_pos))
+            D.indptr.astype(np.intp), D.indices.astype(np.intp), D.data, mass_storage, damping_storage,
+            np.array([self.dense_lu]), perm, s_row.astype(np.intp), s_col.astype(np.intp), s_pos))
 
     def tangent_matrix(self, K: Array) -> Any:
-        """K_t as the model assembles it (sparse on its pattern, or dense), from its entries on the
-        three diagonals K: the same numbers."""
+        """K_t as the model assembles it (sparse on its pattern, or dense), from its entries in
+        S's storage K: the same numbers."""
         if not self.dense:
             return on_pattern(self.tangent, K[self.tangent_positions])
         out = np.zeros(self.n * self.n)
@@ -103,10 +127,22 @@ class _Design:
         return out.reshape(self.n, self.n)
 
 
+def _storage(factor: Factor) -> "BandPlan | DenseStorage | None":
+    """Where a compiled step stores S to factor it as the Python path did (``factor``): the band
+    plan of a tridiagonal factor, the whole matrix for a dense real LU (getrf); None for any
+    other factorization (a wider band, SuperLU, a diagonal S): the Python iteration then runs."""
+    lu = getattr(factor, "_lu", None)
+    if isinstance(lu, TridiagonalFactor):
+        return lu.plan
+    if factor.dense_real_lu is not None:
+        return DenseStorage(factor.n)
+    return None
+
+
 def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
     """For :meth:`.structural.StructuralModel.compiled_step`: the :class:`CompiledSpringStep` of a
     step, or None for a step it does not serve (complex data; a design whose S the Python path
-    does not factor as tridiagonal: it iterates in Python); None for a model it does not serve
+    factors neither as tridiagonal nor by a dense LU: it iterates in Python); None for a model it does not serve
     (not a spring network, see :func:`serves`)."""
     if not (newton and refactor and enabled() and serves(model)):
         return None
@@ -126,10 +162,10 @@ def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
             factor = Factor(S, Counters(), within=lin.dense_pattern)
         except SingularMatrixError:
             return None
-        lu = getattr(factor, "_lu", None)
-        if not isinstance(lu, TridiagonalFactor):
+        plan = _storage(factor)
+        if plan is None:
             return None
-        d = _Design(model, params, lu.plan, S, lin.R_q)
+        d = _Design(model, params, plan, S, lin.R_q)
         kept[id(params)] = (params, d)
         return d
 
@@ -171,7 +207,9 @@ class CompiledSpringStep(CompiledStep):
             return None, None, None
         d = self.design
         factor = None
-        if test[0] == REGULAR:
+        if test[0] == REGULAR and d.dense_lu:       # getrf's LU by columns: its rows are LU's columns
+            factor = Factor.from_compiled_lu(lu.reshape(d.n, d.n), piv, counters)
+        elif test[0] == REGULAR:
             factor = Factor.from_band(TridiagonalFactor.from_lu(d.plan, lu, du2, piv), counters)
         lin = None
         if linearization:

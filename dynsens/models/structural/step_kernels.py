@@ -8,9 +8,12 @@ arrays (which designs it serves, and what becomes of its results: :mod:`.step`):
   (:func:`.spring_law.spring_law`), summed as the Python path sums them: a sparse model's
   products entry by entry in stored order, as scipy's; a dense model's through BLAS, as numpy's;
   f_ext(t) is the model's, evaluated once a step in Python;
-* S is formed on the three diagonals ((c_q K_t + c_q̇ D) + M, the Python path's sums) and
-  factored by :func:`dynsens.solver.tridiagonal.gttrf` (LAPACK's dgttrf, operation for
-  operation) in the band plan's order, with the Python path's tests of regularity.
+* S is formed where it is stored ((c_q K_t + c_q̇ D) + M, the Python path's sums): on the three
+  diagonals, factored by :func:`dynsens.solver.tridiagonal.gttrf` (LAPACK's dgttrf, operation for
+  operation) in the band plan's order, or whole, by columns, factored and solved by LAPACK's
+  dgesv (:func:`dynsens.solver.compiled_iteration.dense_solver`: dgetrf and dgetrs, the routines
+  of the Python path's dense :class:`~dynsens.solver.linalg.Factor`), with the Python path's
+  tests of regularity.
 
 numba caches it on disk, keyed by the sources it inlines (:func:`_stamp`).
 """
@@ -26,7 +29,8 @@ from ...solver import newton_core as core
 from ...solver import tridiagonal
 from ...solver._jit import inline, jit
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
-                                         LazyIteration, is_step_data, sources_stamp, step_kept)
+                                         LazyIteration, dense_solver, is_step_data, sources_stamp,
+                                         step_kept)
 from ...solver.linalg import all_finite, pivot_test
 from . import spring_law as law
 
@@ -48,14 +52,15 @@ class SpringStepData(NamedTuple):
     k1: Array
     k2: Array
     k3: Array
-    k_pos: Array             # (4 n_s,) storage positions of the tangent's entries (aa, bb, ab, ba), −1: grounded
+    k_pos: Array             # (4 n_s,) positions of the tangent's entries (aa, bb, ab, ba) in S's storage, −1: grounded
     G: Array                 # dense models: (n_s, n) spring forces to nodal forces, else (0, 0)
     D: Array                 # dense models: (n, n) damping, else (0, 0) and by rows below
     d_ptr: Array             # D by rows (sorted columns)
     d_col: Array
     d_val: Array
-    mass_band: Array         # (3n − 2,) M and D on the three diagonals
-    damping_band: Array
+    mass_storage: Array      # M and D in S's storage: its three diagonals (3n − 2), or whole by columns (n²)
+    damping_storage: Array
+    dense_lu: Array          # (1,) True: S stored whole and factored by dense LU, False: tridiagonal
     perm: Array              # (n,) the band order: its row k is row perm[k] of S
     s_row: Array             # S's stored entries in the Python path's order: row, column, storage
     s_col: Array
@@ -71,6 +76,7 @@ def _register() -> None:
     from numba.extending import overload
 
     correct = inline(correct_arrays)
+    dense_factor_solve = dense_solver()
 
     @overload(core.step_correct)
     def _correct(ops, z):  # type: ignore[no-untyped-def]
@@ -138,7 +144,7 @@ def _register() -> None:
             kt = evaluation
             n = rhs.shape[0]
             n_s = kt.shape[0]
-            K = np.zeros(3 * n - 2)
+            K = np.zeros(ops.mass_storage.shape[0])
             for block in range(4):          # the assembly's order: (a, a), (b, b), (a, b), (b, a)
                 sign = 1.0 if block < 2 else -1.0
                 for e in range(n_s):
@@ -146,9 +152,16 @@ def _register() -> None:
                     if pos >= 0:
                         K[pos] += sign * kt[e]
             c = ops.coeffs
-            S = ops.mass_band + (c[0] * K + c[1] * ops.damping_band)
-            lu = S.copy()
+            S = ops.mass_storage + (c[0] * K + c[1] * ops.damping_storage)
+            q, qd, qdd = s[0], s[1], s[2]
             du2 = np.zeros(max(n - 2, 0))
+            if ops.dense_lu[0]:             # S by columns: getrf's LU of S, and x = S⁻¹ rhs
+                lu = S.copy()
+                piv = np.zeros(n, np.int32)
+                x = rhs.copy()
+                test = dense_factor_solve(lu.reshape(n, n), piv, x)
+                return test[0] == REGULAR, (K, q, qd, qdd.copy(), S, lu, du2, piv, test), x
+            lu = S.copy()
             piv = np.zeros(n, np.int32)
             x = np.zeros(n)
             test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
@@ -170,7 +183,6 @@ def _register() -> None:
             step = np.empty(n)
             for k in range(n):
                 step[ops.perm[k]] = x[k]
-            q, qd, qdd = s[0], s[1], s[2]
             return test[0] == REGULAR, (K, q, qd, qdd.copy(), S, lu, du2, piv, test), step
         return impl
 
@@ -183,8 +195,10 @@ def _register() -> None:
             S = lf[4]
             if S.size == 0:
                 return False
-            entries = S[ops.s_pos]          # S's stored entries, in the Python path's order
             n = R.shape[0]
+            if ops.dense_lu[0]:             # S by columns: the Python path's S is its transpose's rows
+                return core.dense_at_roundoff(np.ascontiguousarray(S.reshape(n, n).T), R, z, rnorm)
+            entries = S[ops.s_pos]          # S's stored entries, in the Python path's order
             if ops.G.shape[0] > 0:          # a dense model: the Python path's dense S and product
                 Sd = np.zeros((n, n))
                 for k in range(entries.shape[0]):
