@@ -207,10 +207,12 @@ class CompiledSpringStep(CompiledStep):
             return None, None, None
         d = self.design
         factor = None
-        if test[0] == REGULAR and d.dense_lu:       # getrf's LU by columns: its rows are LU's columns
-            factor = Factor.from_compiled_lu(lu.reshape(d.n, d.n), piv, counters)
-        elif test[0] == REGULAR:
-            factor = Factor.from_band(TridiagonalFactor.from_lu(d.plan, lu, du2, piv), counters)
+        if test[0] == REGULAR:
+            plan = d.plan
+            if isinstance(plan, DenseStorage):      # getrf's LU by columns: its rows are LU's columns
+                factor = Factor.from_compiled_lu(lu.reshape(d.n, d.n), piv, counters)
+            else:
+                factor = Factor.from_band(TridiagonalFactor.from_lu(plan, lu, du2, piv), counters)
         lin = None
         if linearization:
             # the model's linearization with the step's K_t: the same sums as its own assembly
