@@ -204,9 +204,10 @@ def _failure(monkeypatch: pytest.MonkeyPatch, run):  # type: ignore[no-untyped-d
 
 
 @compiled_only
-def test_a_step_that_does_not_converge_fails_alike(monkeypatch):
-    case = dynsens.load_case_dict(_chain(), "chain.yaml", ["integrator.solver.max_iterations=1",
-                                                         "integrator.max_step_cuts=0"])
+@pytest.mark.parametrize("build", [_chain, _small_dense_chain], ids=["tridiagonal", "dense-lu"])
+def test_a_step_that_does_not_converge_fails_alike(monkeypatch, build):
+    case = dynsens.load_case_dict(build(), "chain.yaml", ["integrator.solver.max_iterations=1",
+                                                        "integrator.max_step_cuts=0"])
     compiled, python = _failure(monkeypatch, lambda: dynsens.run_case(case, sensitivities=False))
     assert_same_failures(compiled, python)
     assert "did not converge" in compiled[1]
@@ -226,11 +227,12 @@ def test_a_softening_run_that_loses_its_way_fails_alike(monkeypatch):
 
 
 @compiled_only
-def test_a_singular_iteration_matrix_fails_alike(monkeypatch):
+@pytest.mark.parametrize("linear_algebra", ["sparse", "dense"], ids=["tridiagonal", "dense-lu"])
+def test_a_singular_iteration_matrix_fails_alike(monkeypatch, linear_algebra):
     """No mass, no damping, purely cubic springs: S = c_q K_t(q) is regular where every spring
     is stretched and zero at q = 0.  A first step served compiled, then one at q = 0: the same
-    reason from both iterations."""
-    case = dynsens.load_case_dict(_chain(12), "chain.yaml")
+    reason from both iterations (gttrf's or getrf's zero pivot in column 1)."""
+    case = dynsens.load_case_dict(_chain(12, linear_algebra=linear_algebra), "chain.yaml")
     model = case.model
     params = model.parameters(np.array([0.0, 0.0, 0.0, 1.0e6]))     # m, c, k, k3
     h = 1e-3
