@@ -163,6 +163,24 @@ def test_which_models_are_served(monkeypatch):
 
 
 @compiled_only
+def test_a_small_dense_chain_takes_the_compiled_direct_block(monkeypatch):
+    """The compiled step's dense LU (getrf's, stored by columns) is a record the compiled block of
+    direct sensitivity steps reads: every step's sensitivities are taken there, none in Python."""
+    from dynsens.derivatives import direct
+    blocks: list[int] = []
+    original = direct.run_block
+    monkeypatch.setattr(direct, "run_block", lambda scheme, trail, *a: blocks.append(len(trail))
+                        or original(scheme, trail, *a))
+    calls: list[int] = []
+    iterate = structural_step.CompiledSpringStep.iterate
+    monkeypatch.setattr(structural_step.CompiledSpringStep, "iterate",
+                        lambda self, *a: calls.append(1) or iterate(self, *a))
+    result = dynsens.run_case(dynsens.load_case_dict(_small_dense_chain(), "chain.yaml"), sensitivities=True)
+    steps = result.counters["steps"]
+    assert len(calls) == sum(blocks) == steps > 0
+
+
+@compiled_only
 @pytest.mark.parametrize("build", [_chain, _dense_chain, _small_dense_chain, _small_dense_network, _network],
                          ids=["sparse", "dense", "small-dense", "small-dense-network", "network"])
 def test_the_compiled_residual_is_the_models(build):
