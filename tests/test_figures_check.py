@@ -46,3 +46,28 @@ def test_check_fails_on_a_stale_probe_and_a_missing_record(tmp_path: Path, monke
     assert figures.check() == 1
     err = capsys.readouterr().err
     assert "toy (docs/fig5.png) is stale" in err and "value: 2.1 recorded, 2.0 now" in err
+
+
+def test_make_accepts_the_statuses_a_figure_allows_and_resumes_from_a_named_figure(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    exit1 = (sys.executable, "-c", "import sys; sys.exit(1)")
+    mark = tmp_path / "ran"
+    touch = (sys.executable, "-c", f"open({str(mark)!r}, 'w').close()")
+    monkeypatch.setattr(figures, "RECORD", tmp_path / "figures.json")
+    # an optimization stopped by its iteration limit (status 1) still made its figure
+    monkeypatch.setattr(figures, "FIGURES", (figures.Figure("limit", ("p",), (exit1,), lambda: {"v": 1.0},
+                                                            statuses=(0, 1)),))
+    figures.make()
+    assert json.loads(figures.RECORD.read_text())["figures"]["limit"]["probe"] == {"v": 1.0}
+    # any other failure stops `make`, naming the figure, and writes no record
+    figures.RECORD.unlink()
+    failing = figures.Figure("broken", ("p",), (exit1,), lambda: {"v": 1.0})
+    monkeypatch.setattr(figures, "FIGURES", (failing, figures.Figure("later", ("q",), (touch,), lambda: {"v": 2.0})))
+    with pytest.raises(SystemExit, match="broken: .* exited with status 1"):
+        figures.make()
+    assert not figures.RECORD.exists() and not mark.exists()
+    # resumed from the figure after the one that stopped: the record holds every figure's probe
+    figures.make("later")
+    assert mark.exists() and set(json.loads(figures.RECORD.read_text())["figures"]) == {"broken", "later"}
+    with pytest.raises(SystemExit, match="no such figure"):
+        figures.make("nonesuch")
