@@ -96,7 +96,9 @@ def test_the_hub_follows_the_prescribed_angle(spin_up):
 def test_steady_spin_centrifugal_tension_and_stretch(spin_up):
     """After the spin-up (t > T_s, w = 4 rad/s), averaged over the last 5 s (the residual
     vibration averages out), against the bar spinning about one end: the root member's axial force
-    N(0) = rho A w^2 L^2/2 = 960 N (exact for the lumped masses too), the tip's stretch
+    N(0) = rho A w^2 L^2/2 = 960 N (exact for the lumped masses too; the step's period error
+    overestimates the centripetal accelerations of the nodes, driven round at w dt = 0.2 rad per
+    step, by O((w dt)^2): measured +1.0 % at dt = 0.05 s, +4 % at dt = 0.1 s), the tip's stretch
     u(L) = rho A w^2 L^3/(3 EA) = 2.29e-4 m (the 4-element lumped mesh overestimates it by 3.1 %:
     stretch sum 412.5 against 400 rho A w^2/EA; measured +3.5 %), and no lag: the straight radial
     beam is the equilibrium at constant w.  The lag left (5.5e-3 m = 5.5e-4 L at dt = 0.05 s,
@@ -106,7 +108,7 @@ def test_steady_spin_centrifugal_tension_and_stretch(spin_up):
     t, u, v = rotating_frame_tip(spin_up)
     force = spin_up.quantities["root_force"].value
     steady = t > T_S
-    assert np.mean(force[steady]) == pytest.approx(RHO_A * w**2 * L**2 / 2, rel=1e-2)
+    assert np.mean(force[steady]) == pytest.approx(RHO_A * w**2 * L**2 / 2, rel=2e-2)
     assert np.mean(u[steady]) == pytest.approx(RHO_A * w**2 * L**3 / (3 * EA), rel=5e-2)
     assert abs(np.mean(v[steady])) < 1e-3 * L
 
