@@ -15,9 +15,9 @@ mesh convergence (4 -> 8 elements) shows are not hiding the discretisation error
 
 - the prescribed hub angle (the driving constraint on a body that carries the beam);
 - during the spin-up, the beam's lag behind the hub: the static response of a cantilever to its
-  Euler load -rho A theta'' x, tip deflection 11 rho A theta'' L^5/(120 EI) (Timoshenko, linearly
-  increasing load on a cantilever), at t = 3 s, where the centrifugal stiffening is below 0.3 %
-  and the load's rate is slow against the first bending period (1.65 s);
+  Euler load -rho A theta'' x, tip deflection 11 rho A theta'' L^5/(120 EI) (a cantilever under a
+  linearly increasing load, Roark's beam tables), at t = 3 s, where the centrifugal stiffening is
+  below 0.3 % and the load's rate is slow against the first bending period (1.65 s);
 - after the spin-up, the steady centrifugal tension at the root, rho A w^2 L^2/2, and the tip's
   stretch rho A w^2 L^3/(3 EA) (a uniform bar spinning about one end).
 """
