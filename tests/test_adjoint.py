@@ -361,7 +361,7 @@ def test_every_shipped_case_has_an_adjoint_test():
     # tyrolean_weir_flexible: adjoint against direct in tests/test_weir_flexible.py;
     # truss_two_loads: tests/test_load_cases.py checks adjoint = direct in each of its load cases;
     # two_bar_shape, crank_circle: tests/test_shape_optimum.py, tests/test_crank_circle.py
-    # (adjoint = direct = complex step); spin_up_beam: tests/test_published_flexible_benchmarks.py
+    # (adjoint = direct = complex step); spin_up_beam: tests/test_spin_up_beam.py
     covered = set(SHORT) | set(MECHANISMS) | {"tower_sizing", "tower_sizing_mma", "ground_structure",
                                               "tyrolean_weir_flexible", "truss_two_loads", "two_bar_shape",
                                               "crank_circle", "spin_up_beam"}

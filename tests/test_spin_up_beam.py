@@ -1,5 +1,5 @@
-"""Published flexible-multibody benchmarks (issue 33): the spin-up of a flexible beam on a hub
-whose angle is prescribed, cases/spin_up_beam.yaml.
+"""The spin-up of a flexible beam on a hub whose angle is prescribed (issue 33), cases/spin_up_beam.yaml,
+the problem of a published flexible-multibody benchmark, checked against closed forms of its physics.
 
 Source of the problem: J. C. Simo and L. Vu-Quoc (1986), "On the dynamics of flexible beams
 under large overall motions -- the plane case: Part II", J. Appl. Mech. 53(4), 855-863: L = 10 m,
