@@ -3,6 +3,7 @@
 
     python scripts/figures.py make      # every figure, by the command that makes it (≈ 10 min)
     python scripts/figures.py make --from NAME   # resume a run that stopped at figure NAME
+    python scripts/figures.py make --jobs 2      # two figures at a time
     python scripts/figures.py check     # a few short runs (≈ 1 min): fails on a stale figure
 
 Comparing the pictures themselves would be fragile (matplotlib's rendering, fonts and PNG
@@ -23,7 +24,9 @@ import argparse
 import json
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -79,6 +82,16 @@ def _ground_structure_240() -> dict[str, Any]:
     from make_ground_structure import ground_structure
     sim = dynsens.simulate(dynsens.load_case_dict(ground_structure(9, 5, 2), "ground_structure_240.yaml"),
                            sensitivities=False, history=())
+    return {"values": {k: float(v) for k, v in sorted(sim.values.items())}}
+
+
+GS = "cases/ground_structure.yaml"
+
+
+def _ground_structure() -> dict[str, Any]:
+    """The shipped 2,252-bar ground structure at its start design."""
+    import dynsens
+    sim = dynsens.simulate(dynsens.load_case(ROOT / GS), sensitivities=False, history=())
     return {"values": {k: float(v) for k, v in sorted(sim.values.items())}}
 
 
@@ -140,6 +153,14 @@ FIGURES = (
     Figure("views", ("docs/tyrolean_weir.gif", "docs/tower_stress_ratio.png"),
            ((sys.executable, "scripts/make_view_figures.py"),),
            lambda: {"weir": _run(WEIR, False), "tower": _run("cases/tower_sizing.yaml", False, _tower_optimum())}),
+    # 80 MMA iterations of 2,252 variables with the verification, about 40 min on 2 shared cores
+    # (BENCHMARKS.md, 2026-11-29); the probe is the start design
+    Figure("ground structure topology", ("docs/ground_structure_topology.png",),
+           (("mkdir", "-p", "results"),
+            (*DYNSENS, "optimize", GS, "--maxiter", "80", "-o", "results/ground_structure_opt.h5", "--overwrite"),
+            (sys.executable, "scripts/plot_topology.py", GS, "results/ground_structure_opt.h5",
+             "docs/ground_structure_topology.png")),
+           _ground_structure, statuses=(0, 1)),
 )
 
 
@@ -194,20 +215,53 @@ def record() -> None:
     print(f"written: {RECORD}")
 
 
-def make(start: str | None = None) -> None:
+def _build(f: Figure, log: Path | None) -> float:
+    """Run a figure's commands (their output to ``log``, or here); the wall time (s)."""
+    t0 = time.perf_counter()
+    out = None if log is None else log.open("w", encoding="utf-8")
+    try:
+        for cmd in f.commands:
+            print(f"$ {' '.join(cmd)}", file=out or sys.stdout, flush=True)
+            status = subprocess.run(cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT if out else None).returncode
+            if status not in f.statuses:
+                raise SystemExit(f"{f.name}: `{' '.join(cmd)}` exited with status {status}"
+                                 + (f" (its output: {log})" if log else ""))
+    finally:
+        if out is not None:
+            out.close()
+    return time.perf_counter() - t0
+
+
+def make(start: str | None = None, jobs: int = 1) -> None:
     """Rebuild every figure by its commands (from the one named ``start`` on: a run that stopped
-    there resumes), then record the probes."""
+    there resumes), ``jobs`` figures at a time, then record the probes.  The figures write
+    outputs of their own, so they may run side by side; with ``jobs`` > 1 each one's output goes
+    to results/figure-logs/."""
     names = [f.name for f in FIGURES]
     if start is not None and start not in names:
         raise SystemExit(f"--from {start!r}: no such figure; the figures are {names}")
-    for f in FIGURES[names.index(start) if start else 0:]:
-        t0 = time.perf_counter()
-        for cmd in f.commands:
-            print("$", " ".join(cmd), flush=True)
-            status = subprocess.run(cmd, cwd=ROOT).returncode
-            if status not in f.statuses:
-                raise SystemExit(f"{f.name}: `{' '.join(cmd)}` exited with status {status}")
-        print(f"made {f.name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    todo = FIGURES[names.index(start) if start else 0:]
+    logs = ROOT / "results" / "figure-logs"
+    if jobs > 1:
+        logs.mkdir(parents=True, exist_ok=True)
+
+    failed = threading.Event()      # after a failure no further figure starts
+
+    def build(f: Figure) -> None:
+        if failed.is_set():
+            return
+        log = logs / (f.name.replace(" ", "_") + ".log") if jobs > 1 else None
+        if log is not None:
+            print(f"making {f.name} (output: {log.relative_to(ROOT)})", flush=True)
+        try:
+            print(f"made {f.name}: {_build(f, log):.0f} s", flush=True)
+        except SystemExit:
+            failed.set()
+            raise
+
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        for done in [pool.submit(build, f) for f in todo]:
+            done.result()           # the first failure stops `make` (figures running finish first)
     record()
 
 
@@ -244,9 +298,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("action", choices=("make", "check"))
     ap.add_argument("--from", dest="start", metavar="FIGURE",
                     help="make: rebuild from this figure on (the earlier ones were rebuilt by a run that stopped)")
+    ap.add_argument("--jobs", type=int, default=1, help="make: figures built side by side (default 1)")
     args = ap.parse_args(argv)
     if args.action == "make":
-        make(args.start)
+        make(args.start, args.jobs)
         return 0
     return check()
 

@@ -1,10 +1,13 @@
 """Column colouring of the design partials: design variables whose rows of F_R are disjoint
 (per-element stiffnesses, masses, bar areas) share one perturbation."""
+import pickle
+
 import numpy as np
 import pytest
 
 import dynsens
 from dynsens.derivatives.partials import DesignPartials, colour_columns
+from dynsens.models.base import StepState
 from helpers import complex_step_gradients, rel_err
 from scripts_path import duffing_chain, truss_impact
 
@@ -123,3 +126,40 @@ def test_initial_conditions_reach_no_residual_row_but_keep_their_gradient():
     for name, r in res.responses.items():
         assert rel_err(r.gradient, ref[name]) < 1e-10, name
         assert abs(r.gradient[-1]) > 0 or ref[name][-1] == 0
+
+
+def test_a_perturbed_set_assembles_its_damping_only_when_its_residual_is_evaluated(monkeypatch):
+    """The gradient's parameter sets: one per design variable (the outputs, the mass and the
+    initial state read their element data) and one per colour (the residual's).  Only the sets
+    whose residual is evaluated assemble the Rayleigh damping matrix (and its K₀): the run's own
+    and one per colour, not one per variable (before: 1 + m + the colours of several variables)."""
+    case = dynsens.load_case_dict(per_bar_truss())
+    model = case.model
+    assert model.rayleigh is not None
+    assembled = []
+    damping = model._damping
+    monkeypatch.setattr(model, "_damping", lambda params, dtype: assembled.append(1) or damping(params, dtype))
+    p = DesignPartials(model, case.x0, "forward")
+    m = case.x0.size
+    assert p.colours is not None and len(p.colours) < m - 1
+    mass_gradient = p.of(lambda prm: np.atleast_1d(model.structural_mass(prm)))[0]
+    assert assembled == []                                  # element data alone, every set
+    rng = np.random.default_rng(3)
+    q, qd, qdd = (rng.uniform(-1.0, 1.0, model.n) for _ in range(3))
+    none = np.zeros(0)
+    p.residual_partials(0.001, StepState(q, qd, qdd, none, none, none))
+    assert len(assembled) == 1 + len(p.colours)             # the unperturbed set and one per colour
+    # the mass is ρ A L summed: its forward-difference derivative along each area is ρ L
+    bars = len(p.params0["A"])
+    exact = p.params0["bar_mass"] / p.params0["A"]
+    assert rel_err(mass_gradient[:bars], exact) < 1e-6
+
+
+def test_a_parameter_set_pickles_with_its_matrices_assembled():
+    """Sent to another process (an executor's worker), a set carries its deferred matrices."""
+    case = dynsens.load_case_dict(per_bar_truss())
+    params = case.model.parameters(case.x0)
+    assert "D" in params and "K0" in params and not params.assembled
+    copy = pickle.loads(pickle.dumps(params))
+    assert type(copy) is dict and set(copy) == set(params) | {"D", "K0"}
+    assert abs(copy["D"] - params["D"]).max() == 0 and params.assembled

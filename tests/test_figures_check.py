@@ -71,3 +71,16 @@ def test_make_accepts_the_statuses_a_figure_allows_and_resumes_from_a_named_figu
     assert mark.exists() and set(json.loads(figures.RECORD.read_text())["figures"]) == {"broken", "later"}
     with pytest.raises(SystemExit, match="no such figure"):
         figures.make("nonesuch")
+
+
+def test_make_builds_figures_side_by_side_with_their_output_in_logs(tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    say = [(sys.executable, "-c", f"print('figure {i}')") for i in range(2)]
+    monkeypatch.setattr(figures, "ROOT", tmp_path)
+    monkeypatch.setattr(figures, "RECORD", tmp_path / "figures.json")
+    monkeypatch.setattr(figures, "FIGURES", tuple(figures.Figure(f"f {i}", ("p",), (say[i],), lambda i=i: {"v": i})
+                                                  for i in range(2)))
+    figures.make(jobs=2)
+    assert json.loads(figures.RECORD.read_text())["figures"]["f 1"]["probe"] == {"v": 1}
+    for i in range(2):
+        assert f"figure {i}" in (tmp_path / "results" / "figure-logs" / f"f_{i}.log").read_text()

@@ -48,6 +48,7 @@ class ParameterTable:
         # positions in _exprs of the expressions naming it (for perturbed designs)
         self._base: tuple[Array, Array] | None = None
         self._naming: list[set[int]] | None = None
+        self._position: dict[str, int] = {}    # design variable name -> position in x (with _naming)
         # range rules checked on the evaluated values (literals are checked when read):
         # (entry index, "positive" | "nonnegative", YAML path); vectors that must not vanish
         self._paths: list[str] = []
@@ -247,7 +248,7 @@ class ParameterTable:
     def _expressions_naming(self) -> list[set[int]]:
         """For each design variable, the positions in ``_exprs`` of the expressions naming it."""
         if self._naming is None:
-            index = {name: j for j, name in enumerate(self.design_names)}
+            index = self._position = {name: j for j, name in enumerate(self.design_names)}
             self._naming = [set() for _ in self.design_names]
             for k, (_, expr) in enumerate(self._exprs):
                 for name in expr.symbols:
@@ -275,7 +276,12 @@ class ParameterTable:
                 if changed.size:
                     naming = self._expressions_naming()
                     ks = sorted(set().union(*(naming[j] for j in changed)))
-                    _evaluate_into(out, [self._exprs[k] for k in ks], dict(zip(self.design_names, x)))
+                    exprs = [self._exprs[k] for k in ks]
+                    # the values of the symbols these expressions name, not of all m variables
+                    # (one perturbed design per variable: m² entries otherwise)
+                    position = self._position
+                    names = set().union(*(e.symbols for _, e in exprs)) & position.keys()
+                    _evaluate_into(out, exprs, {n: x[position[n]] for n in names})
                 return out
         out = np.array(self._constants, dtype=dtype)
         if self._exprs:

@@ -28,6 +28,7 @@ from ...case_keys import allowed
 from ...errors import ProblemCollector
 from .._keys import check_keys, did_you_mean
 from ..base import Linearization, Model, Output, OutputPattern, StepState, Traits
+from .parameter_set import ParameterSet
 from ..parameters import ParameterTable
 from .beams import BeamSet
 from .beams3d import Beam3DSet
@@ -183,22 +184,30 @@ class StructuralModel(StructuralMatrices, Model):
     def parameters(self, x: np.ndarray) -> dict[str, Any]:
         """Evaluated parameter vector and derived element data for design x."""
         pv = self.table.evaluate(np.asarray(x))
-        out: dict[str, Any] = {"pv": pv}
+        out = ParameterSet(pv=pv)
         mass = np.zeros(self.n + 1, dtype=pv.dtype)
         for k in self.sets:
             k.parameters(pv, out, mass)
         out["mass"] = mass[:self.n]
+        # the matrices are assembled when first read: the sets of perturbed designs that only
+        # serve outputs, the mass or the initial state never assemble them (ParameterSet)
         if self.rotating_mass or self.frame_mass:
-            out["M0"] = self._mass_matrix(out, pv.dtype)
+            out.defer("M0", lambda prm: self._mass_matrix(prm, pv.dtype))
         if self.rayleigh is not None:
             # the co-rotated elements' β K acts on their deformation rates instead (residual)
-            out["K0"] = self._tangent(np.zeros(self.n, dtype=pv.dtype), out, corotated=not self.corotated_damping)
+            out.defer("K0", lambda prm: self._tangent(np.zeros(self.n, dtype=pv.dtype), prm,
+                                                      corotated=not self.corotated_damping))
         if self.traits.has_damping:
             # viscous and Rayleigh damping depend on the design only: assemble once per design
-            out["D"] = D = self._damping(out, pv.dtype)
-            if sp.issparse(D):
-                D.data.flags.writeable = False      # constant for the run: kept scaled per step size
+            out.defer("D", lambda prm: self._damping_of_design(prm, pv.dtype))
         return out
+
+    def _damping_of_design(self, params: dict[str, Any], dtype: Any) -> Any:
+        """The design's damping matrix D (viscous and Rayleigh), read-only when sparse."""
+        D = self._damping(params, dtype)
+        if sp.issparse(D):
+            D.data.flags.writeable = False      # constant for the run: kept scaled per step size
+        return D
 
     def _inertia(self, params: dict[str, Any], s: Any) -> np.ndarray:
         """Inertia forces (..., n): M q̈ of the diagonal masses plus the consistent beams'
