@@ -103,13 +103,16 @@ example: $(STAMP)
 reproduce-table1: $(STAMP)
 	$(PY) scripts/reproduce_table1.py
 
-# the figures in docs/, regenerated from the current code by the commands that make them (≈ 10 min
-# on 2 cores; scripts/figures.py lists them), and their probes recorded in docs/figures.json
+# the figures in docs/, regenerated from the current code by the commands that make them, two at a
+# time (scripts/figures.py lists them; about an hour on 2 cores, most of it the weir's virtuous
+# circle and the 2,252-bar ground structure, three and one verified optimizations), and their
+# probes recorded in docs/figures.json; `.venv/bin/python scripts/figures.py make --from NAME`
+# resumes a run that stopped at figure NAME
 figures: $(STAMP)
-	$(PY) scripts/figures.py make
+	$(PY) scripts/figures.py make --jobs 2
 
-# cheap check that the figures in docs/ are current (CI runs it, ≈ 1 min): short runs of what each
-# figure shows, compared with the values recorded by `make figures`
+# cheap check that the figures in docs/ are current (CI runs it, a few minutes): short runs of what
+# each figure shows, compared with the values recorded by `make figures`
 figures-check: $(STAMP)
 	$(PY) scripts/figures.py check
 

@@ -1,10 +1,10 @@
 """The figures in docs/: rebuild them all (``make figures``) or check cheaply that they are current
 (``make figures-check``, run by CI).
 
-    python scripts/figures.py make      # every figure, by the command that makes it (≈ 10 min)
+    python scripts/figures.py make      # every figure, by the command that makes it (≈ 2 h; --jobs 2: ≈ 1 h)
     python scripts/figures.py make --from NAME   # resume a run that stopped at figure NAME
     python scripts/figures.py make --jobs 2      # two figures at a time
-    python scripts/figures.py check     # a few short runs (≈ 1 min): fails on a stale figure
+    python scripts/figures.py check     # a few short runs (a few minutes): fails on a stale figure
 
 Comparing the pictures themselves would be fragile (matplotlib's rendering, fonts and PNG
 encoder vary between versions and machines) and would need the expensive runs.  Instead every
