@@ -121,11 +121,17 @@ def fmt_ratio(r: float) -> str:
 
 
 # --------------------------------------------------------------------------- rows
-def p1_row(n: int, steps: int, repeats: int) -> Row:
-    """P1 at N = n: dynsens, the numpy loop and the JAX scan, primal and primal + gradient."""
+def p1_case(n: int, steps: int) -> Any:
+    """P1: the Duffing chain of N = n masses over ``steps`` steps, four design variables, its one
+    response tip_end."""
     d = ys.dynsens_case_dict(n, steps)
     d["responses"] = [r for r in d["responses"] if r["name"] == "tip_end"]
-    case = dynsens.load_case_dict(d)
+    return dynsens.load_case_dict(d)
+
+
+def p1_row(n: int, steps: int, repeats: int) -> Row:
+    """P1 at N = n: dynsens, the numpy loop and the JAX scan, primal and primal + gradient."""
+    case = p1_case(n, steps)
     runs: dict[str, Callable[[], Any]] = {
         "dynsens primal": lambda: dynsens.run_case(case, sensitivities=False, history=()),
         "dynsens + gradient": lambda: dynsens.run_case(case, sensitivities=True, history=()),

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 
 import dynsens  # noqa: E402  (first: it sets BLAS single-threaded before numpy loads)
-import yardstick_chain as ys  # noqa: E402
+from bench_targets import p1_case  # noqa: E402
 
 WEIR = ROOT / "cases" / "tyrolean_weir.yaml"
 
@@ -40,10 +40,14 @@ class Split:
     """Wall time spent in compiled calls and in LAPACK calls made from Python (s), and their counts."""
 
     def __init__(self) -> None:
+        self.reset()
+        self.active = False
+
+    def reset(self) -> None:
+        """Zero the times and counts (before a timed run)."""
         self.compiled = self.lapack = 0.0
         self.compiled_calls = self.lapack_calls = 0
         self.depth = 0          # > 0 inside a timed call: nested calls are not timed twice
-        self.active = False
 
     def timed(self, kind: str, call: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         """``call(*args, **kwargs)``, its wall time added to ``kind`` when outermost."""
@@ -118,9 +122,7 @@ def configurations(ns: list[int], steps: int, weir: bool) -> dict[str, Callable[
     """The runs to split, by label."""
     runs: dict[str, Callable[[], Any]] = {}
     for n in ns:
-        d = ys.dynsens_case_dict(n, steps)
-        d["responses"] = [r for r in d["responses"] if r["name"] == "tip_end"]
-        case = dynsens.load_case_dict(d)
+        case = p1_case(n, steps)
         runs[f"P1 N = {n}, primal"] = lambda c=case: dynsens.run_case(c, sensitivities=False, history=())
         runs[f"P1 N = {n}, + gradient (direct)"] = lambda c=case: dynsens.run_case(c, sensitivities=True, history=())
     if weir:
@@ -139,7 +141,7 @@ def split_of(run: Callable[[], Any], repeats: int) -> dict[str, float]:
         t0 = time.perf_counter()
         run()
         plain.append(time.perf_counter() - t0)
-        SPLIT.__init__()   # type: ignore[misc]
+        SPLIT.reset()
         SPLIT.active = True
         t0 = time.perf_counter()
         run()
