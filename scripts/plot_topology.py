@@ -3,7 +3,8 @@ area, the removed ones (area at the lower bound, /optimization/summary/removed) 
 
     python scripts/plot_topology.py CASE.yaml OPT.h5 OUT.png [--family A]
 
-For plane trusses (the ground structure, cases/ground_structure.yaml) and the x-z view of 3D ones.
+For plane trusses (the ground structure, cases/ground_structure.yaml, also under load cases:
+cases/ground_structure_two_loads.yaml) and the x-z view of 3D ones.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import h5py
 import numpy as np
 import yaml
 
-import dynsens
+from dynsens.case.load_cases import load_any_case
 
 MAX_WIDTH = 6.0     # points, of the largest area
 
@@ -22,7 +23,7 @@ MAX_WIDTH = 6.0     # points, of the largest area
 def topology(case_file: Path, opt_file: Path, family: str) -> tuple[list[tuple[np.ndarray, np.ndarray]],
                                                                     np.ndarray, int, int]:
     """The remaining bars' end points, their areas, and the counts of remaining and removed bars."""
-    case = dynsens.load_case(case_file)
+    case = load_any_case(case_file)     # a case, or a set of load cases (the same design)
     raw = yaml.safe_load(Path(case_file).read_text())
     nodes = {k: np.asarray(v["coords"], dtype=float) for k, v in raw["model"]["nodes"].items()}
     ends = {e["name"]: e["nodes"] for e in raw["model"]["elements"] if e.get("type") == "bar"}
@@ -60,7 +61,9 @@ def main() -> None:
         ax.plot([p[0], q[0]], [p[k], q[k]], color="k", lw=max(MAX_WIDTH * a / top, 0.2),
                 solid_capstyle="round")
     ax.set_aspect("equal")
-    ax.set_title(f"{kept} members remain, {gone} removed (width ∝ area, largest {top:.4g})")
+    raw = yaml.safe_load(args.case.read_text(encoding="utf-8"))
+    loads = f" under load cases {', '.join(raw['load_cases'])}" if raw.get("load_cases") else ""
+    ax.set_title(f"{kept} members remain, {gone} removed{loads} (width ∝ area, largest {top:.4g})")
     ax.set_xlabel("x")
     fig.tight_layout()
     fig.savefig(args.out, dpi=120)
