@@ -313,6 +313,17 @@ def test_console_entry_point_has_no_traceback(tmp_path):
     assert not out.exists()
 
 
+def test_python_dash_m_dynsens_is_the_command(runner):
+    """``python -m dynsens`` (dynsens/__main__.py) is the ``dynsens`` command: the same entry point
+    in process, and in a fresh interpreter the same help text as the click group."""
+    import dynsens.__main__ as entry
+    assert entry.main is main
+    proc = subprocess.run([sys.executable, "-m", "dynsens", "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    for command in ("simulate", "check-gradients", "optimize", "verify"):
+        assert command in proc.stdout
+
+
 # =============================================================================== check-gradients
 def run_check(runner, case_file, *args):
     return invoke(runner, "check-gradients", case_file, "--workers", "1", *args)

@@ -131,6 +131,32 @@ def test_verify_command_checks_a_recorded_optimum(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "beyond t_end" in r.output
 
 
+def test_verify_command_on_a_small_case(tmp_path: Path) -> None:
+    """`dynsens verify` in a second or two (the truss test above is in the slow list): the two-bar
+    truss (stress ratio 0.57 at the start design) passes, a design with a tenth of the area
+    (ratio ~5.7) does not, an optimum recorded by `optimize` is read back with --from, and a file
+    that is not an optimization is refused with exit 2."""
+    shape = REPO / "cases" / "two_bar_shape.yaml"
+    r = invoke("verify", shape)
+    assert r.exit_code == 0 and "PASSES" in r.output and "stress_ratio <= 1" in r.output
+    r = invoke("verify", shape, "-x", "A=100")
+    assert r.exit_code == 1 and "does NOT pass" in r.output
+    out = tmp_path / "opt.h5"
+    assert invoke("optimize", shape, "-o", out, "--no-verify").exit_code == 0
+    with h5py.File(out, "r") as f:
+        best = int(f["optimization/summary"].attrs["best"])
+        h_opt = float(f[f"optimization/start_{best}"].attrs["x_opt"][0])
+    r = invoke("verify", shape, "--from", out, "-v")
+    assert r.exit_code in (0, 1) and "stress_ratio <= 1" in r.output
+    ratio = float(r.output.split("stress_ratio <= 1")[1].split()[0])
+    assert abs(ratio - 1.0) < 1e-4 and abs(h_opt - 1000.0) < 1.0     # on its bound, at H* = B
+    not_opt = tmp_path / "run.h5"
+    with h5py.File(not_opt, "w") as f:          # an HDF5 file, but no optimization in it
+        f["time"] = np.zeros(3)
+    r = invoke("verify", shape, "--from", not_opt)
+    assert r.exit_code == 2 and "not a finished dynsens optimization file" in r.output
+
+
 def test_verification_keys_are_checked() -> None:
     raw = copy.deepcopy(SDOF_DESIGN)
     raw["optimization"]["verification"] = {"refine": 1, "tail": 1.5, "horizn": "auto"}
