@@ -60,6 +60,19 @@ def test_summary_names_kkt_active_constraints_bounds_and_the_objective_change(tm
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
 
 
+def test_the_active_line_counts_a_family_at_its_bounds():
+    """A ground structure leaves thousands of variables at their lower bound: the `active:` line
+    counts them per family (it listed every one: one line of 40,000 characters for 1,747 bars)."""
+    from dynsens.optimize.summary import LISTED, active_bounds
+    few = [f"A[b{i}]" for i in range(LISTED)]
+    assert active_bounds(few) == [f"bound of A[b{i}]" for i in range(LISTED)]
+    many = [f"A[b{i}]" for i in range(1747)] + [f"t[m{i}]" for i in range(5)] + ["H", "k"]
+    assert active_bounds(many) == ["bound of H", "bound of k", "bounds of 1747 variables of family A",
+                                   "bounds of 5 variables of family t"]
+    plain = [f"x{i}" for i in range(LISTED + 3)]
+    assert active_bounds(plain) == [f"bound of x{i}" for i in range(LISTED)] + ["bounds of 3 more variables"]
+
+
 def test_constraint_rows_say_violated_and_inactive_in_units():
     from dynsens.optimize.problem import ConstraintTerm, ScaledProblem
     from dynsens.optimize.summary import bound_rows, constraint_rows

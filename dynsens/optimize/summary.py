@@ -141,5 +141,26 @@ def decision_summary(path: str | Path, result: Any, design_units: Sequence[str] 
     at_bound = [ln.split(" =")[0].strip() for ln in bound_rows(problem.names, np.asarray(b.x, dtype=float),
                                                                 problem.lower, problem.upper, design_units)
                 if "(active)" in ln]
-    lines.append(f"active: {', '.join(active + [f'bound of {n}' for n in at_bound]) or 'none'}")
+    lines.append(f"active: {', '.join(active + active_bounds(at_bound)) or 'none'}")
     return "\n".join(lines)
+
+
+def active_bounds(at_bound: Sequence[str]) -> list[str]:
+    """The ``active:`` line's bound entries: ``bound of NAME`` for each variable at a bound, up to
+    ``LISTED`` of them; beyond, the variables of a design family (``family[element]``) are
+    counted per family (a ground structure has thousands at their lower bound; the removed
+    members are listed in the file) and the others listed, up to ``LISTED``."""
+    if len(at_bound) <= LISTED:
+        return [f"bound of {n}" for n in at_bound]
+    per_family: dict[str, int] = {}
+    others = []
+    for n in at_bound:
+        if n.endswith("]") and "[" in n:
+            family = n.split("[", 1)[0]
+            per_family[family] = per_family.get(family, 0) + 1
+        else:
+            others.append(n)
+    out = [f"bound of {n}" for n in others[:LISTED]]
+    if len(others) > LISTED:
+        out.append(f"bounds of {len(others) - LISTED} more variables")
+    return out + [f"bounds of {k} variables of family {f}" for f, k in per_family.items()]
