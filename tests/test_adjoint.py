@@ -357,12 +357,14 @@ def test_adjoint_equals_direct_on_the_newer_mechanisms(name):
 
 def test_every_shipped_case_has_an_adjoint_test():
     shipped = {p.stem for p in CASES.glob("*.yaml")}
-    # ground_structure: tests/test_ground_structure.py checks its adjoint against central differences;
+    # ground_structure(_two_loads): tests/test_ground_structure.py checks its adjoint against central
+    # differences (each load case of the two-load one);
     # tyrolean_weir_flexible: adjoint against direct in tests/test_weir_flexible.py;
     # truss_two_loads: tests/test_load_cases.py checks adjoint = direct in each of its load cases;
     # two_bar_shape, crank_circle: tests/test_shape_optimum.py, tests/test_crank_circle.py
     # (adjoint = direct = complex step); spin_up_beam: tests/test_spin_up_beam.py
     covered = set(SHORT) | set(MECHANISMS) | {"tower_sizing", "tower_sizing_mma", "ground_structure",
+                                              "ground_structure_two_loads",
                                               "tyrolean_weir_flexible", "truss_two_loads", "two_bar_shape",
                                               "crank_circle", "spin_up_beam"}
     assert shipped <= covered, sorted(shipped - covered)
