@@ -32,3 +32,23 @@ def test_command_writes_tables_and_plots(tmp_path):
     bad = CliRunner().invoke(cli, ["convergence", str(CASES / "sdof_step.yaml"), "--methods", "magic",
                                    "-o", str(tmp_path)])
     assert bad.exit_code != 0 and "unknown methods" in bad.output
+
+
+def test_a_ladder_without_ratio_two_says_its_reference_is_not_extrapolated(tmp_path):
+    """--dt 0.03,0.02: the reference is the finest run itself (not Richardson-extrapolated). Its
+    errors were reported as 0 and the orders as nan and 32.7, with the report claiming an
+    extrapolated reference; now the command warns, the errors at the reference step are not
+    shown, and no order is claimed from a single error."""
+    res = CliRunner().invoke(cli, ["convergence", str(CASES / "sdof_step.yaml"), "--set", "integrator.t_end=0.05",
+                                   "--dt", "0.03,0.02", "--methods", "ddm-forward", "-o", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert "warning: the reference is the finest run itself (Δt = 0.02 s" in res.output
+    assert "observed order n/a (needs errors at two steps)" in res.output and "nan" not in res.output
+    text = (tmp_path / "sdof_step_work_precision.md").read_text()
+    assert "not extrapolated" in text and "Richardson-extrapolated from" not in text
+    assert "| 0.02 | ddm-forward |" in text and "(reference)" in text
+    ok = CliRunner().invoke(cli, ["convergence", str(CASES / "sdof_step.yaml"), "--set", "integrator.t_end=0.05",
+                                  "--dt", "0.02,0.01", "--methods", "ddm-forward", "-o", str(tmp_path / "b")])
+    assert ok.exit_code == 0 and "warning" not in ok.output
+    report = (tmp_path / "b" / "sdof_step_work_precision.md").read_text()
+    assert "Richardson-extrapolated from the two finest steps" in report

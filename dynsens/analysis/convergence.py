@@ -143,27 +143,55 @@ def work_precision(case: Case, dts: list[float], methods: list[str], *, workers:
     refs = [(dt, vals, grads) for (dt, _), (vals, grads, _) in zip(pairs[:n_ref], outs[:n_ref])]
     (dt1, v1, g1), (dt2, v2, g2) = refs if len(refs) == 2 else (refs[0], refs[0])
     p = case.scheme.order
-    ratio = dt1 / dt2 if dt2 < dt1 else 1.0
-    if abs(ratio - 2.0) < 1e-9:
-        f = 1.0 / (ratio ** p - 1.0)
+    if extrapolated(dts):
+        f = 1.0 / (2.0 ** p - 1.0)
         ref_v = {n: v2[n] + (v2[n] - v1[n]) * f for n in v2}
         ref_g = {n: g2[n] + (g2[n] - g1[n]) * f for n in g2}
     else:
         ref_v, ref_g = v2, g2
     rows = []
     for (dt, method), (vals, grads, wall) in zip(pairs[n_ref:], outs[n_ref:]):
-        rows.append(Row(dt, method, wall, vals, grads,
-                        {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals},
-                        {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
-                         for n in grads}))
+        value_error = {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals}
+        gradient_error = {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
+                          for n in grads}
+        if not extrapolated(dts) and dt == dt2:
+            # the reference is this run: its value (every method's) and its complex-step gradient
+            # equal it by construction, an error of 0 that measures nothing (NaN: not shown, no order)
+            value_error = dict.fromkeys(value_error, float("nan"))
+            if method == "ddm-complex":
+                gradient_error = dict.fromkeys(gradient_error, float("nan"))
+        rows.append(Row(dt, method, wall, vals, grads, value_error, gradient_error))
     return rows, ref_v, ref_g
+
+
+def extrapolated(dts: list[float]) -> bool:
+    """Whether the reference of a ladder is Richardson-extrapolated: its two finest steps are
+    in ratio 2 (else the reference is the finest run itself)."""
+    finest = sorted(set(dts))[:2]
+    return len(finest) == 2 and abs(finest[1] / finest[0] - 2.0) < 1e-9
+
+
+def reference_note(dts: list[float]) -> str:
+    """How the ladder's reference was made, in words (for the report and the command)."""
+    finest = sorted(set(dts))[:2]
+    if extrapolated(dts):
+        return (f"the reference is Richardson-extrapolated from the two finest steps "
+                f"(Δt = {finest[1]:g} and {finest[0]:g} s, complex-step partials)")
+    return (f"the reference is the finest run itself (Δt = {finest[0]:g} s, complex-step partials), not "
+            f"extrapolated: the two finest steps are not in ratio 2; the errors at Δt = {finest[0]:g} s are "
+            "zero by construction and are not shown, nor used for an order")
+
+
+def format_order(order: float) -> str:
+    """An observed order, or why there is none."""
+    return f"{order:.2f}" if np.isfinite(order) else "n/a (needs errors at two steps)"
 
 
 def observed_order(rows: list[Row], response: str, method: str = "ddm-complex", what: str = "value") -> float:
     """Slope of log(error) over log(Δt) for the coarser half of the ladder (before round-off)."""
     pts = [(r.dt, (r.value_error if what == "value" else r.gradient_error)[response])
            for r in rows if r.method == method]
-    pts = [(d, e) for d, e in pts if e > 0]
+    pts = [(d, e) for d, e in pts if e > 0]           # NaN (the reference run itself) is left out too
     pts = sorted(pts, reverse=True)[: max(2, len(pts) - 1)]
     if len(pts) < 2:
         return float("nan")
@@ -197,16 +225,16 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path, overwrite: boo
                             f"{r.value_error[n]:.3e}", f"{r.gradient_error[n]:.3e}"])
     files.append(csv_path)
     lines = [f"# Work-precision study: `{case.name}` (scheme {case.scheme.name}, order {case.scheme.order})", "",
-             "Relative errors against the reference (finest Δt, complex-step partials, Richardson-extrapolated). "
+             f"Relative errors against the reference: {reference_note([r.dt for r in rows])}. "
              "Wall times exclude numba compilation (the kernels are compiled before the first timed run).", ""]
     first = rows[0].method
     for n in names:
-        lines += [f"## {n}", "", f"Observed order (value, {first}): {observed_order(rows, n, first):.2f}; "
-                  f"gradient: {observed_order(rows, n, first, what='gradient'):.2f}", "",
+        lines += [f"## {n}", "", f"Observed order (value, {first}): {format_order(observed_order(rows, n, first))}; "
+                  f"gradient: {format_order(observed_order(rows, n, first, what='gradient'))}", "",
                   "| Δt [s] | method | wall time [s] | value error | gradient error |", "|---|---|---|---|---|"]
         for r in rows:
             lines.append(f"| {r.dt:g} | {r.method} | {r.wall_time:.3f} | {r.value_error[n]:.2e} | "
-                         f"{r.gradient_error[n]:.2e} |")
+                         f"{r.gradient_error[n]:.2e} |".replace("nan", "(reference)"))
         lines.append("")
     md = atomic_write_text(planned[1], "\n".join(lines), overwrite)
     files.append(md)
@@ -223,7 +251,7 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path, overwrite: boo
             axes[1].loglog([r.wall_time for r in rr], [max(r.gradient_error[n], 1e-17) for r in rr], "o-", label=mth)
         rr = [r for r in rows if r.method == methods[0]]
         axes[0].loglog([r.dt for r in rr], [max(r.value_error[n], 1e-17) for r in rr], "k--",
-                       label=f"value (order {observed_order(rows, n, methods[0]):.2f})")
+                       label=f"value (order {format_order(observed_order(rows, n, methods[0]))})")
         axes[0].set(xlabel="Δt [s]", ylabel="relative error", title=f"{case.name}: {n}")
         axes[1].set(xlabel="wall time [s]", ylabel="gradient relative error", title="error vs. run time")
         for ax in axes:

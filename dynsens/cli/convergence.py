@@ -4,7 +4,8 @@ from __future__ import annotations
 import click
 
 from ..case.load import load_case
-from ..analysis.convergence import METHODS, observed_order, report_files, work_precision, write_report
+from ..analysis.convergence import (METHODS, extrapolated, format_order, observed_order, reference_note, report_files,
+                                    work_precision, write_report)
 from ..io.paths import check_output_folder
 from ..timeloop.progress import Progress
 from .main import cli
@@ -55,7 +56,9 @@ def convergence_cmd(case_file: str, dts: list[float] | None, methods: str, outdi
             bar.update(done, note, force=True)
         rows, _, _ = work_precision(case, dts, chosen, workers=workers, scheduler=scheduler, progress=progress)
     files = write_report(case, rows, outdir, overwrite=overwrite)
+    if not extrapolated(dts):
+        click.echo(f"warning: {reference_note(dts)}", err=True)
     for n in rows[0].values:
-        click.echo(f"{n}: observed order {observed_order(rows, n, chosen[0]):.2f} "
+        click.echo(f"{n}: observed order {format_order(observed_order(rows, n, chosen[0]))} "
                    f"(scheme order {case.scheme.order})")
     click.echo("written: " + ", ".join(str(f) for f in files))
