@@ -63,6 +63,27 @@ def _history_fields(history: Any) -> tuple[str, ...] | None:
     return tuple(history)
 
 
+def _count(name: str, value: Any, minimum: int) -> int | None:
+    """``value`` as an optional whole number >= ``minimum`` (maxiter, starts, ...), else ValueError."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name}: expected a whole number >= {minimum} or None, found {value!r}")
+    return int(value)
+
+
+def _finite_numbers(name: str, values: Any, positive: bool = False) -> list[float]:
+    """``values`` as a list of finite numbers (> 0 with ``positive``), else ValueError naming them."""
+    what = f"a sequence of finite numbers{' > 0' if positive else ''}"
+    if isinstance(values, (str, bytes, Mapping)) or not isinstance(values, (list, tuple, np.ndarray)):
+        raise ValueError(f"{name}: expected {what}, found {values!r}")
+    bad = [v for v in values if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number))
+           or not np.isfinite(v) or (positive and v <= 0)]
+    if bad or not len(values):
+        raise ValueError(f"{name}: expected {what}, found {values!r}")
+    return [float(v) for v in values]
+
+
 def _flag(name: str, value: Any) -> bool | None:
     """``value`` as an optional flag: None, True or False (a string such as "no" is no flag)."""
     if value is None or isinstance(value, (bool, np.bool_)):
@@ -305,6 +326,15 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
         raise ValueError(f"ftol: expected a finite number > 0, found {ftol!r}")
     if resume and output is None:
         raise ValueError("resume=True continues the run recorded in an output file: give output")
+    maxiter, starts, seed = _count("maxiter", maxiter, 1), _count("starts", starts, 1), _count("seed", seed, 0)
+    workers = _count("workers", workers, 1)
+    if x0 is not None:
+        if not isinstance(x0, Mapping):
+            raise ValueError(f"x0: expected a mapping of design-variable names to start values, found {x0!r}")
+        bad = {k: v for k, v in x0.items() if isinstance(v, (bool, np.bool_))
+               or not isinstance(v, (int, float, np.number)) or not np.isfinite(v)}
+        if bad:
+            raise ValueError(f"x0: expected a finite start value for each design variable, found {bad}")
     c = as_any_case(case, overrides)
     tmp = tempfile.TemporaryDirectory(prefix="dynsens-opt-") if output is None else None
     path = Path(tmp.name if tmp is not None else ".") / "opt.h5" if output is None else Path(output)
@@ -349,6 +379,7 @@ def check_gradients(case: CaseLike, steps: Sequence[float] = (1e-3, 1e-4, 1e-5, 
     step, with ``gradients`` and ``rel_diff``); ``report.passes(rtol)`` is the command's exit test
     and `to_markdown` its table.
     """
+    steps = _finite_numbers("steps", steps, positive=True)
     c = as_case(case, overrides)
-    return _check_gradients(c, list(steps), scheme, x=None if x is None else np.asarray(x, dtype=float),
+    return _check_gradients(c, steps, scheme, x=None if x is None else np.asarray(x, dtype=float),
                             workers=_default_workers(workers))

@@ -91,6 +91,25 @@ def test_degenerate_elements(kind: str, dofs: list, needle: str) -> None:
     assert [m for p, m in found if p == "model.elements[3].dofs" and needle in m], found
 
 
+def test_zero_length_bars_and_beams_are_refused_at_load_and_at_a_design() -> None:
+    """A bar or beam whose end nodes coincide has no direction: it gave raw numpy warnings and a
+    NaN/Inf error without the element's key path."""
+    raw = _yaml("cases/two_bar_shape.yaml")                    # tip at (0, -H), H = 1800 at the start
+    raw["model"]["nodes"]["right"] = {"coords": [0.0, -1800.0]}
+    found = _problems(raw)
+    assert [m for p, m in found if p == "model.elements[1].nodes" and "zero length" in m
+            and "[0.0, -1800.0]" in m], found
+    raw["model"]["nodes"]["right"] = {"coords": [0.0, -1500.0]}   # valid at the start, not at H = 1500
+    case = load_case_dict(raw)
+    x = case.x0.copy()
+    x[case.design_names.index("H")] = 1500.0
+    with pytest.raises(DesignError, match=r"model\.elements\[1\]\.nodes: expected two distinct end points"):
+        dynsens.run_case(case, x)
+    frame = cantilever(2)
+    frame["model"]["nodes"]["n2"]["coords"] = list(frame["model"]["nodes"]["n1"]["coords"])
+    assert [m for p, m in _problems(frame) if p == "model.elements[1].nodes" and "a beam of zero length" in m]
+
+
 def test_degenerate_inertia_tensor_is_refused() -> None:
     raw = _yaml("cases/pendulum_3d.yaml")
     bodies = raw["model"]["bodies"]
@@ -111,6 +130,17 @@ def test_inputs_that_overflow_memory_budget(budget: str) -> None:
     raw["sensitivity"]["memory_budget"] = yaml.safe_load(budget)
     found = _problems(raw)
     assert [m for p, m in found if p == "sensitivity.memory_budget" and "expected a positive size" in m], found
+
+
+def test_memory_budget_limit_is_stated_exactly() -> None:
+    """Just above the limit: the message named "at most 5e+18" (rounded up from 2**62 ≈ 4.61e18)."""
+    from helpers import SDOF_DESIGN
+    raw = copy.deepcopy(SDOF_DESIGN)
+    raw["sensitivity"]["memory_budget"] = 4999999999999999999
+    found = _problems(raw)
+    assert [m for p, m in found if p == "sensitivity.memory_budget" and "at most 2**62 = 4611686018427387904" in m]
+    raw["sensitivity"]["memory_budget"] = 2 ** 62
+    load_case_dict(raw)
 
 
 @pytest.mark.parametrize("spec", ["lhs:100000000000", "sobol:1099511627776", "grid:100000", "grid:4000x4000x4000"])
@@ -234,6 +264,23 @@ def test_python_api_validates_nan_tolerance() -> None:
     report = dynsens.check_gradients("cases/sdof_step.yaml", steps=[1e-6], **{"integrator.t_end": 0.1})
     with pytest.raises(ValueError, match="rtol: expected a finite number > 0"):
         report.passes(float("nan"))
+
+
+@pytest.mark.parametrize("call, needle", [
+    (lambda c: dynsens.check_gradients(c, "1e-4"), "steps: expected a sequence of finite numbers > 0, found '1e-4'"),
+    (lambda c: dynsens.check_gradients(c, [1e-4, -1e-5]), "steps: expected a sequence of finite numbers > 0"),
+    (lambda c: dynsens.optimize(c, maxiter=float("nan")), "maxiter: expected a whole number >= 1 or None, found nan"),
+    (lambda c: dynsens.optimize(c, starts=0), "starts: expected a whole number >= 1"),
+    (lambda c: dynsens.optimize(c, x0={"k": float("nan")}), "x0: expected a finite start value for each design "
+                                                            "variable, found {'k': nan}"),
+])
+def test_python_api_names_the_bad_argument(call, needle: str) -> None:
+    """These raised numpy's TypeError, "cannot convert float NaN to integer", or called NaN
+    "outside the bounds" in the command line's words (-x); nothing runs before the check."""
+    from helpers import SDOF_DESIGN
+    with pytest.raises(ValueError) as err:
+        call(copy.deepcopy(SDOF_DESIGN))
+    assert needle in str(err.value)
 
 
 @pytest.mark.parametrize("name", ["pi", "e", "sqrt"])

@@ -35,7 +35,7 @@ def derivative_settings(sens: dict[str, Any], pc: ProblemCollector) -> dict[str,
     if value is None or not 0 < value <= MAX_MEMORY_BUDGET:
         pc.add("sensitivity.memory_budget",
                f"expected a positive size in bytes or with a unit (e.g. 2 GiB, 500 MB; finite, at most "
-               f"{MAX_MEMORY_BUDGET:.0e} bytes), found {budget!r}")
+               f"2**62 = {int(MAX_MEMORY_BUDGET)} bytes), found {budget!r}")
         value = DEFAULT_MEMORY_BUDGET
     return {"method": str(method), "memory_budget": value}
 

@@ -43,6 +43,18 @@ def component_index(labels: Sequence[str], c: Any) -> int | None:
     return None
 
 
+def missing_component(labels: Sequence[str], c: Any) -> str:
+    """Why :func:`component_index` found no component ``c`` among ``labels``: a short label that
+    names several components is ambiguous, not missing."""
+    if isinstance(c, str):
+        for short in ([lb.rsplit(".", 1)[-1] for lb in labels], [lb.split(".", 1)[0] for lb in labels]):
+            matches = [lb for lb, s in zip(labels, short) if s == c]
+            if len(matches) > 1:
+                shown = ", ".join(matches[:4]) + (", ..." if len(matches) > 4 else "")
+                return f"component {c!r} is ambiguous: it names {len(matches)} components ({shown}); give a full label"
+    return f"component {c!r} not found (components: {list(labels)})"
+
+
 def _components(out: Output, comp: Any, path: str, pc: ProblemCollector) -> tuple[int, ...] | None:
     """Indices of the requested components (all when ``comp`` is None)."""
     if comp is None:
@@ -52,7 +64,7 @@ def _components(out: Output, comp: Any, path: str, pc: ProblemCollector) -> tupl
     for c in wanted:
         i = component_index(out.labels, c)
         if i is None:
-            pc.add(path, f"component {c!r} not found (components: {list(out.labels)})")
+            pc.add(path, missing_component(out.labels, c))
             return None
         idx.append(i)
     return tuple(idx)

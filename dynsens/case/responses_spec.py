@@ -22,7 +22,7 @@ from ..responses.types import load_response_types, response_type_names
 from .aggregates import AGGREGATE_TYPES, aggregate_maker
 from .checks import reserved_message
 from .member_checks import beam_names, interaction_maker
-from .quantities import component_index
+from .quantities import component_index, missing_component
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -57,7 +57,7 @@ def quantity_component(out: Output, comp: Any, path: str, pc: ProblemCollector) 
         return 0
     i = component_index(out.labels, comp)
     if i is None:
-        pc.add(path, f"component {comp!r} not found (components: {list(out.labels)})")
+        pc.add(path, missing_component(out.labels, comp))
     return i
 
 

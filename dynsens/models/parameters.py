@@ -54,6 +54,8 @@ class ParameterTable:
         self._paths: list[str] = []
         self._rules: list[tuple[int, str, str]] = []
         self._nonzero: list[tuple[tuple[int, ...], str, str]] = []
+        # two points (coordinate entries) that must not coincide: (a, b, path, what)
+        self._apart: list[tuple[tuple[int, ...], tuple[int, ...], str, str]] = []
         # hollow sections whose wall must leave a hole: (wall index, {width name: index}, path)
         self._walls: list[tuple[int, dict[str, int], str]] = []
         # bar pretensions that must leave a positive free length, N0 > −E A: (N0, E, A, path)
@@ -119,6 +121,12 @@ class ParameterTable:
         if all(i >= 0 for i in indices):
             self._nonzero.append((tuple(indices), path, what))
 
+    def require_apart(self, a: Sequence[int], b: Sequence[int], path: str, what: str) -> None:
+        """Points ``a`` and ``b`` (coordinate entries, e.g. a bar's end nodes) must not coincide at
+        any design: an element of zero length has no direction (its strain divides by it)."""
+        if all(i >= 0 for i in (*a, *b)):
+            self._apart.append((tuple(a), tuple(b), path, what))
+
     def require_wall(self, wall: int, widths: Mapping[str, int], path: str) -> None:
         """A hollow section's wall thickness (entry ``wall``) must leave a hole at every design:
         2·t < each outer width in ``widths`` (name -> entry, e.g. {"D": i} for a tube)."""
@@ -145,8 +153,8 @@ class ParameterTable:
         values, out, bad = self._evaluated(env)
         out += self._derivative_problems(env, bad)
         # the rules, each on the entries that have a value (an entry in ``bad`` is reported above)
-        for rule in (self._range_problems, self._nonzero_problems, self._definite_problems, self._wall_problems,
-                     self._pretension_problems):
+        for rule in (self._range_problems, self._nonzero_problems, self._apart_problems, self._definite_problems,
+                     self._wall_problems, self._pretension_problems):
             out += rule(values, bad, env)
         return out
 
@@ -202,6 +210,13 @@ class ParameterTable:
         return [(path, f"expected a nonzero {what}, found {values[list(idx)].tolist()}")
                 for idx, path, what in self._nonzero
                 if not bad.intersection(idx) and not np.any(values[list(idx)])]
+
+    def _apart_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
+        """Elements whose two end points coincide (zero length)."""
+        return [(path, f"expected two distinct end points (a {what} of zero length has no direction), found both "
+                       f"at {values[list(a)].tolist()}")
+                for a, b, path, what in self._apart
+                if not bad.intersection((*a, *b)) and np.array_equal(values[list(a)], values[list(b)])]
 
     def _definite_problems(self, values: Array, bad: set[int], env: dict[str, float]) -> list[tuple[str, str]]:
         """Symmetric matrices (an inertia tensor) that must be positive definite and are not."""

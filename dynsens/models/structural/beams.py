@@ -328,6 +328,7 @@ def parse_beam(el: dict, ep: str, name: str, beams: BeamSet, table: ParameterTab
     dofs = node_dofs(pair[0], f"{ep}.nodes") + node_dofs(pair[1], f"{ep}.nodes")
     if any(p not in node_coords for p in pair):
         return
+    table.require_apart(node_coords[pair[0]], node_coords[pair[1]], f"{ep}.nodes", "beam")
     beams.names.append(name)
     beams.dofs.append(dofs)
     beams.coords.append(node_coords[pair[0]] + node_coords[pair[1]])

@@ -310,6 +310,7 @@ def parse_beam_3d(el: dict, ep: str, name: str, beams: Beam3DSet, table: Paramet
         return
     if not _orientation_ok(v, [(given_coords or {}).get(p) for p in pair], ep, problems):
         return
+    table.require_apart(node_coords[pair[0]], node_coords[pair[1]], f"{ep}.nodes", "beam")
     beams.names.append(name)
     beams.dofs.append(dofs)
     beams.coords.append(node_coords[pair[0]] + node_coords[pair[1]])

@@ -54,6 +54,8 @@ class Bars(ElementKind):
                                      problems, positive=True))
         self.nodes.append((pair[0], pair[1]))
         self.node_coords = ctx.node_coords
+        if pair[0] in ctx.node_coords and pair[1] in ctx.node_coords:
+            table.require_apart(ctx.node_coords[pair[0]], ctx.node_coords[pair[1]], f"{path}.nodes", self.type)
 
     def freeze(self, model: ModelContext) -> None:
         self.dim = dim = model.dim
