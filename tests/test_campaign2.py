@@ -350,6 +350,21 @@ def test_messages_ks_components_take_the_short_label() -> None:
             and "'u99' not found" in m]
 
 
+def test_messages_an_ambiguous_short_label_is_not_called_missing() -> None:
+    """`displacement` is the last part of both labels: it was refused as "not found"."""
+    raw = _yaml("cases/duffing_chain.yaml")
+    two = {"dof": ["u19", "u20"], "kind": "displacement"}
+    raw["responses"][0] = {"name": "tip_end", "type": "value", "quantity": two, "component": "displacement"}
+    raw["output"] = {"quantities": [{"name": "two", "quantity": two, "component": "displacement"}]}
+    found = dict(_problems(raw))
+    for path in ("responses[0].component", "output.quantities[0].component"):
+        assert "component 'displacement' is ambiguous: it names 2 components (u19.displacement, " \
+               "u20.displacement)" in found[path], found
+    raw["responses"][0]["component"] = "u20"          # a short label that names one component
+    raw["output"]["quantities"][0]["component"] = "u20.displacement"
+    load_case_dict(raw)
+
+
 def test_messages_dimensionless_unit_prints_bare() -> None:
     from dynsens.optimize.summary import _u
     assert _u("-") == "" and _u("MPa") == " MPa" and _u("") == ""
