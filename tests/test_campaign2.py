@@ -164,6 +164,17 @@ def test_csv_not_utf8_read_by_its_byte_order_mark(tmp_path, encoding: str) -> No
                                   [[60, 1.5], [80, 2.0]])
 
 
+@pytest.mark.parametrize("encoding", ["utf-16-le", "utf-16-be"])
+def test_csv_utf16_without_byte_order_mark_is_named(tmp_path, encoding: str) -> None:
+    """It decoded as UTF-8 and was refused for "unknown design variable(s) 'm\\x00'"."""
+    from test_study import SDOF
+    csv = tmp_path / "d.csv"
+    csv.write_bytes("k,m\n60,1.5\n".encode(encoding))
+    r = invoke("study", SDOF, "-o", tmp_path / "s.h5", "--sample", csv)
+    assert r.exit_code == 2 and "found NUL bytes" in r.output and "UTF-16 without a byte-order mark" in r.output
+    assert not (tmp_path / "s.h5").exists()
+
+
 @pytest.mark.parametrize("encoding", ["latin-1", "cp1252"])
 def test_csv_not_utf8(tmp_path, encoding: str) -> None:
     from test_study import SDOF

@@ -80,6 +80,10 @@ def read_designs_csv(case: Case, path: str | Path) -> np.ndarray:
         raise StudyError(f"{path}: expected a UTF-8 text file (or UTF-16 with a byte-order mark), found "
                          f"{data[exc.start:exc.start + 1]!r} at byte {exc.start}, not {exc.encoding}; "
                          "save the file as UTF-8 CSV") from None
+    if "\x00" in text:     # UTF-16 without its byte-order mark decodes as UTF-8 with a NUL in every other byte
+        raise StudyError(f"{path}: expected a UTF-8 text file (or UTF-16 with a byte-order mark), found NUL "
+                         f"bytes (at byte {data.index(0)}): UTF-16 without a byte-order mark?; save the file as "
+                         "UTF-8 CSV")
     rows = list(csv.reader(io.StringIO(text, newline="")))
     rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
