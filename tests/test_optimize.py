@@ -9,6 +9,7 @@ a Dask cluster) and give a table of optima.
 """
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -24,6 +25,7 @@ import dynsens.optimize.problem as opt_problem
 from dynsens.case.load import load_case, load_case_dict
 from dynsens.cli.main import cli
 from dynsens.errors import ConvergenceError, ModelError
+from dynsens.io.paths import OutputPathError
 from dynsens.postcheck import check_members
 from dynsens.responses.base import ResponseValue
 from helpers import SDOF_DESIGN, ctrl_c_after_rows
@@ -198,6 +200,24 @@ def test_existing_output_needs_overwrite(tmp_path, sdof_file) -> None:
     out.write_bytes(b"keep")
     r = CliRunner().invoke(cli, ["optimize", str(sdof_file), "-o", str(out)])
     assert r.exit_code == 2 and "--overwrite" in r.output and out.read_bytes() == b"keep"
+
+
+@pytest.mark.parametrize("extra", [None, -3])
+def test_too_long_output_name_is_a_clean_error(tmp_path, sdof_file, extra) -> None:
+    # 297 characters + ".h5" is past any file system's limit on names; NAME_MAX - 3 bytes fits,
+    # but its lock file ".NAME.lock" and the temporary file do not: refused before any lookup
+    # of the path (which failed with "OSError: File name too long" and a traceback)
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    name = "a" * 297 + ".h5" if extra is None else "a" * (name_max + extra - 3) + ".h5"
+    r = CliRunner().invoke(cli, ["optimize", str(sdof_file), "-o", str(tmp_path / name), "--maxiter", "1"])
+    assert r.exit_code == 2 and "Traceback" not in r.output and r.exception is not None, r.output
+    assert r.output.count("Error:") == 1 and "-o/--output: expected" in r.output, r.output
+    assert f"at most {name_max} bytes" in r.output, r.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sdof_design.yaml"]      # nothing written
+    if extra is not None:       # the library call: its lock file's name is past the limit
+        with pytest.raises(OutputPathError, match=f"at most {name_max - 6} bytes .*its lock file adds 6"):
+            opt.optimize_case(load_case(sdof_file), tmp_path / name, maxiter=1)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["sdof_design.yaml"]
 
 
 def test_multistart_with_two_workers_prints_a_table(tmp_path: Path) -> None:

@@ -28,6 +28,7 @@ import dynsens.cli.study  # noqa: F401  (registers the command)
 from dynsens.case.load import load_case
 from dynsens.cli.main import cli
 from dynsens.io.hdf5 import read_result_dict as read_result
+from dynsens.io.paths import OutputLockedError, OutputPathError, lock_path, writer_lock
 from dynsens.study import StudyError, read_study, run_study, sample_designs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -253,6 +254,89 @@ def test_resume_checks_the_case_and_options(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--overwrite" in r.output
     t = run_study(case, out, resume=True)                      # nothing left to do
     assert t.index.tolist() == [0, 1] and t.run.tolist() == [0, 0]
+
+
+# --------------------------------------------------------------------------------------
+# one writer per study file; output names the file system cannot hold
+# --------------------------------------------------------------------------------------
+def _refused(r, *fragments: str) -> None:
+    assert r.exit_code == 2 and "Traceback" not in r.output and r.output.count("Error:") == 1, r.output
+    for frag in fragments:
+        assert frag in r.output, (frag, r.output)
+
+
+def test_second_study_writer_is_refused(tmp_path: Path) -> None:
+    # two studies writing one file interleaved their rows (35 rows for 20 designs), and a
+    # --resume beside a running study appended duplicates: the second is refused at once
+    out = tmp_path / "s.h5"
+    run_study(load_case(SDOF, ["integrator.t_end=1"]), out, "lhs:2", seed=1, workers=1)
+    before = out.read_bytes()
+    fresh = tmp_path / "new.h5"
+    with writer_lock(out), writer_lock(fresh):          # as a running study holds it
+        for extra in (["--sample", "lhs:3", "--overwrite"], ["--resume"], ["--sample", "lhs:2", "--resume"]):
+            r = CliRunner().invoke(cli, ["study", str(SDOF), "-o", str(out), "--workers", "1", *extra, *SHORT])
+            _refused(r, "s.h5 is being written by another dynsens process", "another -o file")
+            assert out.read_bytes() == before
+        r = CliRunner().invoke(cli, ["study", str(SDOF), "-o", str(fresh), "--sample", "lhs:2", *SHORT])
+        _refused(r, "new.h5 is being written by another dynsens process")
+        assert not fresh.exists()
+        with pytest.raises(OutputLockedError):
+            run_study(load_case(SDOF), out, resume=True)
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5"]      # the locks released and removed
+    assert not lock_path(out).exists()
+    t = run_study(load_case(SDOF, ["integrator.t_end=1"]), out, "lhs:3", seed=1, workers=1, overwrite=True)
+    assert t.index.tolist() == [0, 1, 2]                                  # free again once released
+
+
+def test_a_running_study_refuses_a_resume_of_its_file(tmp_path: Path) -> None:
+    # the race as it happens: a study in another process is still writing when --resume starts
+    out = tmp_path / "s.h5"
+    args = ["study", str(SDOF), "-o", str(out), "--sample", "lhs:6", "--seed", "4", "--workers", "1",
+            "--set", "integrator.t_end=4"]
+    code = "import sys; from dynsens.cli.main import main; sys.argv = ['dynsens'] + sys.argv[1:]; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert proc.stdout is not None
+    try:
+        for line in proc.stdout:                   # the first row is on disk: the study is running
+            if line.startswith("["):
+                break
+        r = CliRunner().invoke(cli, ["study", str(SDOF), "-o", str(out), "--resume", "--workers", "1",
+                                     "--set", "integrator.t_end=4"])
+        _refused(r, "s.h5 is being written by another dynsens process")
+        r = CliRunner().invoke(cli, [*args, "--overwrite"])
+        _refused(r, "s.h5 is being written by another dynsens process")
+    finally:
+        proc.stdout.read()
+        proc.wait(timeout=120)
+    assert proc.returncode == 0
+    t = read_study(out)
+    assert t.status == "completed" and sorted(t.index.tolist()) == list(range(6))     # each design once
+
+
+@pytest.mark.parametrize("extra", [None, -3])
+def test_too_long_output_name_is_a_clean_error(tmp_path: Path, extra: int | None) -> None:
+    # a lookup of a name past NAME_MAX failed with "OSError: File name too long" and a traceback;
+    # NAME_MAX - 3 bytes fits, its lock file ".NAME.lock" (and the temporary file) do not
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    name = "a" * 297 + ".h5" if extra is None else "a" * (name_max + extra - 3) + ".h5"
+    out = tmp_path / "d" / name
+    r = CliRunner().invoke(cli, ["study", str(SDOF), "-o", str(out), "--sample", "lhs:2", *SHORT])
+    _refused(r, "-o/--output: expected", f"at most {name_max} bytes")
+    assert not (tmp_path / "d").exists()
+    with pytest.raises(OutputPathError, match=f"at most {name_max} bytes"):
+        run_study(load_case(SDOF), out, "lhs:2")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_lock_file_name_past_the_limit_is_a_clean_error(tmp_path: Path) -> None:
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    out = tmp_path / ("a" * (name_max - 3))
+    with pytest.raises(OutputPathError, match=f"at most {name_max - 6} bytes .*its lock file adds 6"):
+        with writer_lock(out):
+            pass
+    assert list(tmp_path.iterdir()) == []
 
 
 # --------------------------------------------------------------------------------------

@@ -151,9 +151,10 @@ def optimize(case_file: str, output: str | None, overwrite: bool, overrides: tup
         raise OptimizationError("--resume continues OUTPUT and --overwrite replaces it: give one of them")
 
     def check_output(output: str) -> None:
+        # name legal (also its lock file's), folder writable: before anything looks the path up
+        check_output_path(output, overwrite=True)
         if not resume and Path(output).exists() and not overwrite:
             raise OutputExistsError(f"{output} exists: pass --overwrite to replace it, or --resume to continue it")
-        check_output_path(output, overwrite=True)   # folder writable, name legal: before any simulation
     if output is not None:
         check_output(output)                        # before the case is read
     # a case with load cases stands in for one case (its design, RESPONSE@LOADCASE responses)

@@ -8,7 +8,7 @@ import click
 import numpy as np
 
 from ..case.load import load_case
-from ..io.paths import check_output_folder
+from ..io.paths import check_output_folder, check_output_path
 from ..study import format_summary, plot_study, read_study, run_study
 from ..study.plots import study_plot_files
 from .main import cli
@@ -41,10 +41,13 @@ def study(case_file: str, output: str | None, sample: str | None, gradients: boo
     Rows are on disk as soon as each design finishes: after a kill, --resume computes
     only the designs without a row.  Read the table with dynsens.read_study(OUTPUT).
     """
+    if output is not None:      # before the case is read (run_study checks it again, and locks it)
+        check_output_path(output, overwrite=True)
     case = load_case(case_file, overrides)
     names = case.design_names
     if output is None:
         output = default_output(case, "_study.h5")
+        check_output_path(output, overwrite=True)
     if plots:       # before the run, not after it
         check_output_folder(plots, study_plot_files(plots), overwrite or resume, option="--plots")
 

@@ -5,16 +5,19 @@ lost to a typo in ``-o``), refuses to replace a file without ``--overwrite``, de
 names from a case name only through :func:`safe_stem` (a name such as ``../x`` cannot leave
 the output folder), and writes through :func:`atomic_path`: a temporary file in the same
 folder, given the permissions the user's umask grants, renamed into place on success and
-removed on any failure, Ctrl-C or SIGTERM.
+removed on any failure, Ctrl-C or SIGTERM.  A file that is appended to while a command runs
+(an optimization's or a study's HDF5) has one writer at a time: :func:`writer_lock`.
 """
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import functools
 import os
 import re
 import tempfile
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, TypeVar
 
 from ..errors import DynsensError
 
@@ -25,6 +28,13 @@ class OutputExistsError(DynsensError, FileExistsError):
 
 class OutputPathError(DynsensError, OSError):
     """An output path cannot be written (folder missing or read-only, name too long, ...)."""
+
+
+class OutputLockedError(DynsensError, BlockingIOError):
+    """Another process is writing the same output file."""
+
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
@@ -60,6 +70,8 @@ def _name_max(folder: Path) -> int:
 
 #: bytes that atomic_path's temporary name ".NAME.XXXXXXXX.tmp" adds to a file name
 _TEMPORARY_EXTRA = len(".") + len(".") + 8 + len(".tmp")
+#: bytes that writer_lock's lock file ".NAME.lock" adds to a file name
+_LOCK_EXTRA = len(".") + len(".lock")
 
 
 def _check_lengths(path: Path, option: str) -> None:
@@ -91,15 +103,22 @@ def check_output_path(path: str | Path, overwrite: bool = False, *, option: str 
     _check_lengths(p, option)
     if p.is_dir():
         raise OutputPathError(f"{option}: expected a file, found the folder {p}")
-    name_max = _name_max(_existing_ancestor(p.parent))
-    if len(os.fsencode(p.name)) + _TEMPORARY_EXTRA > name_max:
-        raise OutputPathError(f"{option}: expected a file name of at most {name_max - _TEMPORARY_EXTRA} bytes "
-                              f"(the file system allows at most {name_max} bytes, and the temporary file "
-                              f"written first adds {_TEMPORARY_EXTRA}), found {len(os.fsencode(p.name))} bytes")
+    _check_name_room(p, _TEMPORARY_EXTRA, "the temporary file written first", option)
     _check_folder(p.parent, option)
     if p.exists() and not overwrite:
         raise OutputExistsError(f"{p} exists: pass --overwrite to replace it")
     return p
+
+
+def _check_name_room(p: Path, extra: int, what: str, option: str) -> None:
+    """Raise unless the name of ``p`` with ``extra`` bytes more (a file made beside it) fits the
+    file system's limit on names."""
+    name_max = _name_max(_existing_ancestor(p.parent))
+    n = len(os.fsencode(p.name))
+    if n + extra > name_max:
+        raise OutputPathError(f"{option}: expected a file name of at most {name_max - extra} bytes "
+                              f"(the file system allows at most {name_max} bytes, and {what} "
+                              f"adds {extra}), found {n} bytes")
 
 
 def check_output_folder(folder: str | Path, files: Iterable[Path], overwrite: bool = False, *,
@@ -190,3 +209,60 @@ def atomic_write_text(path: str | Path, text: str, overwrite: bool = False) -> P
     with atomic_path(path, overwrite) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+# --------------------------------------------------------------------------------------
+# one writer per output file
+# --------------------------------------------------------------------------------------
+def lock_path(path: str | Path) -> Path:
+    """The lock file that guards ``path`` (hidden, in the same folder)."""
+    p = Path(path)
+    return p.with_name(f".{p.name}.lock")
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | Path, *, option: str = "-o/--output") -> Iterator[None]:
+    """Hold an exclusive lock on the output file ``path`` for the duration of the block.
+
+    A second writer (another ``dynsens optimize`` or ``dynsens study`` with the same ``-o``,
+    also ``--resume`` or ``--overwrite``) is refused at once with :class:`OutputLockedError`
+    instead of interleaving its rows.  The lock is an ``flock`` on a hidden file beside
+    ``path``, released by the kernel when the process ends (also on SIGKILL), and the file is
+    removed on the way out.  A name too long for its lock file is an :class:`OutputPathError`.
+    """
+    p = Path(path)
+    _check_lengths(p, option)                   # before anything looks the path up
+    _check_name_room(p, _LOCK_EXTRA, "its lock file", option)
+    lp = lock_path(p)
+    lp.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lp, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputLockedError(f"{path} is being written by another dynsens process (lock {lp}): wait for "
+                                    "it to finish, or write to another -o file") from None
+        # the holder before us may have removed the file between our open and our lock
+        try:
+            same = os.stat(lp).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lp)
+        os.close(fd)
+
+
+def holds_writer_lock(fn: F) -> F:
+    """Decorate ``fn(case, output, ...)`` to run under :func:`writer_lock` of ``output``."""
+    @functools.wraps(fn)
+    def wrapper(case: Any, output: str | Path, *args: Any, **kwargs: Any) -> Any:
+        with writer_lock(output):
+            return fn(case, output, *args, **kwargs)
+    return wrapper  # type: ignore[return-value]

@@ -12,10 +12,11 @@ import numpy as np
 from ..case.load import Case
 from ..executor import make_executor, remember_case
 from ..io.hdf5 import OutputExistsError
+from ..io.paths import holds_writer_lock
 from .jobs import StartJob, StartOutcome, run_start
 from .methods import check_method
 from .problem import OptimizationError, ScaledProblem, _fmt, _spec, build_problem, scaled_evaluation, simulate
-from .store import holds_writer_lock, validate_resume_file
+from .store import validate_resume_file
 from .summary import removed_members
 from .store import (_init_file, _outcome_attrs, _outcome_from_file, _problem_attrs, _problem_from_file,
                     _set_attrs, _start_group, _store_optimum, _write_row, set_status)

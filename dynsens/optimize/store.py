@@ -1,82 +1,22 @@
 """The optimization file: rows appended per iteration, start attributes, the stored optimum."""
 from __future__ import annotations
 
-import contextlib
-import fcntl
-import functools
 import json
-import os
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, TypeVar
+from typing import Any, Mapping
 
 import h5py
 import numpy as np
 
 from ..case.load import Case
 from ..io.hdf5 import append_rows, atomic_h5, write_design, write_header
+# one writer per output file: shared with the study (re-exported here, where it began)
+from ..io.paths import OutputLockedError, holds_writer_lock, lock_path, writer_lock  # noqa: F401
 from ..io.series import make_scale, write_series
 from ..simulation import run_case
 from .jobs import StartOutcome
 from .problem import FEAS_TOL, SIM_ERRORS, ConstraintTerm, OptimizationError, ScaledProblem
 
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-# --------------------------------------------------------------------------------------
-# one writer per optimization file
-# --------------------------------------------------------------------------------------
-class OutputLockedError(OptimizationError):
-    """Another process is writing the same optimization file."""
-
-
-def lock_path(path: str | Path) -> Path:
-    """The lock file that guards ``path`` (hidden, in the same folder)."""
-    p = Path(path)
-    return p.with_name(f".{p.name}.lock")
-
-
-@contextlib.contextmanager
-def writer_lock(path: str | Path) -> Iterator[None]:
-    """Hold an exclusive lock on the optimization file ``path`` for the duration of the block.
-
-    A second writer (another ``dynsens optimize -o`` of the same file, also ``--resume``)
-    is refused at once instead of interleaving its rows.  The lock is an ``flock`` on a
-    hidden file beside ``path``, released by the kernel when the process ends (also on
-    SIGKILL), and the file is removed on the way out.
-    """
-    lp = lock_path(path)
-    lp.parent.mkdir(parents=True, exist_ok=True)
-    while True:
-        fd = os.open(lp, os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise OutputLockedError(f"{path} is being written by another dynsens process (lock {lp}): wait for "
-                                    "it to finish, or write to another -o file") from None
-        # the holder before us may have removed the file between our open and our lock
-        try:
-            same = os.stat(lp).st_ino == os.fstat(fd).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        os.close(fd)
-    try:
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(lp)
-        os.close(fd)
-
-
-def holds_writer_lock(fn: F) -> F:
-    """Decorate ``fn(case, output, ...)`` to run under :func:`writer_lock` of ``output``."""
-    @functools.wraps(fn)
-    def wrapper(case: Any, output: str | Path, *args: Any, **kwargs: Any) -> Any:
-        with writer_lock(output):
-            return fn(case, output, *args, **kwargs)
-    return wrapper  # type: ignore[return-value]
 
 # --------------------------------------------------------------------------------------
 # the output file (written only by the calling process)

@@ -13,6 +13,7 @@ import numpy as np
 from ..case.load import Case
 from ..executor import cached_case, make_executor, remember_case
 from ..io.hdf5 import OutputExistsError
+from ..io.paths import check_output_path, writer_lock
 from ..simulation import run_case
 from .sampling import StudyError, sample_designs
 from .store import (StudyTable, append_row, create_study_file, prepare_resume, read_study, set_response_units,
@@ -87,11 +88,23 @@ def run_study(case: Case, output: str | Path, sample: str | None = None, *, grad
 
     A design whose simulation fails is a row with ``failed`` set and the reason; it does
     not stop the study.  Ctrl-C (or any error of the study itself) leaves the file with
-    status ``interrupted`` and every finished row.
+    status ``interrupted`` and every finished row.  One writer at a time: while another
+    process writes ``output`` (a study or an optimization), this one is refused at once with
+    :class:`~dynsens.io.paths.OutputLockedError` and touches nothing.
     """
-    path = Path(output)
     if resume and overwrite:
         raise StudyError("--resume continues OUTPUT and --overwrite replaces it: give one of them")
+    # the name and folder first (a name too long must not reach a lookup), then one writer at a time:
+    # a second study (new, --overwrite or --resume) of the same file is refused before it reads or writes it
+    path = check_output_path(output, overwrite=True)
+    with writer_lock(path):
+        return _run_locked(case, path, sample, gradients, seed, workers, scheduler, resume, overwrite, on_row)
+
+
+def _run_locked(case: Case, path: Path, sample: str | None, gradients: bool, seed: int | None,
+                workers: int | None, scheduler: str | None, resume: bool, overwrite: bool,
+                on_row: Callable[[dict[str, Any], int, int], None] | None) -> StudyTable:
+    """:func:`run_study` once its output is checked and locked."""
     if resume:
         designs, done, run, sample, seed = prepare_resume(path, case, sample, seed, gradients)
     else:
