@@ -159,6 +159,9 @@ def test_failed_design_is_recorded_not_fatal(tmp_path: Path, sdof_m0: Path) -> N
     # a zero mass is out of the element's range: refused before its run, recorded with the reason
     assert "design 1: m=0, c=0.8, k=50: FAILED: DesignError" in r.output
     assert "3 designs (" in r.output and "1 failed" in r.output
+    # the user's umask decides the permissions, as for every result file (each row rewrote it 0600)
+    from dynsens.io.paths import current_umask
+    assert out.stat().st_mode & 0o777 == 0o666 & ~current_umask()
     t = dynsens.read_study(out)          # the public entry point (dynsens/__init__.py)
     assert t.failed.tolist() == [False, True, False]
     assert "DesignError" in t.message[1] and t.message[0] == "" and t.message[2] == ""

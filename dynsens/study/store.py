@@ -56,6 +56,7 @@ def _updated(path: Path) -> Iterator[h5py.File]:
     os.close(fd)
     try:
         shutil.copyfile(path, tmp)
+        shutil.copymode(path, tmp)      # mkstemp made it 0600: keep the file's own permissions
         with h5py.File(tmp, "a") as f:
             yield f
         os.replace(tmp, path)
