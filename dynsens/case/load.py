@@ -32,7 +32,8 @@ from ..derivatives.partials import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
 from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings
-from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
+from .checks import (bounds_span_finite, check_reference_types, check_start, reserved_message,
+                     unused_design_variables)
 from .families import design_with_families, fold_assigned_problems
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
@@ -263,6 +264,10 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
             continue
         if lower >= upper:
             pc.add(p, f"lower >= upper ({lower} >= {upper}): did you swap the bounds?")
+            continue
+        if not bounds_span_finite(lower, upper):
+            pc.add(p, f"expected bounds whose difference is a finite number, found lower {lower} and "
+                      f"upper {upper} (upper - lower overflows)")
             continue
         if not lower <= value <= upper:
             pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")
