@@ -208,7 +208,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                       "used by no element, load, initial condition or response: "
                       f"{'their gradients are' if len(unused) > 1 else 'its gradient is'} zero by construction",
                       stacklevel=2)
-    return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
+    return Case(source=source, text=text, name=_case_name(raw.get("name"), source),
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
                 _make_responses=lambda record: ResponseSet(
@@ -216,6 +216,14 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                     stack_parameters=model.stack_parameters),
                 response_names=rnames, event_names=tuple(e.name for e in events),
                 optimization=optimization, quantities=quantities, parameters=table, unused_design=unused)
+
+
+def _case_name(name: Any, source: str) -> str:
+    """The case's ``name:``; without one, or with one left empty (``name:`` is null, ``""`` or
+    blanks), its file's stem (docs/commands.md), never ``None`` or ``case``."""
+    if name is None or (isinstance(name, str) and not name.strip()):
+        return Path(source).stem
+    return str(name)
 
 
 def _plain(node: Any) -> Any:
