@@ -235,6 +235,23 @@ def test_swapped_bounds_are_reported_with_hint():
     assert_problem(err, "design.variables[1]", "swap")
 
 
+def test_bounds_whose_span_overflows_are_refused():
+    # ±1e308 are finite, but upper - lower overflows to inf: the scaled design, the samples of
+    # a study and the KKT measure came out inf or nan (a crash, or nan designs and exit 0)
+    def huge(r):
+        r["design"]["variables"][0].update(lower=-1e308, upper=1e308)
+    err = case_error(huge)
+    msg = assert_problem(err, "design.variables[0]", "bounds whose difference is a finite number")
+    assert "-1e+308" in msg and "1e+308" in msg, msg
+    assert len(err.problems) == 1, str(err)
+    # a wide yet finite span stays valid
+    for lo, up in ((-1e308, 10.0), (0.5, 1e308), (-1e307, 1e307)):
+        raw = make(lambda r, lo=lo, up=up: r["design"]["variables"][0].update(lower=lo, upper=up))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_case_text(as_text(raw), "ok.yaml")
+
+
 def _swap_stiff(r):
     v = r["design"]["variables"][1]
     v["lower"], v["upper"] = v["upper"], v["lower"]

@@ -68,6 +68,16 @@ def test_without_a_name_the_file_stem_names_the_output_and_a_hostile_name_stays_
     assert sorted(p.name for p in work.parent.iterdir() if p.suffix == ".h5") == []
 
 
+@pytest.mark.parametrize("empty", [None, "", "  "], ids=["null", "empty", "blank"])
+def test_an_empty_name_falls_back_to_the_file_stem(work: Path, empty: object) -> None:
+    # 'name:' left empty wrote results/None.h5 (null) or results/case.h5 (""), not the stem
+    case = dict(SDOF_DESIGN, name=empty)
+    (work / "mycase.yaml").write_text(yaml.safe_dump(case, sort_keys=False), encoding="utf-8")
+    r = invoke("simulate", "mycase.yaml", *SHORT)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in (work / "results").iterdir()) == ["mycase.h5"]
+
+
 def test_optimize_writes_results_case_name_opt_and_never_overwrites(work: Path) -> None:
     r = invoke("optimize", "case.yaml", *SHORT, "--maxiter", "2", "--no-verify")
     assert r.exit_code in (0, 1), r.output        # 1: not converged in two iterations

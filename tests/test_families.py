@@ -145,6 +145,8 @@ def test_set_and_x_address_the_family_or_one_member(tmp_path: Path) -> None:
     ({"value": "x"}, "design.families[0].value", "expected a number or a constant expression"),
     ({"scale": -1.0}, "design.families[0].scale", "expected a positive finite number"),
     ({"members": {"diag1": {"upper": float("nan")}}}, "design.families[0].members.diag1.upper", "finite number"),
+    ({"lower": -1e308, "upper": 1e308}, "design.families[0]", "A[bottom1]: expected bounds whose difference is a "
+     "finite number, found lower -1e+308 and upper 1e+308"),
     ({"name": "A b"}, "design.families[0].name", "identifier"),
     ({"colour": 1}, "design.families[0].colour", "unknown key"),
 ])

@@ -1,9 +1,13 @@
 """Extreme multibody runs: a fast spinning top (large rotations), a stiff oil column."""
+import warnings
+
 import numpy as np
 import pytest
 
 import dynsens
 from conftest import CASES
+from dynsens.case.load import load_case_dict
+from dynsens.errors import ModelError
 
 
 def spinning_top(spin, dt, t_end, scheme="newmark", rho_inf=None, baumgarte=0.0):
@@ -66,3 +70,48 @@ def test_stiff_oil_column_stays_stable():
         assert np.all(np.isfinite(p1)) and np.max(p1) < 50.0            # MPa: bounded
         ring[label] = np.std(np.diff(p1[-50:]))                          # step-to-step ringing
     assert ring["galpha"] < 0.5 * ring["newmark"]
+
+
+# ---------------------------------------------------------------- a spring whose two ends meet
+def _tether(bodies: dict, spring: dict, dt: float = 1.0e-3) -> dict:
+    """A free body and a spring-damper from a ground marker to it, no gravity."""
+    return {"name": "tether", "design": {"variables": [{"name": "m", "value": 1.0, "lower": 0.5, "upper": 2.0}]},
+            "model": {"type": "multibody", "gravity": [0, 0, 0], "bodies": bodies,
+                      "forces": [{"type": "spring_damper", "name": "tether", **spring}]},
+            "integrator": {"scheme": "newmark", "dt": dt, "t_end": 2.0},
+            "sensitivity": {"enabled": False},
+            "responses": [{"name": "x_end", "type": "value", "quantity": {"body": "bob", "kind": "position"},
+                           "component": "bob.x"}]}
+
+
+BOB = {"mass": "m", "inertia": [1.0, 1.0, 1.0], "position": [1.0, 0, 0], "markers": {"A": [0, 0, 0]}}
+
+
+@pytest.mark.parametrize("bodies, spring, needle", [
+    # the same marker of the same body at both ends: refused before anything is evaluated
+    ({"bob": BOB}, {"body_1": "bob", "point_1": "A", "body_2": "bob", "point_2": "A", "stiffness": 10.0},
+     "expected two distinct points, found point_1 and point_2 both 'A' of body 'bob'"),
+    # two bodies' points at one place at the initial pose: the length is zero there
+    ({"ground": {"markers": {"P": [1.0, 0, 0]}}, "bob": BOB},
+     {"body_1": "ground", "point_1": "P", "body_2": "bob", "point_2": "A", "stiffness": 10.0},
+     "expected two points apart at the initial pose, found both at [1.0, 0.0, 0.0]"),
+], ids=["same_point", "coincide_at_start"])
+def test_a_spring_of_zero_length_is_refused_at_load(bodies, spring, needle):
+    # both raised ZeroDivisionError in the compiled kernel (the spring's direction d/L)
+    with pytest.raises(dynsens.CaseError) as err:
+        load_case_dict(_tether(bodies, spring))
+    msgs = [p.message for p in err.value.problems if p.path == "model.forces[0]"]
+    assert any(needle in m for m in msgs), str(err.value)
+    assert "zero" in str(err.value)
+
+
+def test_a_spring_whose_ends_meet_during_the_run_stops_it_naming_the_force():
+    # the body glides (no force: k = 0) through the ground marker, exactly at t = 1 s
+    bodies = {"ground": {"markers": {"P": [0.0, 0, 0]}}, "bob": {**BOB, "velocity": [-1.0, 0, 0]}}
+    spring = {"body_1": "ground", "point_1": "P", "body_2": "bob", "point_2": "A", "stiffness": 0.0,
+              "free_length": 1.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        case = load_case_dict(_tether(bodies, spring, dt=0.25))
+    with pytest.raises(ModelError, match=r"at t = 1 s the two points of force 'tether' coincide: its length is zero"):
+        dynsens.run_case(case, sensitivities=False)

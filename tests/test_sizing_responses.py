@@ -195,6 +195,13 @@ def test_ks_reports_the_sampled_maximum_and_warns_when_the_gap_is_large(run) -> 
     ({"type": "ks", "quantity": {"dof": "c.x"}, "rho": 3.0, "side": "both"}, "responses[0].side", "upper"),
     ({"type": "ks", "quantity": {"element": "all", "kind": "stress"}, "rho": 3.0, "components": ["lft.stress"]},
      "responses[0].components", "lft.stress"),
+    # a component listed twice was aggregated twice (KS ln(2)/rho higher)
+    ({"type": "ks", "quantity": {"element": "all", "kind": "stress"}, "rho": 3.0,
+      "components": ["right.stress", "right.stress"]}, "responses[0].components",
+     "expected each component once, found 'right.stress' twice"),
+    ({"type": "ks", "quantity": {"dof": ["c.x", "c.y"], "kind": "displacement"}, "rho": 3.0,
+      "components": [1, "c.y.displacement"]}, "responses[0].components",
+     "found 'c.y.displacement' twice (as 1 and 'c.y.displacement')"),
     ({"type": "ks", "quantities": [{"dof": "c.x"}, {"dof": "c.y"}], "rho": 3.0, "components": [0]},
      "responses[0].components", "one list of components per quantity"),
     ({"type": "stress_ratio", "rho": 3.0}, "responses[0]", "tension_limit"),

@@ -244,14 +244,22 @@ def _components(spec: Any, outs: list[Output], several: bool, path: str,
             out.append(np.arange(len(o.labels)))
             continue
         sel = sel if isinstance(sel, list) else [sel]
-        idx = []
+        idx: list[int] = []
+        given: dict[int, Any] = {}
+        dup = False
         for c in sel:
             i = component_index(o.labels, c)
             if i is None:
                 pc.add(p, f"component {c!r} not found (components: {list(o.labels)})")
+            elif i in given:
+                # counted twice, a KS would be ln(2)/rho higher and a mean weighted
+                pc.add(p, f"expected each component once, found {o.labels[i]!r} twice"
+                          + (f" (as {given[i]!r} and {c!r})" if given[i] != c else ""))
+                dup = True
             else:
+                given[i] = c
                 idx.append(i)
-        if len(idx) != len(sel):
+        if dup or len(idx) != len(sel):
             return None
         if not idx:
             pc.add(p, "expected at least one component")

@@ -7,6 +7,7 @@ the optimizer or a finite difference evaluates.
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -90,3 +91,12 @@ def unused_design_variables(table: ParameterTable, responses: Any) -> tuple[str,
                     pass
     return tuple(n for n, deps in zip(table.design_names, table.design_dependents())
                  if not deps and n not in used)
+
+
+def bounds_span_finite(lower: float, upper: float) -> bool:
+    """Whether finite bounds have a finite span: ``upper - lower`` of two finite bounds may
+    overflow (±1e308), and the scaled design, the samples of a study and the KKT measure
+    would then be inf or nan.  An absent (infinite) bound has no span to check."""
+    if not (math.isfinite(lower) and math.isfinite(upper)):
+        return True
+    return math.isfinite(upper - lower)

@@ -38,7 +38,7 @@ from ..expressions.restricted import RESERVED_NAMES
 from ..models._keys import check_keys, did_you_mean
 from ..models.structural.beams import SHAPES
 from ..models.structural.beams3d import SHAPES3
-from .checks import reserved_message
+from .checks import bounds_span_finite, reserved_message
 from .responses_spec import read_number
 
 _FAMILY_KEYS = allowed("design.family")
@@ -288,6 +288,10 @@ def _checked(var: dict, path: str, pc: ProblemCollector) -> dict:
     value, lo, up = var["value"], var.get("lower", float("-inf")), var.get("upper", float("inf"))
     if lo >= up:
         pc.add(path, f"{var['name']}: lower >= upper ({lo} >= {up}): did you swap the bounds?")
+        return {"name": var["name"], "value": 0.0}
+    if not bounds_span_finite(lo, up):
+        pc.add(path, f"{var['name']}: expected bounds whose difference is a finite number, found lower {lo} "
+                     f"and upper {up} (upper - lower overflows)")
         return {"name": var["name"], "value": 0.0}
     if not lo <= value <= up:
         pc.add(f"{path}.value", f"{var['name']}: {value} is outside the bounds [{lo}, {up}]")

@@ -32,7 +32,8 @@ from ..derivatives.partials import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
 from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings
-from .checks import check_reference_types, check_start, reserved_message, unused_design_variables
+from .checks import (bounds_span_finite, check_reference_types, check_start, reserved_message,
+                     unused_design_variables)
 from .families import design_with_families, fold_assigned_problems
 from .optimization import OptimizationSpec, validate_optimization
 from .overrides import apply_overrides
@@ -207,7 +208,7 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                       "used by no element, load, initial condition or response: "
                       f"{'their gradients are' if len(unused) > 1 else 'its gradient is'} zero by construction",
                       stacklevel=2)
-    return Case(source=source, text=text, name=str(raw.get("name", Path(source).stem)),
+    return Case(source=source, text=text, name=_case_name(raw.get("name"), source),
                 description=str(raw.get("description", "")), design=design, model=model,
                 scheme=scheme, plan=plan, overrides=tuple(overrides),
                 _make_responses=lambda record: ResponseSet(
@@ -215,6 +216,14 @@ def load_case_dict(raw: dict, source: str = "<dict>", overrides: list[str] | tup
                     stack_parameters=model.stack_parameters),
                 response_names=rnames, event_names=tuple(e.name for e in events),
                 optimization=optimization, quantities=quantities, parameters=table, unused_design=unused)
+
+
+def _case_name(name: Any, source: str) -> str:
+    """The case's ``name:``; without one, or with one left empty (``name:`` is null, ``""`` or
+    blanks), its file's stem (docs/commands.md), never ``None`` or ``case``."""
+    if name is None or (isinstance(name, str) and not name.strip()):
+        return Path(source).stem
+    return str(name)
 
 
 def _plain(node: Any) -> Any:
@@ -263,6 +272,10 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
             continue
         if lower >= upper:
             pc.add(p, f"lower >= upper ({lower} >= {upper}): did you swap the bounds?")
+            continue
+        if not bounds_span_finite(lower, upper):
+            pc.add(p, f"expected bounds whose difference is a finite number, found lower {lower} and "
+                      f"upper {upper} (upper - lower overflows)")
             continue
         if not lower <= value <= upper:
             pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")

@@ -146,6 +146,15 @@ class StepSolver:
         if self._compiled_step is not None and coeffs != (0.0, 0.0, 0.0):
             compiled = self._compiled_step(t, pred, params, coeffs)
         args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities)
+        result = None
+        if compiled is not None:
+            scales = np.array(self._scales)      # (compiled: typed arrays)
+            try:
+                result = compiled.iterate(z0.copy(), *args, scales, self._present_array, history)
+            except ZeroDivisionError:
+                # a law divided by zero (a spring whose two ends met): the Python path takes the
+                # step again, and its evaluation names the element (a ModelError, no traceback)
+                compiled = None
         if compiled is None:
             ops = _PythonStep(self, t, pred, params, coeffs, correct)
             status, it, z, dz, s, R, lf, fresh, n_res, n_lin = newton_iterations(
@@ -153,9 +162,8 @@ class StepSolver:
             lin, factor = lf if lf is not None else (None, None)
             finite = False        # (not known: the stepper looks)
         else:
-            scales = np.array(self._scales)      # (compiled: typed arrays)
-            status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept, finite = compiled.iterate(
-                z0.copy(), *args, scales, self._present_array, history)
+            assert result is not None
+            status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept, finite = result
             self._scales = scales.tolist()
             s = compiled.state(s)
             if status == CONVERGED or status == AT_ROUNDOFF:

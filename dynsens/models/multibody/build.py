@@ -90,6 +90,8 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     x0 = np.array([float(table.nominal.get(n, 0.0)) for n in table.design_names])
     if table.check(x0):      # an entry without a value there: the loader reports it at its path
         return model
+    if _zero_length_springs(rd, model, x0):
+        return None
     try:
         red = analyse(model, x0)
     except InconsistentRedundancy as exc:
@@ -293,3 +295,18 @@ def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
         a.equations.append(eq)
         a.labels.append(f"distance {pair[0]}-{pair[1]}")
     return a
+
+
+def _zero_length_springs(rd: Reader, model: MultibodyModel, x0: np.ndarray) -> bool:
+    """Reports every spring-damper whose two points coincide at the initial pose (its length is
+    zero there and the direction of its force undefined); whether there was one."""
+    prm = model.parameters(x0)
+    found = False
+    for fp, g1, g2 in rd.axial_ends:
+        d = np.real(np.asarray(g2(prm)) - np.asarray(g1(prm)))
+        if not np.linalg.norm(d) > 0.0:
+            rd.problems.add(fp, f"expected two points apart at the initial pose, found both at "
+                                f"{np.round(np.real(np.asarray(g1(prm))), 12).tolist()}: the spring's length "
+                                "is zero there and the direction of its force undefined")
+            found = True
+    return found

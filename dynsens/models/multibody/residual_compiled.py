@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from ...errors import ModelError
 from ..base import Linearization
 from . import compiled as cc
 from . import compiled_linearization as clin
@@ -50,14 +51,17 @@ class CompiledEvaluation(Evaluation):
         else:
             cf, shift = m.coefficients(t, kp)
             ext, f_ext, g = time_inputs(m, kp, t, dt)
-        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp, self._rot) = \
-            cc.forces_and_residual(
+        try:
+            out = cc.forces_and_residual(
                 kin.Lp, kin.Lr, kin.C, kin.ABV, kin.X, kin.N, cl.pb, cl.is_point, cl.side_ptr, cl.side_prim,
                 cl.side_coef, cl.prod_eq, np.ascontiguousarray(cf, dt), np.ascontiguousarray(shift, dt),
                 cl.norm_eq, cl.norm_body, cl.ax_kind, cl.ax_pidx, ck.ax_c, ext, f_ext, ck.mass, ck.J, g,
                 np.ascontiguousarray(self.lam, dt), np.ascontiguousarray(self.p, dt),
                 np.ascontiguousarray(self.pd, dt), float(m.scale), float(m.alpha),
                 float(m.beta), cc.TG, cl.rot_prod, ck.rot_c)
+        except ZeroDivisionError:
+            raise zero_length_error(m, kin, t) from None
+        (R, self.Phi, self.w, self.f, self._ax, self._Pp, _, self._hL, self._hLd, self._hp, self._rot) = out
         if m.other_forces and self._given_inputs is None:
             # (a block of steps at different times: Model.residual_batch_steps adds them per step)
             R[:, :lay.n_q] -= other_forces_q(m, t, kin.q, kin.qd, kp.prms)
@@ -87,6 +91,17 @@ class CompiledEvaluation(Evaluation):
             R_q[:tr.n_q] -= Kq
             R_qd[:tr.n_q] -= Kqd
         return CompiledLinearization(R_z, R_q, R_qd, R_p if tr.n_p else None)
+
+
+def zero_length_error(model: "MultibodyModel", kin: CompiledKin, t: float) -> ModelError:
+    """The error of a step where an axial element's two points met: its length is zero and the
+    direction of its force undefined (the compiled kernel divides by the length)."""
+    lay = model.layout
+    names = [el.name for i, el in enumerate(lay.axial)
+             if not np.all(np.real(kin.X[:, lay.n_cp + i, 0]) > 0.0)]
+    which = ", ".join(f"'{n}'" for n in names) if names else "an axial force element"
+    return ModelError(f"at t = {t:.6g} s the two points of force {which} coincide: its length is zero and "
+                      "the direction of its force undefined (keep the ends of a spring apart)")
 
 
 def serves(model: "MultibodyModel", kin: Kin, lam: Array, p: Array, pd: Array) -> bool:

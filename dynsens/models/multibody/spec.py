@@ -36,6 +36,8 @@ class Reader:
         # (point-mass body, vec key, what) of every point attached to a point mass
         self.point_mass_attachments: list[tuple[str, str, str]] = []
         self.scal: list[tuple[str, Recipe]] = []
+        # (YAML path, global point 1, global point 2) at the initial pose of every spring-damper
+        self.axial_ends: list[tuple[str, Recipe, Recipe]] = []
         for k, e in (("e_x", (1.0, 0, 0)), ("e_y", (0, 1.0, 0)), ("e_z", (0, 0, 1.0)), ("zero", (0, 0, 0))):
             self.vec.append((k, lambda prm, _e=e: np.array(_e, dtype=float)))
 

@@ -48,11 +48,17 @@ class SpringDamperLaw(ForceLaw):
         if ends is None:
             return
         b1, P1, b2, P2 = ends
+        if b1 is b2 and P1.key == P2.key:
+            rd.problems.add(fp, f"expected two distinct points, found point_1 and point_2 both "
+                                f"{f.get('point_1', 'the COM')!r} of body '{b1.name}': a spring from a point "
+                                "to itself has zero length and no direction")
+            return
         free = f.get("free_length")
         key = f"{name}.L0"
+        g1 = rd.global_point_recipe(b1, P1.key)
+        g2 = rd.global_point_recipe(b2, P2.key)
+        rd.axial_ends.append((fp, g1, g2))      # a zero length at the initial pose: build.py reports it
         if free is None or free == "initial":
-            g1 = rd.global_point_recipe(b1, P1.key)
-            g2 = rd.global_point_recipe(b2, P2.key)
             rd.scal.append((key, lambda prm, _a=g1, _b=g2: np.sqrt(np.sum((_b(prm) - _a(prm)) ** 2))))
         else:
             il = rd.num(free, f"{fp}.free_length", positive=True)
