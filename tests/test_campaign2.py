@@ -367,12 +367,14 @@ def test_messages_an_ambiguous_short_label_is_not_called_missing() -> None:
     two = {"dof": ["u19", "u20"], "kind": "displacement"}
     raw["responses"][0] = {"name": "tip_end", "type": "value", "quantity": two, "component": "displacement"}
     raw["output"] = {"quantities": [{"name": "two", "quantity": two, "component": "displacement"}]}
+    raw["responses"][1].update(quantity=two, components=["displacement"])     # a KS over the pair
     found = dict(_problems(raw))
-    for path in ("responses[0].component", "output.quantities[0].component"):
+    for path in ("responses[0].component", "output.quantities[0].component", "responses[1].components"):
         assert "component 'displacement' is ambiguous: it names 2 components (u19.displacement, " \
                "u20.displacement)" in found[path], found
     raw["responses"][0]["component"] = "u20"          # a short label that names one component
     raw["output"]["quantities"][0]["component"] = "u20.displacement"
+    raw["responses"][1]["components"] = ["u19", "u20"]
     load_case_dict(raw)
 
 

@@ -17,7 +17,7 @@ from ..models.parameters import finite_float, number_text
 from ..models.base import Output
 from ..responses.base import Response
 from ..responses.sizing import Aggregate, GroupTerm, MagnitudeAggregate, Term
-from .quantities import component_index
+from .quantities import component_index, missing_component
 
 __all__ = ["AGGREGATE_TYPES", "aggregate_maker"]
 
@@ -250,7 +250,7 @@ def _components(spec: Any, outs: list[Output], several: bool, path: str,
         for c in sel:
             i = component_index(o.labels, c)
             if i is None:
-                pc.add(p, f"component {c!r} not found (components: {list(o.labels)})")
+                pc.add(p, missing_component(o.labels, c))
             elif i in given:
                 # counted twice, a KS would be ln(2)/rho higher and a mean weighted
                 pc.add(p, f"expected each component once, found {o.labels[i]!r} twice"
