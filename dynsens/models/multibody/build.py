@@ -53,11 +53,7 @@ def build_multibody(spec: dict, path: str, table: ParameterTable,
     read_forces(rd, spec.get("forces", []), f"{path}.forces", forces, cylinders, springs)
     members = read_members(rd, spec.get("members"), f"{path}.members", springs, forces)
     assembly = _initial(rd, spec.get("initial", {}), f"{path}.initial")
-    alpha = beta = 0.0
-    st = spec.get("stabilization")
-    if st is not None and check_keys(st, f"{path}.stabilization", allowed("multibody.stabilization"), problems):
-        alpha = setting(st, "alpha", 0.0, f"{path}.stabilization", problems, ">= 0", "(1/s)")
-        beta = setting(st, "beta", 0.0, f"{path}.stabilization", problems, ">= 0", "(1/s)")
+    alpha, beta = _stabilization(spec.get("stabilization"), f"{path}.stabilization", problems)
     projection = read_projection(spec.get("projection"), f"{path}.projection", problems)
     scale = setting(spec, "constraint_scale", 1.0, path, problems, "> 0")
     drift_limit = setting(spec, "drift_limit", None, path, problems, "> 0", "(a length: bound on ‖Φ‖)")
@@ -295,6 +291,14 @@ def _initial(rd: Reader, spec: Any, path: str) -> Assembly:
         a.equations.append(eq)
         a.labels.append(f"distance {pair[0]}-{pair[1]}")
     return a
+
+
+def _stabilization(st: Any, path: str, problems: ProblemCollector) -> tuple[float, float]:
+    """Baumgarte's alpha and beta (1/s) of ``model.stabilization`` (0, 0 without it)."""
+    if st is None or not check_keys(st, path, allowed("multibody.stabilization"), problems):
+        return 0.0, 0.0
+    return (setting(st, "alpha", 0.0, path, problems, ">= 0", "(1/s)"),
+            setting(st, "beta", 0.0, path, problems, ">= 0", "(1/s)"))
 
 
 def _zero_length_springs(rd: Reader, model: MultibodyModel, x0: np.ndarray) -> bool:
