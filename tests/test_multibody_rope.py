@@ -83,6 +83,18 @@ def test_a_slack_rope_carries_no_compression(switch):
     assert abs(res.responses["t_taut"].value / np.sqrt(2 * DROP_H / G) - 1) < 1e-5
 
 
+def test_a_rope_whose_ends_meet_is_slack():
+    """The bob starts on the rope's anchor (length 0 < L0): the rope is slack and the bob falls
+    freely, y = −g t²/2 (the trapezoidal rule is exact for a constant acceleration).  The force
+    N d/L was 0/0 there: the run stopped with a NaN/Inf error."""
+    raw = _case(0.0, [], [{"name": "y_end", "type": "value", "quantity": {"body": "bob", "kind": "position"},
+                           "component": "bob.y"}])
+    raw["integrator"]["t_end"] = 0.2
+    res = dynsens.run_case(dynsens.load_case_dict(raw))
+    assert res.responses["y_end"].value == pytest.approx(-0.5 * G * 0.2 ** 2, rel=1e-12)
+    np.testing.assert_array_equal(res.responses["y_end"].gradient, [0.0, 0.0])     # free fall: no m, EA
+
+
 @pytest.mark.parametrize("switch", [{}, {"switch": "smooth", "width": 2e-3}])
 def test_rope_jacobian_matches_closed_form_and_differences(switch):
     """∂Q/∂r of a taut rope on a point (−K, K = N/L (I − n nᵀ) + (EA/L0) g′(e) n nᵀ, the

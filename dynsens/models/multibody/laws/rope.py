@@ -79,7 +79,9 @@ class Rope(ForceElement):
 
     def add(self, ctx: Ctx, out: np.ndarray) -> None:
         d, L, N = self.state(ctx)
-        self.d.apply(ctx, -N * d / L, out)
+        # ends that meet (L = 0) leave the rope slack: no force (N·d/L would be 0/0 = NaN); the real
+        # part decides, as the switch does, so a complex-step perturbation of the state stays finite
+        self.d.apply(ctx, -N * d / np.where(np.real(L) > 0, L, 1.0), out)
 
 
 @register_law
