@@ -145,7 +145,7 @@ def test_set_and_x_address_the_family_or_one_member(tmp_path: Path) -> None:
     ({"value": "x"}, "design.families[0].value", "expected a number or a constant expression"),
     ({"scale": -1.0}, "design.families[0].scale", "expected a positive finite number"),
     ({"members": {"diag1": {"upper": float("nan")}}}, "design.families[0].members.diag1.upper", "finite number"),
-    ({"lower": -1e308, "upper": 1e308}, "design.families[0]", "A[bottom1]: expected bounds whose difference is a "
+    ({"lower": -1e308, "upper": 1e308}, "design.families[0]", "expected bounds whose difference is a "
      "finite number, found lower -1e+308 and upper 1e+308"),
     ({"name": "A b"}, "design.families[0].name", "identifier"),
     ({"colour": 1}, "design.families[0].colour", "unknown key"),
@@ -166,6 +166,17 @@ def test_bad_family_entries_are_one_problem_each() -> None:
     with pytest.raises(CaseError) as err:
         load_case_dict(per_member(assign={"area": "-A", "inertia": "A"}))
     assert [p.path for p in err.value.problems] == ["design.families[0].assign.area"]
+    # the family's own bounds, swapped or overflowing, are one problem too (was one per member)
+    for bounds, needle in (({"lower": 10.0, "upper": 1.0}, "did you swap the bounds?"),
+                           ({"lower": -1e308, "upper": 1e308}, "upper - lower overflows")):
+        with pytest.raises(CaseError) as err:
+            load_case_dict(per_member(value=5.0, **bounds))
+        assert [p.path for p in err.value.problems] == ["design.families[0]"], str(err.value)
+        assert needle in err.value.problems[0].message and "A[" not in err.value.problems[0].message
+    # a member's own bounds keep the member's name
+    with pytest.raises(CaseError) as err:
+        load_case_dict(per_member(members={"diag1": {"lower": 10.0, "upper": 1.0, "value": 5.0}}))
+    assert [p.message.split(":")[0] for p in err.value.problems] == ["A[diag1]"], str(err.value)
 
 
 def test_a_placeholder_the_family_replaces_is_still_a_number() -> None:

@@ -93,6 +93,17 @@ def unused_design_variables(table: ParameterTable, responses: Any) -> tuple[str,
                  if not deps and n not in used)
 
 
+def bounds_problem(lower: float, upper: float) -> str | None:
+    """Why a design variable cannot have the bounds ``lower``, ``upper`` (swapped, or a span
+    that overflows), or None."""
+    if lower >= upper:
+        return f"lower >= upper ({lower} >= {upper}): did you swap the bounds?"
+    if not bounds_span_finite(lower, upper):
+        return (f"expected bounds whose difference is a finite number, found lower {lower} and upper {upper} "
+                "(upper - lower overflows)")
+    return None
+
+
 def bounds_span_finite(lower: float, upper: float) -> bool:
     """Whether finite bounds have a finite span: ``upper - lower`` of two finite bounds may
     overflow (±1e308), and the scaled design, the samples of a study and the KKT measure

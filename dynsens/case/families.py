@@ -38,7 +38,7 @@ from ..expressions.restricted import RESERVED_NAMES
 from ..models._keys import check_keys, did_you_mean
 from ..models.structural.beams import SHAPES
 from ..models.structural.beams3d import SHAPES3
-from .checks import bounds_span_finite, reserved_message
+from .checks import bounds_problem, reserved_message
 from .responses_spec import read_number
 
 _FAMILY_KEYS = allowed("design.family")
@@ -270,7 +270,8 @@ def _member_variable(member: str, shared: dict, entry: Any, entry_path: str, pat
     if isinstance(entry, dict):
         where = entry_path
         var.update(_numbers(entry, _MEMBER_KEYS, where, pc) or {})   # a problem: reported, shared kept
-    return _checked(var, where, pc)
+    family_bounds = (shared.get("lower", float("-inf")), shared.get("upper", float("inf")))
+    return _checked(var, where, family_bounds, pc)
 
 
 def _report_misfits(misfits: dict[str, list[tuple[str, str]]], path: str, pc: ProblemCollector) -> None:
@@ -282,16 +283,17 @@ def _report_misfits(misfits: dict[str, list[tuple[str, str]]], path: str, pc: Pr
                   f"({', '.join(more[:5])}{', ...' if len(more) > 5 else ''})" if more else ""))
 
 
-def _checked(var: dict, path: str, pc: ProblemCollector) -> dict:
+def _checked(var: dict, path: str, family_bounds: tuple[float, float], pc: ProblemCollector) -> dict:
     """The member variable, its start inside its bounds (reported here, under the family's
-    path, rather than at an index of the expanded variable list)."""
+    path, rather than at an index of the expanded variable list); bounds that are the family's
+    own (``family_bounds``) are reported without the member's name, once."""
     value, lo, up = var["value"], var.get("lower", float("-inf")), var.get("upper", float("inf"))
-    if lo >= up:
-        pc.add(path, f"{var['name']}: lower >= upper ({lo} >= {up}): did you swap the bounds?")
-        return {"name": var["name"], "value": 0.0}
-    if not bounds_span_finite(lo, up):
-        pc.add(path, f"{var['name']}: expected bounds whose difference is a finite number, found lower {lo} "
-                     f"and upper {up} (upper - lower overflows)")
+    why = bounds_problem(lo, up)
+    if why:
+        if (lo, up) != family_bounds:
+            pc.add(path, f"{var['name']}: {why}")
+        elif not any(p.path == path and p.message == why for p in pc.problems):
+            pc.add(path, why)           # the family's own bounds: one problem for all its members
         return {"name": var["name"], "value": 0.0}
     if not lo <= value <= up:
         pc.add(f"{path}.value", f"{var['name']}: {value} is outside the bounds [{lo}, {up}]")

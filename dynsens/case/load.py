@@ -32,7 +32,7 @@ from ..derivatives.partials import METHODS
 from .derivative_keys import adjoint_problems, derivative_settings
 from .step_keys import adaptive_settings
 from ..solver.newton import NewtonSettings
-from .checks import (bounds_span_finite, check_reference_types, check_start, reserved_message,
+from .checks import (bounds_problem, check_reference_types, check_start, reserved_message,
                      unused_design_variables)
 from .families import design_with_families, fold_assigned_problems
 from .optimization import OptimizationSpec, validate_optimization
@@ -270,12 +270,9 @@ def _design(spec: Any, pc: ProblemCollector) -> tuple[list[DesignVariable], tupl
         scale = read_number(v.get("scale", 1.0), f"{p}.scale", pc, positive=True) if "scale" in v else None
         if value is None or lower is None or upper is None:
             continue
-        if lower >= upper:
-            pc.add(p, f"lower >= upper ({lower} >= {upper}): did you swap the bounds?")
-            continue
-        if not bounds_span_finite(lower, upper):
-            pc.add(p, f"expected bounds whose difference is a finite number, found lower {lower} and "
-                      f"upper {upper} (upper - lower overflows)")
+        why = bounds_problem(lower, upper)
+        if why:
+            pc.add(p, why)
             continue
         if not lower <= value <= upper:
             pc.add(f"{p}.value", f"{value} is outside the bounds [{lower}, {upper}]")
