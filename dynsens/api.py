@@ -72,13 +72,18 @@ def _count(name: str, value: Any, minimum: int) -> int | None:
     return int(value)
 
 
+def _is_finite_number(v: Any) -> bool:
+    """Whether ``v`` is a real finite number (not a bool, a string or NaN)."""
+    return (not isinstance(v, (bool, np.bool_)) and isinstance(v, (int, float, np.number))
+            and bool(np.isfinite(v)))
+
+
 def _finite_numbers(name: str, values: Any, positive: bool = False) -> list[float]:
     """``values`` as a list of finite numbers (> 0 with ``positive``), else ValueError naming them."""
     what = f"a sequence of finite numbers{' > 0' if positive else ''}"
     if isinstance(values, (str, bytes, Mapping)) or not isinstance(values, (list, tuple, np.ndarray)):
         raise ValueError(f"{name}: expected {what}, found {values!r}")
-    bad = [v for v in values if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number))
-           or not np.isfinite(v) or (positive and v <= 0)]
+    bad = [v for v in values if not _is_finite_number(v) or (positive and v <= 0)]
     if bad or not len(values):
         raise ValueError(f"{name}: expected {what}, found {values!r}")
     return [float(v) for v in values]
@@ -331,8 +336,7 @@ def optimize(case: CaseLike, output: str | Path | None = None, *, x0: Mapping[st
     if x0 is not None:
         if not isinstance(x0, Mapping):
             raise ValueError(f"x0: expected a mapping of design-variable names to start values, found {x0!r}")
-        bad = {k: v for k, v in x0.items() if isinstance(v, (bool, np.bool_))
-               or not isinstance(v, (int, float, np.number)) or not np.isfinite(v)}
+        bad = {k: v for k, v in x0.items() if not _is_finite_number(v)}
         if bad:
             raise ValueError(f"x0: expected a finite start value for each design variable, found {bad}")
     c = as_any_case(case, overrides)

@@ -143,7 +143,8 @@ def work_precision(case: Case, dts: list[float], methods: list[str], *, workers:
     refs = [(dt, vals, grads) for (dt, _), (vals, grads, _) in zip(pairs[:n_ref], outs[:n_ref])]
     (dt1, v1, g1), (dt2, v2, g2) = refs if len(refs) == 2 else (refs[0], refs[0])
     p = case.scheme.order
-    if extrapolated(dts):
+    richardson = extrapolated(dts)
+    if richardson:
         f = 1.0 / (2.0 ** p - 1.0)
         ref_v = {n: v2[n] + (v2[n] - v1[n]) * f for n in v2}
         ref_g = {n: g2[n] + (g2[n] - g1[n]) * f for n in g2}
@@ -154,7 +155,7 @@ def work_precision(case: Case, dts: list[float], methods: list[str], *, workers:
         value_error = {n: abs(vals[n] - ref_v[n]) / max(abs(ref_v[n]), 1e-300) for n in vals}
         gradient_error = {n: float(np.linalg.norm(grads[n] - ref_g[n]) / max(np.linalg.norm(ref_g[n]), 1e-300))
                           for n in grads}
-        if not extrapolated(dts) and dt == dt2:
+        if not richardson and dt == dt2:
             # the reference is this run: its value (every method's) and its complex-step gradient
             # equal it by construction, an error of 0 that measures nothing (NaN: not shown, no order)
             value_error = dict.fromkeys(value_error, float("nan"))
@@ -180,6 +181,11 @@ def reference_note(dts: list[float]) -> str:
     return (f"the reference is the finest run itself (Δt = {finest[0]:g} s, complex-step partials), not "
             f"extrapolated: the two finest steps are not in ratio 2; the errors at Δt = {finest[0]:g} s are "
             "zero by construction and are not shown, nor used for an order")
+
+
+def _error_text(error: float) -> str:
+    """A relative error in the report; NaN marks the reference run's own (zero by construction)."""
+    return "(reference)" if np.isnan(error) else f"{error:.2e}"
 
 
 def format_order(order: float) -> str:
@@ -233,8 +239,8 @@ def write_report(case: Case, rows: list[Row], outdir: str | Path, overwrite: boo
                   f"gradient: {format_order(observed_order(rows, n, first, what='gradient'))}", "",
                   "| Δt [s] | method | wall time [s] | value error | gradient error |", "|---|---|---|---|---|"]
         for r in rows:
-            lines.append(f"| {r.dt:g} | {r.method} | {r.wall_time:.3f} | {r.value_error[n]:.2e} | "
-                         f"{r.gradient_error[n]:.2e} |".replace("nan", "(reference)"))
+            lines.append(f"| {r.dt:g} | {r.method} | {r.wall_time:.3f} | {_error_text(r.value_error[n])} | "
+                         f"{_error_text(r.gradient_error[n])} |")
         lines.append("")
     md = atomic_write_text(planned[1], "\n".join(lines), overwrite)
     files.append(md)

@@ -57,6 +57,15 @@ def member_name(family: str, element: str) -> str:
     return f"{family}[{element}]"
 
 
+def member_parts(name: str) -> tuple[str, str] | None:
+    """(family, element) of a member's design-variable name (``A[diag7]`` -> ("A", "diag7")),
+    the inverse of :func:`member_name`; None for a variable of no family."""
+    if not name.endswith("]") or "[" not in name:
+        return None
+    family, element = name[:-1].split("[", 1)
+    return family, element
+
+
 def design_with_families(raw: dict, pc: ProblemCollector, read_design: DesignReader
                          ) -> tuple[list, tuple[str, ...], Assigned]:
     """Expand ``raw['design']['families']`` in place (member variables appended to the design

@@ -11,6 +11,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..case.families import member_parts
 from .problem import ACTIVE_TOL, FEAS_TOL, ScaledProblem
 from .store import read_history
 
@@ -70,9 +71,10 @@ def removed_members(names: Sequence[str], x: np.ndarray, lower: np.ndarray,
     (a bar at its minimum gauge carries next to nothing).  Families with none map to []."""
     removed: dict[str, list[str]] = {}
     for j, n in enumerate(names):
-        if not n.endswith("]") or "[" not in n:
+        parts = member_parts(n)
+        if parts is None:
             continue
-        family, element = n[:-1].split("[", 1)
+        family, element = parts
         span = upper[j] - lower[j] if np.isfinite(upper[j] - lower[j]) else max(abs(x[j]), 1.0)
         at_lower = bool(np.isfinite(lower[j]) and x[j] <= lower[j] + BOUND_TOL * span)
         removed.setdefault(family, [])
@@ -83,7 +85,7 @@ def removed_members(names: Sequence[str], x: np.ndarray, lower: np.ndarray,
 
 def removed_rows(names: Sequence[str], x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
     """One line per design family: how many of its members are at the lower bound (removed)."""
-    counts = {n[:-1].split("[", 1)[0]: 0 for n in names if n.endswith("]") and "[" in n}
+    counts = {parts[0]: 0 for parts in map(member_parts, names) if parts is not None}
     for family, members in removed_members(names, x, lower, upper).items():
         counts[family] = len(members)
     total = {f: sum(1 for n in names if n.startswith(f + "[")) for f in counts}
@@ -155,9 +157,9 @@ def active_bounds(at_bound: Sequence[str]) -> list[str]:
     per_family: dict[str, int] = {}
     others = []
     for n in at_bound:
-        if n.endswith("]") and "[" in n:
-            family = n.split("[", 1)[0]
-            per_family[family] = per_family.get(family, 0) + 1
+        parts = member_parts(n)
+        if parts is not None:
+            per_family[parts[0]] = per_family.get(parts[0], 0) + 1
         else:
             others.append(n)
     out = [f"bound of {n}" for n in others[:LISTED]]
