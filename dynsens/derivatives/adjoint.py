@@ -36,6 +36,7 @@ from ..models.base import Model, Output, StepState
 from ..responses.base import OutputTrace
 from .partials import DesignPartials, initial_state_gradient
 from ..solver.linalg import Counters
+from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
 from .checkpoints import RecordStore
 from .direct import trail_length
@@ -66,7 +67,10 @@ class AdjointMode:
         self.reason = reason           # why the run takes the adjoint
         tr = model.traits
         self.n_q, self.n_lam, self.n_p = tr.n_q, tr.n_lam, tr.n_p
-        self.block = trail_length(tr, partials.m)
+        # records whose design term ∂_xF_Rᵀ μ takes one batched residual call: the call holds
+        # one residual per parameter set of the batch for each record (not m sensitivity
+        # columns, as the direct mode's trail does), so the trail's memory rule counts those sets
+        self.block = trail_length(tr, partials.evaluations_per_call)
         self.seeds = OutputSeeds(model, outputs, partials)
         self.store = store             # the records (all, or checkpoints and recomputation)
         self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
@@ -220,7 +224,7 @@ class AdjointMode:
         """Bars of (q, q̇, p) += (R_q, R_q̇, R_p)ᵀ μ, in place (the pseudo load's state part)."""
         for block, target in ((lin.R_q, pq), (lin.R_qd, pqd), (lin.R_p, pp)):
             if block is not None and target.shape[0]:
-                target += block.T @ mu
+                target += transpose_times(block, mu)
 
     def _initial_step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
         """Transpose of the initial solve S0 ∇z0 = −(∂_xF_R + R_q ∇q0 + R_q̇ ∇q̇0 + R_p ∇p0) and

@@ -21,7 +21,7 @@ from .partials import DesignPartials, initial_state_gradient, pseudo_load
 from ..solver.linalg import Counters
 from ..solver.newton import StepSolver
 from ..timeloop.stepping import StepRecord, split_unknowns
-from .direct_step import PythonDirectStep, direct_step, run_block, serves
+from .direct_step import PythonDirectStep, block_kind, direct_step, run_block
 from .finite import check_block
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -118,9 +118,10 @@ class DirectMode:
                                                             [r.solved for r in trail])
         self.counters.sensitivity_residual_evaluations += self.partials.evaluations_per_call * len(trail)
         ds, daux = self.ds, self.daux
-        compiled = not self._use_transitions and serves(self.scheme, trail, ds, design_part)
+        kind = None if self._use_transitions else block_kind(self.scheme, trail, ds, design_part)
+        compiled = kind is not None
         if compiled:          # the whole block compiled (:mod:`.direct_step`)
-            states, ds, daux = run_block(self.scheme, trail, ds, daux, design_part, self.n_q, self.n_lam)
+            states, ds, daux = run_block(self.scheme, trail, ds, daux, design_part, self.n_q, self.n_lam, kind)
             ds_of = list(states)
             self.counters.solves += len(trail)
             self.counters.solve_columns += len(trail) * self.partials.m

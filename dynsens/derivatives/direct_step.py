@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..integrators.newmark import (Newmark, advance_arrays, correct_arrays, corrector_coefficients,
                                    predict_arrays)
@@ -112,45 +113,136 @@ class DenseBlock(NamedTuple):
     sizes: np.ndarray     # (n_q, n_lam)
 
 
+class BandBlock(NamedTuple):
+    """The records of a block of sparse steps whose S the Python path factored as a tridiagonal
+    band (gttrf, after the plan's reordering ``perm``), for the compiled :func:`direct_block`:
+    R_q and R_q̇ (n, n) on one CSC pattern each, their values stacked (K, nnz)."""
+
+    R_q_values: np.ndarray     # (K, nnz)
+    R_q_indptr: np.ndarray     # (n + 1,) column pointers
+    R_q_indices: np.ndarray    # (nnz,) row indices
+    R_qd_values: np.ndarray
+    R_qd_indptr: np.ndarray
+    R_qd_indices: np.ndarray
+    dl: np.ndarray        # (K, n − 1) gttrf's multipliers
+    d: np.ndarray         # (K, n) U's diagonal
+    du: np.ndarray        # (K, n − 1) U's first super-diagonal
+    du2: np.ndarray       # (K, max(n − 2, 0)) U's second super-diagonal
+    ipiv: np.ndarray      # (K, n) gttrf's 1-based interchanges (int32)
+    perm: np.ndarray      # (n,) row i of the reordered system is row perm[i] of S
+    h: np.ndarray
+    scheme: np.ndarray
+    sizes: np.ndarray     # (n_q, 0)
+
+
 def dense_real(rec: StepRecord) -> bool:
-    """Whether the compiled block serves a record: a dense real linearization (R_q, R_q̇ and
-    R_p or none) and a dense real LU factor, no projection."""
+    """Whether the compiled dense block serves a record: a dense real linearization (R_q, R_q̇
+    and R_p or none) and a dense real LU factor, no projection."""
     lin, factor = rec.lin, rec.factor
     if rec.projection is not None or type(factor) is not Factor or factor.dense_real_lu is None or lin is None:
         return False
     return _dense_real(lin.R_q) and _dense_real(lin.R_qd) and (lin.R_p is None or _dense_real(lin.R_p))
 
 
+def band_real(rec: StepRecord) -> bool:
+    """Whether the compiled band block serves a record: a real tridiagonal factor of S (n, n)
+    with z = q̈ (no multipliers, no first-order states), R_q and R_q̇ real CSC, no projection.
+    (A dense R_q beside a tridiagonal factor, a dense model of 48 or more unknowns, is left to
+    the Python steps: copying its n² entries into the block cost more than the steps saved,
+    and a banded product would not sum as numpy's BLAS does.)"""
+    lin, factor = rec.lin, rec.factor
+    if rec.projection is not None or type(factor) is not Factor or factor.tridiagonal_real is None \
+            or lin is None or lin.R_p is not None:
+        return False
+    return all(_csc_real(a) and a.shape == (factor.n, factor.n) for a in (lin.R_q, lin.R_qd))
+
+
 def _dense_real(a: Any) -> bool:
     return type(a) is np.ndarray and a.dtype == _F64
 
 
+def _csc_real(a: Any) -> bool:
+    return isinstance(a, sp.csc_matrix) and a.dtype == _F64
+
+
+def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> str | None:
+    """``dense`` or ``band``, the compiled block that takes this block of records, or None (the
+    Python steps): compiled code enabled, plain Newmark, real sensitivities and design partials,
+    every record :func:`dense_real`, or every record :func:`band_real` with its R_q and R_q̇ on
+    the first record's patterns and its band plan's reordering."""
+    if not (HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0
+            and design_part.dtype == _F64 and all(v.dtype == _F64 for v in ds) and trail):
+        return None
+    if all(dense_real(r) for r in trail):
+        return "dense"
+    if all(band_real(r) for r in trail) and all(
+            _same_layout(trail[0].lin.R_q, r.lin.R_q) and _same_layout(trail[0].lin.R_qd, r.lin.R_qd)
+            and _same_reordering(trail[0].factor.tridiagonal_real.plan.perm, r.factor.tridiagonal_real.plan.perm)
+            for r in trail[1:]):
+        return "band"
+    return None
+
+
 def serves(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> bool:
-    """Whether :func:`run_block` takes this block: compiled code enabled, plain Newmark, real
-    sensitivities and design partials, every record :func:`dense_real`."""
-    return (HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0
-            and design_part.dtype == _F64 and all(v.dtype == _F64 for v in ds)
-            and all(dense_real(r) for r in trail))
+    """Whether :func:`run_block` takes this block (:func:`block_kind`)."""
+    return block_kind(scheme, trail, ds, design_part) is not None
+
+
+def _same_layout(a: Any, b: Any) -> bool:
+    """Whether two sparse matrices store the same positions, in the same order."""
+    return (a.indptr is b.indptr or np.array_equal(a.indptr, b.indptr)) and \
+        (a.indices is b.indices or np.array_equal(a.indices, b.indices))
+
+
+def _same_reordering(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Whether two band plans reorder the unknowns alike (one plan per pattern: mostly the same
+    object)."""
+    return a is b or (a is not None and b is not None and np.array_equal(a, b))
 
 
 def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any, design_part: np.ndarray,
-              n_q: int, n_lam: int) -> tuple[list[StepState], StepState, Any]:
-    """The sensitivities of the records of ``trail`` (which :func:`serves`), from ∇s and ∇aux
-    before the first; design_part (K, n_z, m).  Returns (∇s of each record, ∇s, ∇aux after the
+              n_q: int, n_lam: int, kind: str | None = None) -> tuple[list[StepState], StepState, Any]:
+    """The sensitivities of the records of ``trail`` (which :func:`serves`; ``kind``: its
+    :func:`block_kind` when known), from ∇s and ∇aux before the first; design_part (K, n_z, m).
+    Returns (∇s of each record, ∇s, ∇aux after the
     last)."""
-    K, n_z = len(trail), trail[0].factor.n
-    zeros = np.zeros((n_z, 0))
-    block = DenseBlock(
-        np.array([r.lin.R_q for r in trail]), np.array([r.lin.R_qd for r in trail]),
-        np.array([r.lin.R_p if r.lin.R_p is not None else zeros for r in trail]),
-        np.array([r.factor.compiled_lu[0] for r in trail]), np.array([r.factor.compiled_lu[1] for r in trail]),
-        np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
+    K = len(trail)
+    kind = kind or block_kind(scheme, trail, ds, design_part)
+    block = (_band_block if kind == "band" else _dense_block)(
+        trail, np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
         np.array([n_q, n_lam]))
     # (leaves in one layout: the compiled block is typed by its arguments)
     out = _block()(block, tuple(np.ascontiguousarray(v) for v in ds), tuple(np.ascontiguousarray(v) for v in daux),
                    np.ascontiguousarray(design_part, np.float64))
     states = list(map(StepState._make, zip(*out[:6])))
     return states, states[-1], type(daux)(out[6][K - 1], out[7][K - 1])
+
+
+def _dense_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> DenseBlock:
+    zeros = np.zeros((trail[0].factor.n, 0))
+    return DenseBlock(
+        np.array([r.lin.R_q for r in trail]), np.array([r.lin.R_qd for r in trail]),
+        np.array([r.lin.R_p if r.lin.R_p is not None else zeros for r in trail]),
+        np.array([r.factor.compiled_lu[0] for r in trail]), np.array([r.factor.compiled_lu[1] for r in trail]),
+        h, scheme, sizes)
+
+
+def _band_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> BandBlock:
+    lus = [r.factor.tridiagonal_real for r in trail]
+    perm = lus[0].plan.perm        # (one for the block: :func:`block_kind`)
+
+    def stack(name: str) -> np.ndarray:
+        return np.array([getattr(lu, name) for lu in lus])
+    return BandBlock(
+        *_stacked([r.lin.R_q for r in trail]), *_stacked([r.lin.R_qd for r in trail]),
+        stack("dl"), stack("d"), stack("du"), stack("du2"), stack("ipiv").astype(np.int32),
+        np.arange(lus[0].plan.n, dtype=np.intp) if perm is None else np.asarray(perm, np.intp), h, scheme, sizes)
+
+
+def _stacked(mats: list[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(values (K, nnz), indptr, indices) of a block's sparse matrices on one pattern."""
+    first = mats[0]
+    return np.array([a.data for a in mats]), first.indptr.astype(np.intp), first.indices.astype(np.intp)
 
 
 def _make_block(stamp: str) -> Any:
@@ -181,9 +273,10 @@ def _block() -> Any:
     if not _COMPILED:
         import sys
 
+        from ..solver import sparse_products, tridiagonal
         from ..solver.compiled_iteration import sources_stamp
         _register()
-        _COMPILED.append(_make_block(sources_stamp((sys.modules[__name__],))))
+        _COMPILED.append(_make_block(sources_stamp((sys.modules[__name__], tridiagonal, sparse_products))))
     return _COMPILED[0]
 
 
@@ -205,12 +298,15 @@ def store(out: tuple, k: int, ds: Any, daux: Any) -> None:
 
 
 def _register() -> None:
-    """The overloads of the step operations for :class:`DenseBlock` (numba only)."""
+    """The overloads of the step operations for :class:`DenseBlock` and :class:`BandBlock`
+    (numba only).  The two differ in the pseudo load's products and in the solve."""
     import llvmlite.binding as ll
     from numba import types
     from numba.extending import get_cython_function_address, overload
 
     from ..solver.compiled_iteration import is_step_data
+    from ..solver.sparse_products import csc_times
+    from ..solver.tridiagonal import gttrs_columns as tridiagonal_solve
 
     # LAPACK's dgetrs as scipy exports it (the routine scipy.linalg.lapack's getrs calls), by a
     # symbol name: a compiled function that calls a ctypes pointer could not be cached
@@ -219,53 +315,79 @@ def _register() -> None:
     getrs = types.ExternalFunction(GETRS_SYMBOL, types.void(vp, vp, vp, vp, vp, vp, vp, vp, vp))
     predict, correct = inline(predict_arrays), inline(correct_arrays)
     advance, coefficients = inline(advance_arrays), inline(corrector_coefficients)
+    times = inline(csc_times)
 
-    def ours(ops: Any) -> bool:
+    def dense(ops: Any) -> bool:
         return is_step_data(ops, DenseBlock)
+
+    def band(ops: Any) -> bool:
+        return is_step_data(ops, BandBlock)
 
     @overload(sens_predict)
     def _predict(ops, rec, ds, daux):  # type: ignore[no-untyped-def]
-        if ours(ops):
+        if dense(ops) or band(ops):
             return lambda ops, rec, ds, daux: predict(ds[0], ds[1], ds[4], daux[0], daux[1], ops.h[rec],
                                                       ops.scheme[0], ops.scheme[1])
 
     @overload(sens_pseudo_load)
     def _pseudo_load(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
-        if not ours(ops):
-            return None
-
-        def impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
-            # pseudo_load_with's sums (Linearization.state_product's), in its order
-            out = ops.R_q[rec] @ dpred[0]
-            out = out + ops.R_qd[rec] @ dpred[1]
-            if dpred[2].shape[0]:
-                out = out + ops.R_p[rec] @ dpred[2]
-            return design_part + out
-        return impl
+        if dense(ops):
+            def impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
+                # pseudo_load_with's sums (Linearization.state_product's), in its order
+                out = ops.R_q[rec] @ dpred[0]
+                out = out + ops.R_qd[rec] @ dpred[1]
+                if dpred[2].shape[0]:
+                    out = out + ops.R_p[rec] @ dpred[2]
+                return design_part + out
+            return impl
+        if band(ops):
+            def band_impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
+                # Linearization.state_product's sums: R_q ∇q, then + R_q̇ ∇q̇ (scipy's products)
+                out = times(ops.R_q_values[rec], ops.R_q_indptr, ops.R_q_indices, dpred[0])
+                out = out + times(ops.R_qd_values[rec], ops.R_qd_indptr, ops.R_qd_indices, dpred[1])
+                return design_part + out
+            return band_impl
+        return None
 
     @overload(sens_solve)
     def _solve(ops, rec, P):  # type: ignore[no-untyped-def]
-        if not ours(ops):
-            return None
-
-        def impl(ops, rec, P):  # type: ignore[no-untyped-def]
-            n, m = P.shape
-            x = np.empty((m, n))            # −P in column-major order, as LAPACK takes it
-            for i in range(n):
-                for j in range(m):
-                    x[j, i] = -P[i, j]
-            trans = np.array([ord("N")], np.uint8)
-            ints = np.array([n, m, n, n, 0], np.int32)      # n, nrhs, lda, ldb, info
-            lu = ops.lu[rec]
-            piv = ops.piv[rec]
-            getrs(trans.ctypes, ints[0:].ctypes, ints[1:].ctypes, lu.ctypes, ints[2:].ctypes, piv.ctypes,
-                  x.ctypes, ints[3:].ctypes, ints[4:].ctypes)
-            return x.T
-        return impl
+        if dense(ops):
+            def impl(ops, rec, P):  # type: ignore[no-untyped-def]
+                n, m = P.shape
+                x = np.empty((m, n))            # −P in column-major order, as LAPACK takes it
+                for i in range(n):
+                    for j in range(m):
+                        x[j, i] = -P[i, j]
+                trans = np.array([ord("N")], np.uint8)
+                ints = np.array([n, m, n, n, 0], np.int32)      # n, nrhs, lda, ldb, info
+                lu = ops.lu[rec]
+                piv = ops.piv[rec]
+                getrs(trans.ctypes, ints[0:].ctypes, ints[1:].ctypes, lu.ctypes, ints[2:].ctypes, piv.ctypes,
+                      x.ctypes, ints[3:].ctypes, ints[4:].ctypes)
+                return x.T
+            return impl
+        if band(ops):
+            def band_impl(ops, rec, P):  # type: ignore[no-untyped-def]
+                # TridiagonalFactor.solve's: the rows reordered, dgttrs's arithmetic for each
+                # column (the same for one right-hand side or several), the rows put back
+                n, m = P.shape
+                perm = ops.perm
+                B = np.empty((n, m))
+                for i in range(n):
+                    for j in range(m):
+                        B[i, j] = -P[perm[i], j]
+                tridiagonal_solve(ops.dl[rec], ops.d[rec], ops.du[rec], ops.du2[rec], ops.ipiv[rec], B)
+                x = np.empty((n, m))
+                for i in range(n):
+                    for j in range(m):
+                        x[perm[i], j] = B[i, j]
+                return x
+            return band_impl
+        return None
 
     @overload(sens_correct)
     def _correct(ops, rec, dpred, dz):  # type: ignore[no-untyped-def]
-        if not ours(ops):
+        if not (dense(ops) or band(ops)):
             return None
 
         def impl(ops, rec, dpred, dz):  # type: ignore[no-untyped-def]
@@ -279,5 +401,5 @@ def _register() -> None:
 
     @overload(sens_advance)
     def _advance(ops, rec, dpred, ds):  # type: ignore[no-untyped-def]
-        if ours(ops):
+        if dense(ops) or band(ops):
             return lambda ops, rec, dpred, ds: advance(0.0, 0.0, ds[2], ds[5], ops.scheme[2])

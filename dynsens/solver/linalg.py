@@ -208,6 +208,15 @@ class Factor:
         return self._lu  # type: ignore[no-any-return]
 
     @property
+    def tridiagonal_real(self) -> TridiagonalFactor | None:
+        """The :class:`~.banded.TridiagonalFactor` (gttrf's LU of the reordered S) of a real S
+        factored as a tridiagonal band; None for another kind or dtype."""
+        lu = self._lu if self._kind == "banded" else None
+        if not isinstance(lu, TridiagonalFactor) or lu.complex or lu.d.dtype != np.float64:
+            return None
+        return lu
+
+    @property
     def compiled_lu(self) -> tuple[np.ndarray, np.ndarray] | None:
         """:attr:`dense_real_lu` in a compiled step's form: lu row by row (C order), piv 1-based
         int32 (the arrays the compiled step returned, when it made this factor)."""

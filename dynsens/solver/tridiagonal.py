@@ -70,3 +70,28 @@ def gttrs(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: 
         b[n - 2] = (b[n - 2] - du[n - 2] * b[n - 1]) / d[n - 2]
     for i in range(n - 3, -1, -1):
         b[i] = (b[i] - du[i] * b[i + 1] - du2[i] * b[i + 2]) / d[i]
+
+
+@register_jitable
+def gttrs_columns(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
+                  B: np.ndarray) -> None:
+    """Solve A X = B in place for the m right-hand sides of B (n, m), row-major, with the
+    factor of :func:`gttrf`: each column's operations are :func:`gttrs`'s (dgtts2's), taken for
+    all columns at once, so that the columns' division chains overlap (a column alone waits
+    for each division in turn; BENCHMARKS.md, issue 35)."""
+    n, m = B.shape
+    for i in range(n - 1):
+        ip = ipiv[i] - 1
+        other = i + 1 - ip + i
+        for v in range(m):
+            temp = B[other, v] - dl[i] * B[ip, v]
+            B[i, v] = B[ip, v]
+            B[i + 1, v] = temp
+    for v in range(m):
+        B[n - 1, v] = B[n - 1, v] / d[n - 1]
+    if n > 1:
+        for v in range(m):
+            B[n - 2, v] = (B[n - 2, v] - du[n - 2] * B[n - 1, v]) / d[n - 2]
+    for i in range(n - 3, -1, -1):
+        for v in range(m):
+            B[i, v] = (B[i, v] - du[i] * B[i + 1, v] - du2[i] * B[i + 2, v]) / d[i]
