@@ -358,6 +358,12 @@ class Model(ABC):
         relative to the largest singular value ('' if unknown)."""
         return ""
 
+    #: what the message of a singular iteration matrix suggests to check (a model of masses,
+    #: stiffnesses and dampers; mechanisms name their joints and poses instead)
+    singular_hint = ("check the element parameters and the supports for zero or negative masses or "
+                     "stiffnesses, unsupported (rigid-body) degrees of freedom, or stiffness and mass "
+                     "terms too far apart in size for double precision (a tiny pivot ratio)")
+
     def compiled_step(self, newton: bool, refactor: bool) -> Callable[..., Any] | None:
         """A compiled Newton iteration for this model's steps, when it has one
         (:mod:`dynsens.solver.newton_core`): a function of (t, prediction, params, coefficients)

@@ -193,9 +193,7 @@ class StepSolver:
             raise ConvergenceError(
                 f"singular iteration matrix ({reason}{'; ' + why if why else ''})", t=t, step=step,
                 iterations=it, residual_history=residual_history,
-                hint="a mechanism at a singular (e.g. dead-centre) configuration, redundant "
-                     "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
-                     "change the geometry or the joint set")
+                hint=self.model.singular_hint)
         # a mechanism that locks (near-dependent constraint equations at the step's start) is not
         # helped by a smaller step: say so instead
         locked = ""

@@ -68,6 +68,10 @@ class Assembly:
 class MultibodyModel(Model):
     """Rigid bodies with Euler parameters, joints, forces and hydraulic cylinders."""
 
+    singular_hint = ("a mechanism at a singular (e.g. dead-centre) configuration, redundant "
+                     "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
+                     "change the geometry or the joint set")
+
     def __init__(self, table: ParameterTable, bodies: list[BodyDef], ground: BodyDef,
                  joints: list[Joint], forces: list[ForceElement], cylinders: list[HydraulicCylinder],
                  vec_recipes: list[tuple[str, Recipe]], scal_recipes: list[tuple[str, Recipe]],
