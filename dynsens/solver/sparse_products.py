@@ -55,8 +55,9 @@ _TRANSPOSED: list[Any] = []     # the compiled csc_transpose_times, made on firs
 def transpose_times(A: Any, x: np.ndarray) -> np.ndarray:
     """Aᵀ x for a matrix A (dense or sparse) and x (n, m): compiled for a real CSC A and a real
     x where compiled code is enabled (the same numbers as scipy's), else ``A.T @ x``."""
-    if not (enabled() and isinstance(A, sp.csc_matrix) and A.dtype == np.float64 and x.ndim == 2
-            and x.dtype == np.float64):
+    # (the cheap tests first: a dense model's two products per step pay only for them)
+    if not (type(A) is sp.csc_matrix and A.dtype == np.float64 and x.ndim == 2 and x.dtype == np.float64
+            and enabled()):
         return A.T @ x
     if not _TRANSPOSED:
         _TRANSPOSED.append(jit(csc_transpose_times))
