@@ -10,9 +10,12 @@ linear algebra only through operations (``sens_*``):
   kind, real or complex, with the derivative of a projection);
 * compiled, they are numba overloads for :class:`DenseBlock`, the records of a block of steps
   of plain Newmark with dense real linearizations and LU factors (the compiled mechanisms'),
-  and :func:`direct_block` takes the whole block without returning to the interpreter.  The
-  products are BLAS gemm and the solve LAPACK getrs, as in the Python path, so the numbers are
-  the same where numba's BLAS is numpy's build.
+  or for :class:`BandBlock`, sparse records whose factor is a tridiagonal band (chains), and
+  :func:`direct_block` takes the whole block without returning to the interpreter.  The dense
+  block's products are BLAS gemm and its solve LAPACK getrs, as in the Python path, so the
+  numbers are the same where numba's BLAS is numpy's build; the band block's products are
+  scipy's CSC sums (:mod:`dynsens.solver.sparse_products`) and its solve dgttrs's arithmetic
+  (:func:`dynsens.solver.tridiagonal.gttrs_columns`), the same numbers everywhere.
 """
 from __future__ import annotations
 
@@ -204,8 +207,7 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
               n_q: int, n_lam: int, kind: str | None = None) -> tuple[list[StepState], StepState, Any]:
     """The sensitivities of the records of ``trail`` (which :func:`serves`; ``kind``: its
     :func:`block_kind` when known), from ∇s and ∇aux before the first; design_part (K, n_z, m).
-    Returns (∇s of each record, ∇s, ∇aux after the
-    last)."""
+    Returns (∇s of each record, ∇s, ∇aux after the last)."""
     K = len(trail)
     kind = kind or block_kind(scheme, trail, ds, design_part)
     block = (_band_block if kind == "band" else _dense_block)(
