@@ -15,6 +15,8 @@ The parameters of the perturbed designs are evaluated once per run, not per step
 """
 from __future__ import annotations
 
+import functools
+
 from typing import Any, Callable, Literal
 
 import numpy as np
@@ -79,7 +81,6 @@ class DesignPartials:
             self._batch = self._plus
             self._col = np.arange(m)
             self._coef = 1j * h
-        self._stacked = model.stack_parameters(self._batch)
         self._states: tuple[StepState, StepState, StepState] | None = None
 
         # ∂_x F_R: design variables whose rows of F_R are disjoint share one perturbation
@@ -88,6 +89,14 @@ class DesignPartials:
         self.colours = colour_columns(pattern, m)
         self._residual_batch = (self._batch if self.colours is None or pattern is None
                                 else self._colour_batch(pattern))
+
+    @functools.cached_property
+    def _stacked(self) -> Any:
+        """The model's stacked parameters of the whole batch (None when it does not stack them),
+        made on first use: the batched outputs of the direct mode read them, the adjoint with
+        declared output patterns never does, and for m = 2 252 bars they are ~1 GB and a second
+        (BENCHMARKS.md)."""
+        return self.model.stack_parameters(self._batch)
 
     @property
     def relative_error(self) -> float:
