@@ -53,33 +53,14 @@ def gttrf(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: 
 
 
 @register_jitable
-def gttrs(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
-          b: np.ndarray) -> None:
-    """Solve A x = b in place with the factor of :func:`gttrf` (dgttrs, via dgtts2, for one
-    right-hand side b (n,))."""
-    n = d.shape[0]
-    # L x = b
-    for i in range(n - 1):
-        ip = ipiv[i] - 1
-        temp = b[i + 1 - ip + i] - dl[i] * b[ip]
-        b[i] = b[ip]
-        b[i + 1] = temp
-    # U x = b
-    b[n - 1] = b[n - 1] / d[n - 1]
-    if n > 1:
-        b[n - 2] = (b[n - 2] - du[n - 2] * b[n - 1]) / d[n - 2]
-    for i in range(n - 3, -1, -1):
-        b[i] = (b[i] - du[i] * b[i + 1] - du2[i] * b[i + 2]) / d[i]
-
-
-@register_jitable
 def gttrs_columns(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
                   B: np.ndarray) -> None:
     """Solve A X = B in place for the m right-hand sides of B (n, m), row-major, with the
-    factor of :func:`gttrf`: each column's operations are :func:`gttrs`'s (dgtts2's), taken for
-    all columns at once, so that the columns' division chains overlap (a column alone waits
-    for each division in turn; BENCHMARKS.md, issue 35)."""
+    factor of :func:`gttrf`: each column's operations are dgttrs's (via dgtts2, the same for one
+    right-hand side or several), taken for all columns at once, so that the columns' division
+    chains overlap (a column alone waits for each division in turn; BENCHMARKS.md, issue 35)."""
     n, m = B.shape
+    # L X = B
     for i in range(n - 1):
         ip = ipiv[i] - 1
         other = i + 1 - ip + i
@@ -87,6 +68,7 @@ def gttrs_columns(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray
             temp = B[other, v] - dl[i] * B[ip, v]
             B[i, v] = B[ip, v]
             B[i + 1, v] = temp
+    # U X = B
     for v in range(m):
         B[n - 1, v] = B[n - 1, v] / d[n - 1]
     if n > 1:
@@ -95,3 +77,11 @@ def gttrs_columns(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray
     for i in range(n - 3, -1, -1):
         for v in range(m):
             B[i, v] = (B[i, v] - du[i] * B[i + 1, v] - du2[i] * B[i + 2, v]) / d[i]
+
+
+@register_jitable
+def gttrs(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
+          b: np.ndarray) -> None:
+    """Solve A x = b in place with the factor of :func:`gttrf` for one right-hand side b (n,),
+    contiguous: :func:`gttrs_columns` of b as a single column."""
+    gttrs_columns(dl, d, du, du2, ipiv, b.reshape((b.shape[0], 1)))
