@@ -27,7 +27,7 @@ import numpy as np
 from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
 from ...solver import tridiagonal
-from ...solver._jit import inline, jit, register_jitable
+from ...solver._jit import inline, jit
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
                                          LazyIteration, dense_solver, is_step_data, sources_stamp,
                                          step_kept)
@@ -67,40 +67,6 @@ class SpringStepData(NamedTuple):
     s_pos: Array
 
 
-@register_jitable
-def spring_residual(q: Array, qd: Array, qdd: Array, mass: Array, a: Array, b: Array, k1: Array, k2: Array,
-                    k3: Array, G: Array, D: Array, d_ptr: Array, d_col: Array, d_val: Array,
-                    f_ext: Array) -> tuple[Array, Array]:
-    """(F_R, the springs' tangents) of a spring network at the state (q, q̇, q̈), each (n,):
-    F_R = M q̈ + f_int(q) − f_ext + D q̇ with the fields of :class:`SpringStepData` (G and D dense
-    for a dense model, else (0, 0) and D by rows), summed as the Python path sums them."""
-    n = q.shape[0]
-    delta = np.empty(a.shape[0])
-    for e in range(a.shape[0]):
-        delta[e] = (q[a[e]] if a[e] < n else 0.0) - (q[b[e]] if b[e] < n else 0.0)
-    f, kt = law.spring_law(delta, k1, k2, k3)
-    dense = G.shape[0] > 0
-    if dense:                   # the dense model's products: BLAS's, as numpy calls it
-        f_int = np.dot(f, G)
-    else:                       # scipy's sparse products: entries in stored order
-        f_int = np.zeros(n)
-        for e in range(a.shape[0]):
-            if a[e] < n:
-                f_int[a[e]] += f[e]
-            if b[e] < n:
-                f_int[b[e]] -= f[e]
-    R = (mass * qdd + f_int) - f_ext
-    if dense:
-        R = R + np.dot(D, qd)
-    else:
-        for i in range(n):
-            acc = 0.0
-            for k in range(d_ptr[i], d_ptr[i + 1]):
-                acc += d_val[k] * qd[d_col[k]]
-            R[i] += acc
-    return R, kt
-
-
 def _is_step_data(ops: Any) -> bool:
     return is_step_data(ops, SpringStepData)
 
@@ -130,8 +96,33 @@ def _register() -> None:
             return None
 
         def impl(ops, s):  # type: ignore[no-untyped-def]
-            return spring_residual(s[0], s[1], s[2], ops.mass, ops.spring_a, ops.spring_b, ops.k1, ops.k2,
-                                   ops.k3, ops.G, ops.D, ops.d_ptr, ops.d_col, ops.d_val, ops.f_ext)
+            q, qd, qdd = s[0], s[1], s[2]
+            n = q.shape[0]
+            a, b = ops.spring_a, ops.spring_b
+            delta = np.empty(a.shape[0])
+            for e in range(a.shape[0]):
+                delta[e] = (q[a[e]] if a[e] < n else 0.0) - (q[b[e]] if b[e] < n else 0.0)
+            f, kt = law.spring_law(delta, ops.k1, ops.k2, ops.k3)
+            dense = ops.G.shape[0] > 0
+            if dense:                   # the dense model's products: BLAS's, as numpy calls it
+                f_int = np.dot(f, ops.G)
+            else:                       # scipy's sparse products: entries in stored order
+                f_int = np.zeros(n)
+                for e in range(a.shape[0]):
+                    if a[e] < n:
+                        f_int[a[e]] += f[e]
+                    if b[e] < n:
+                        f_int[b[e]] -= f[e]
+            R = (ops.mass * qdd + f_int) - ops.f_ext
+            if dense:
+                R = R + np.dot(ops.D, qd)
+            else:
+                for i in range(n):
+                    acc = 0.0
+                    for k in range(ops.d_ptr[i], ops.d_ptr[i + 1]):
+                        acc += ops.d_val[k] * qd[ops.d_col[k]]
+                    R[i] += acc
+            return R, kt
         return impl
 
     @overload(core.step_no_factor)
