@@ -4,8 +4,9 @@ The compiled multibody kernel (``models/multibody/compiled.py``) is compiled on 
 machine, real and complex separately, and so is the compiled step
 that calls it (``models/multibody/compiled_step.py``; one signature for every mechanism)
 and the compiled step of spring networks (``models/structural/step_kernels.py``; one signature
-for every network), and the compiled block of sensitivity steps (``derivatives/direct_step.py``; one
-signature for every dense model); all are cached on disk beside the package.  ``make setup`` runs this module
+for every network) with its blocks of steps, and the compiled block of sensitivity steps
+(``derivatives/direct_step.py``; one signature for every dense model); all are cached on disk
+beside the package.  ``make setup`` runs this module
 (``--jobs 2``) so that a user's first ``dynsens simulate`` takes as long as the second, and so that no
 reported timing includes compilation.  It runs a short piece (``--steps`` steps) of each multibody
 case with forward partials (real arithmetic), complex partials and a complex-step run of the whole
@@ -74,7 +75,9 @@ def warm_run(case: Case, run: str, steps: int = 150) -> float:
     t0 = time.perf_counter()
     if isinstance(case.model, StructuralModel):
         if run == "forward" and serves(case.model):
-            run_case(_short_case(case, steps, run)[0])
+            short = _short_case(case, steps, run)[0]
+            run_case(short)
+            run_case(short, sensitivities=False)      # its blocks of steps (timeloop/step_blocks.py)
     elif isinstance(case.model, MultibodyModel):
         run_case(*_short_case(case, steps, run))
     return time.perf_counter() - t0

@@ -32,6 +32,7 @@ from dynsens.solver import _jit
 from dynsens.solver.linalg import Counters
 from dynsens.solver.newton import NewtonSettings, StepSolver
 from dynsens.solver.tridiagonal import gttrf, gttrs
+from dynsens.timeloop.step_blocks import StepBlocks
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 compiled_only = pytest.mark.skipif(
@@ -88,11 +89,18 @@ def _python_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
     python_iteration(monkeypatch, StructuralModel)
 
 
+def _count_compiled_steps(m: pytest.MonkeyPatch, calls: list[int]) -> None:
+    """Count the steps iterated compiled, one at a time or in a block of steps."""
+    original = structural_step.CompiledSpringStep.iterate
+    m.setattr(structural_step.CompiledSpringStep, "iterate", lambda self, *a: calls.append(1) or original(self, *a))
+    hand_out = StepBlocks._hand_out
+    m.setattr(StepBlocks, "_hand_out", lambda self, *a: calls.append(1) or hand_out(self, *a))
+
+
 def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case, **kw):  # type: ignore[no-untyped-def]
     calls: list[int] = []
-    original = structural_step.CompiledSpringStep.iterate
     with monkeypatch.context() as m:
-        m.setattr(structural_step.CompiledSpringStep, "iterate", lambda self, *a: calls.append(1) or original(self, *a))
+        _count_compiled_steps(m, calls)
         compiled = dynsens.run_case(case, **kw)
     with monkeypatch.context() as m:
         _python_iteration(m)
@@ -165,16 +173,15 @@ def test_which_models_are_served(monkeypatch):
 @compiled_only
 def test_a_small_dense_chain_takes_the_compiled_direct_block(monkeypatch):
     """The compiled step's dense LU (getrf's, stored by columns) is a record the compiled block of
-    direct sensitivity steps reads: every step's sensitivities are taken there, none in Python."""
+    direct sensitivity steps reads: every step's sensitivities are taken there, none in Python
+    (the primal steps are taken compiled too, in blocks of steps)."""
     from dynsens.derivatives import direct
     blocks: list[int] = []
     original = direct.run_block
     monkeypatch.setattr(direct, "run_block", lambda scheme, trail, *a: blocks.append(len(trail))
                         or original(scheme, trail, *a))
     calls: list[int] = []
-    iterate = structural_step.CompiledSpringStep.iterate
-    monkeypatch.setattr(structural_step.CompiledSpringStep, "iterate",
-                        lambda self, *a: calls.append(1) or iterate(self, *a))
+    _count_compiled_steps(monkeypatch, calls)
     result = dynsens.run_case(dynsens.load_case_dict(_small_dense_chain(), "chain.yaml"), sensitivities=True)
     steps = result.counters["steps"]
     assert len(calls) == sum(blocks) == steps > 0

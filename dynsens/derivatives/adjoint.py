@@ -59,6 +59,7 @@ class AdjointMode:
 
     name = "adjoint"
     trail_length = 1   # nothing trails: the responses take the values of every step at once
+    steps_ahead = True     # it reads the records; a recomputed segment starts from its checkpoint
 
     def __init__(self, model: Model, scheme: Newmark, partials: DesignPartials, counters: Counters,
                  outputs: list[Output], store: RecordStore, grid_time: Callable[[int], float],

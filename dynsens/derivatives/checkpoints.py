@@ -13,6 +13,7 @@ test_checkpointing_recomputes_segments_bit_identically).
 """
 from __future__ import annotations
 
+import weakref
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -61,7 +62,9 @@ class RecordStore:
         self.held = 0
         self.peak = 0                                 # most bytes of records held at once
         self.n_grid = 0
-        self._seen: set[int] = set()
+        # the linearizations and factors counted, while they live: an id alone would be taken
+        # again by a new object once a dropped segment's records are freed
+        self._seen: weakref.WeakValueDictionary[int, Any] = weakref.WeakValueDictionary()
         self.dropped = 0
 
     def _bytes(self, rec: StepRecord) -> int:
@@ -69,8 +72,8 @@ class RecordStore:
         n = sum(v.nbytes for v in rec.state)
         for obj, size in ((rec.lin, lambda o: sum(_matrix_bytes(b) for b in (o.R_z, o.R_q, o.R_qd, o.R_p))),
                           (rec.factor, factor_bytes)):
-            if obj is not None and id(obj) not in self._seen:
-                self._seen.add(id(obj))
+            if obj is not None and self._seen.get(id(obj)) is not obj:
+                self._seen[id(obj)] = obj
                 n += size(obj)
         return n
 

@@ -59,6 +59,7 @@ class DirectMode:
     :class:`~dynsens.derivatives.mode.DerivativeMode`)."""
 
     name = "direct"
+    steps_ahead = True       # it reads the records (their factors too), not the solver between steps
 
     def __init__(self, model: Model, scheme: Newmark, solver: StepSolver, partials: DesignPartials,
                  counters: Counters, design_names: tuple[str, ...] = (), reason: str = ""):

@@ -23,6 +23,10 @@ Implementer contract:
    ``trail_length`` grid steps and at every event.
 5. ``finish_responses(responses, design, m, mass)`` returns the responses' final values and
    gradients (a backward mode sweeps here).
+6. ``steps_ahead`` says whether the primal steps may be taken ahead of the mode, in compiled
+   blocks (:mod:`dynsens.timeloop.step_blocks`): true for a mode that reads the records only
+   (their states, linearizations and factors: a block's records carry the same), never the
+   stepper or the solver between steps.
 """
 from __future__ import annotations
 
@@ -45,6 +49,7 @@ class DerivativeMode(Protocol):
     name: str
     reason: str
     trail_length: int
+    steps_ahead: bool
 
     def start(self, rec: StepRecord) -> StepState | None:
         """The initial record; the sensitivities of the initial state (or None)."""
@@ -74,6 +79,7 @@ class PrimalOnlyMode:
     name = ""
     reason = ""
     trail_length = 1
+    steps_ahead = True       # it reads the records' states only
 
     def __init__(self, model: Model):
         self.model = model

@@ -126,25 +126,30 @@ def is_step_data(ops: Any, data_class: type) -> bool:
 
 class LazyIteration:
     """A model family's compiled iteration, made on first use: ``register()`` (its overloads of
-    the step operations) first, then :func:`compiled_iteration` keyed by ``stamp()``."""
+    the step operations) first, then ``build`` (:func:`compiled_iteration`, or
+    :func:`.compiled_march.compiled_march` for blocks of steps) keyed by ``stamp()``."""
 
-    def __init__(self, register: Callable[[], None], stamp: Callable[[], str]):
-        self._register, self._stamp = register, stamp
+    def __init__(self, register: Callable[[], None], stamp: Callable[[], str],
+                 build: Callable[[str], Any] = compiled_iteration):
+        self._register, self._stamp, self._build = register, stamp, build
         self._compiled: Any = None
 
     def __call__(self) -> Any:
         if self._compiled is None:
             self._register()
-            self._compiled = compiled_iteration(self._stamp())
+            self._compiled = self._build(self._stamp())
         return self._compiled
 
 
 class CompiledStep:
     """One step of a model family for :func:`~.newton_core.newton_iterations`, compiled: the
     step's data and the family's :class:`LazyIteration` (``iteration``, set by each family's
-    subclass, which also turns the iteration's last factor into the Python path's objects)."""
+    subclass, which also turns the iteration's last factor into the Python path's objects);
+    ``march``: the family's blocks of steps, which take this step's data as their template."""
 
     iteration: LazyIteration
+    #: the family's compiled blocks of steps (:mod:`.compiled_march`), None where it has none
+    march: LazyIteration | None = None
 
     def __init__(self, data: Any):
         self.data = data
@@ -154,6 +159,21 @@ class CompiledStep:
         ops), what :func:`step_kept` computed at the state it ended at, and whether that state is
         finite."""
         return type(self).iteration()(self.data, *args)  # type: ignore[no-any-return]
+
+    # what the blocks of steps (:mod:`.compiled_march`) ask of a family with ``march``
+    def loads(self, t: float) -> np.ndarray:
+        """The external loads f_ext (n,) of the step's model and design at time t (s)."""
+        raise NotImplementedError(f"{type(self).__name__} runs no blocks of steps")
+
+    def factor_buffers(self, steps: int) -> tuple[np.ndarray, ...]:
+        """Arrays of ``steps`` rows for the last linearization and factor of each step of a block
+        (one row a step, as :func:`.compiled_march.store_factor` writes them)."""
+        raise NotImplementedError(f"{type(self).__name__} runs no blocks of steps")
+
+    def at_time(self, t: float) -> "CompiledStep":
+        """This step's design at another step ending at time t (s): what turns that step's row of
+        the factor buffers into the Python path's objects (:meth:`linearization_and_factor`)."""
+        raise NotImplementedError(f"{type(self).__name__} runs no blocks of steps")
 
     def keep(self, s: Any, kept: Any) -> None:
         """Hand what :func:`step_kept` computed at the converged state s to the model (by

@@ -142,9 +142,7 @@ class StepSolver:
         compiled step for it (a step with the scheme's corrector, coefficients not all zero)."""
         st = self.settings
         history = np.empty(st.max_iterations)
-        compiled = None
-        if self._compiled_step is not None and coeffs != (0.0, 0.0, 0.0):
-            compiled = self._compiled_step(t, pred, params, coeffs)
+        compiled = self.compiled_for(t, pred, params, coeffs)
         args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities)
         result = None
         if compiled is not None:
@@ -161,29 +159,19 @@ class StepSolver:
                 ops, z0.copy(), *args, self._scales, self._present, history)
             lin, factor = lf if lf is not None else (None, None)
             finite = False        # (not known: the stepper looks)
+            self.counters.residual_evaluations += n_res
+            self.counters.newton_iterations += n_lin - (status == SINGULAR)
         else:
             assert result is not None
             status, it, z, dz, s, R, lf, fresh, n_res, n_lin, kept, finite = result
-            self._scales = scales.tolist()
+            self.keep_scales(scales)
             s = compiled.state(s)
             if status == CONVERGED or status == AT_ROUNDOFF:
                 compiled.keep(s, kept)
             lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters, self.sensitivities)
-            c = self.counters
-            c.linearizations += n_lin
-            c.factorizations += n_lin
-            c.step_factorizations += n_lin
-            solves = n_lin - (status == SINGULAR)
-            c.solves += solves
-            c.solve_columns += solves
-        self.counters.residual_evaluations += n_res
-        self.counters.newton_iterations += n_lin - (status == SINGULAR)
-        if status == CONVERGED:
-            return self._accept(t, s, params, coeffs, lin, factor, it, True, finite)
-        if status == AT_ROUNDOFF:
-            return self._accept(t, s, params, coeffs, lin, factor, it, fresh, finite)
-        if status == SOLVED_LINEAR:
-            return StepOutcome(s, lin, factor, it, finite)
+            self.count_compiled(n_res, n_lin, status == SINGULAR)
+        if status == CONVERGED or status == AT_ROUNDOFF or status == SOLVED_LINEAR:
+            return self._outcome(t, s, params, coeffs, lin, factor, it, status, fresh, finite)
         if status == NOT_FINITE:
             raise NonFiniteError(self._nonfinite_message(R, s, t, step, it))
         residual_history = history[:it].tolist()
@@ -206,6 +194,66 @@ class StepSolver:
                   "does not help: check the geometry, the joint set and the driving motion" if locked else
                   "reduce the time step, check that the loads and parameters are physical, "
                   "or raise solver.max_iterations"))
+
+    @property
+    def has_compiled_step(self) -> bool:
+        """Whether the model offers compiled steps for this run's iterations."""
+        return self._compiled_step is not None
+
+    def compiled_for(self, t: float, pred: Prediction, params: Any, coeffs: tuple[float, float, float]) -> Any:
+        """The model's compiled step (a :class:`~.compiled_iteration.CompiledStep`) for the step
+        ending at t (s) with this prediction and corrector coefficients, or None: the iteration
+        runs in Python (no compiled step for the model or this step; the initial solve)."""
+        if self._compiled_step is None or coeffs == (0.0, 0.0, 0.0):
+            return None
+        return self._compiled_step(t, pred, params, coeffs)
+
+    def iteration_arguments(self) -> tuple:
+        """The arguments of a compiled block of steps after its steps (:mod:`.compiled_march`):
+        the tolerances, Newton or one solve, whether sensitivities follow, the block scales (a new
+        array: the compiled steps update it), the present blocks and a residual history."""
+        st = self.settings
+        return (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities,
+                np.array(self._scales), self._present_array, np.empty(st.max_iterations))
+
+    def keep_scales(self, scales: np.ndarray) -> None:
+        """The block scales (3,) after a compiled step: the solver's memory for the next step."""
+        self._scales = scales.tolist()
+
+    def count_compiled(self, n_res: int, n_lin: int, singular: bool) -> None:
+        """Count the work of a compiled iteration: n_res residuals, n_lin linearizations and
+        factorizations, each followed by a solve unless S was singular."""
+        c = self.counters
+        c.linearizations += n_lin
+        c.factorizations += n_lin
+        c.step_factorizations += n_lin
+        solves = n_lin - singular
+        c.solves += solves
+        c.solve_columns += solves
+        c.residual_evaluations += n_res
+        c.newton_iterations += solves
+
+    def compiled_outcome(self, compiled: Any, t: float, s: StepState, params: Any,
+                         coeffs: tuple[float, float, float], status: int, iterations: int, lf: Any,
+                         fresh: bool, n_res: int, n_lin: int, scales: np.ndarray) -> StepOutcome:
+        """The outcome of a step a compiled block took (:mod:`dynsens.timeloop.step_blocks`):
+        what :meth:`solve_step` makes of a compiled iteration that ended in state s at time t
+        (s) with this status, last linearization and factor ``lf`` and block scales, its work
+        counted; ``compiled``: the :class:`~.compiled_iteration.CompiledStep` of that step."""
+        self.keep_scales(scales)
+        lin, factor, self._S = compiled.linearization_and_factor(lf, self.counters, self.sensitivities) \
+            if lf is not None else (None, None, None)
+        self.count_compiled(n_res, n_lin, False)
+        return self._outcome(t, s, params, coeffs, lin, factor, iterations, status, fresh, True)
+
+    def _outcome(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
+                 lin: Linearization | None, factor: Factor | None, iterations: int, status: int, fresh: bool,
+                 finite: bool) -> StepOutcome:
+        """The outcome of an iteration that ended with an accepted status (converged, at
+        round-off or one linear solve)."""
+        if status == SOLVED_LINEAR:
+            return StepOutcome(s, lin, factor, iterations, finite)
+        return self._accept(t, s, params, coeffs, lin, factor, iterations, status == CONVERGED or fresh, finite)
 
     def _accept(self, t: float, s: StepState, params: Any, coeffs: tuple[float, float, float],
                 lin: Linearization | None, factor: Factor | None, iterations: int,

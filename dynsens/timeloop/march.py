@@ -316,6 +316,8 @@ def integrate(model: Model, x: np.ndarray, scheme: Newmark, plan: RunPlan,
     steps = step_sequence(plan, scheme, counters)
     mode = derivative_mode(model, scheme, solver, stepper, partials, plan, responses, counters, steps,
                            design_names)
+    if mode.steps_ahead:
+        stepper.run_ahead(steps.ahead)                               # compiled blocks of steps
 
     rec = stepper.initial(plan.t0)                                    # t0: consistent accelerations
     ds = mode.start(rec)

@@ -105,6 +105,12 @@ class StepSequence:
         """Grid step i from the state s at t_prev (s): its records; the log gains (t_prev, h, t)."""
         raise NotImplementedError
 
+    def ahead(self, i: int, t_prev: float, count: int) -> list[tuple[float, float]] | None:
+        """(t_prev, h) (s) of grid steps i, i + 1, ... (at most ``count``, the first from
+        t_prev) as they will be taken unless a step is cut, or None where the sequence cannot
+        tell before taking them (adaptive steps): then no step runs ahead."""
+        return None
+
     def grid(self, i: int) -> tuple[float, float]:
         """(t_prev, h) of grid step i exactly as it was taken."""
         return self.log[i - 1][0], self.log[i - 1][1]
@@ -136,10 +142,21 @@ class FixedGrid(StepSequence):
 
     def take(self, stepper: PrimalStepper, i: int, t_prev: float, s: StepState) -> list[StepRecord]:
         h = self.step_size(i)
-        t = self.t0 + (i - 1) * self.dt + h
         records = stepper.advance(i, t_prev, h, s)
-        self.log.append((t_prev, h, t))
+        self.log.append((t_prev, h, self._end(i, h)))
         return records
+
+    def _end(self, i: int, h: float) -> float:
+        """The grid time of step i of size h (s): where the next step starts."""
+        return self.t0 + (i - 1) * self.dt + h
+
+    def ahead(self, i: int, t_prev: float, count: int) -> list[tuple[float, float]]:
+        out = []
+        for j in range(i, min(i + count, self.n_steps + 1)):
+            h = self.step_size(j)
+            out.append((t_prev, h))
+            t_prev = self._end(j, h)
+        return out
 
     def progress(self) -> tuple[int, int]:
         return len(self.log), self.n_steps

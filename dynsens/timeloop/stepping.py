@@ -22,6 +22,7 @@ from ..errors import ConvergenceError, NonFiniteError
 from ..integrators.newmark import Aux, Newmark, Prediction
 from ..models.base import Model, StepState
 from .runaway import RunawayMonitor
+from .step_blocks import GridAhead, StepBlocks
 from ..solver.newton import StepOutcome, StepSolver
 
 HISTORY_FIELDS = ("q", "qd", "qdd", "lam", "p", "pd")
@@ -114,6 +115,14 @@ class PrimalStepper:
         self.labels = model.dof_labels()
         self.aux: Aux | None = None
         self.runaway: RunawayMonitor | None = None
+        self.blocks: StepBlocks | None = None
+
+    def run_ahead(self, ahead: GridAhead) -> None:
+        """Let the steps of the grid ``ahead`` (:meth:`.step_sequence.StepSequence.ahead`) be
+        taken ahead in compiled blocks where the model has them (:mod:`.step_blocks`): only for
+        plain Newmark, and only when nothing but the records' states is read as they come."""
+        if self.scheme.alpha_m == 0.0 and self.scheme.alpha_f == 0.0 and self.solver.has_compiled_step:
+            self.blocks = StepBlocks(self, ahead)
 
     def initial(self, t0: float) -> StepRecord:
         """The initial state and its consistent accelerations (coefficients 0: S0 = ∂F_R/∂z)."""
@@ -150,6 +159,10 @@ class PrimalStepper:
     def advance(self, i: int, t_prev: float, h: float, s: StepState) -> list[StepRecord]:
         """Grid step i from the state s at t_prev by h (s): its records (more than one after
         step cuts), the last one ending at t_prev + h."""
+        if self.blocks is not None:
+            record = self.blocks.take(i, t_prev, h, s)
+            if record is not None:
+                return [record]
         records: list[StepRecord] = []
         assert self.aux is not None, "initial() first"
         self.aux = self._take(i, t_prev, h, 0, s, self.aux, records)

@@ -32,7 +32,7 @@ from ...solver.compiled_iteration import REGULAR, CompiledStep, read_only
 from ...solver.linalg import Counters, Factor, SingularMatrixError
 from ..base import StepState
 from ..sparse_assembly import on_pattern
-from .step_kernels import SpringStepData, iteration
+from .step_kernels import SpringStepData, iteration, march
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import StructuralModel
@@ -78,7 +78,7 @@ class _Design:
         n = model.n
         self.plan, self.n = plan, n
         self.dense_lu = isinstance(plan, DenseStorage)
-        size = n * n if self.dense_lu else 3 * n - 2
+        self.size = size = n * n if self.dense_lu else 3 * n - 2      # S's storage
         a, b = model.spring_dofs[:, 0], model.spring_dofs[:, 1]
         rows, cols = np.concatenate([a, b, a, b]), np.concatenate([a, b, b, a])
         grounded = (rows >= n) | (cols >= n)
@@ -139,6 +139,11 @@ def _storage(factor: Factor) -> "BandPlan | DenseStorage | None":
     return None
 
 
+def loads(model: "StructuralModel", t: float, params: dict[str, Any]) -> Array:
+    """f_ext (n,) at time t (s), as a step's data holds it (read-only)."""
+    return read_only(model.external_force(t, params), np.float64)
+
+
 def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
     """For :meth:`.structural.StructuralModel.compiled_step`: the :class:`CompiledSpringStep` of a
     step, or None for a step it does not serve (complex data; a design whose S the Python path
@@ -171,8 +176,8 @@ def step_factory(model: "StructuralModel", newton: bool, refactor: bool) -> Any:
 
     def _step_data(t: float, pred: Any, params: dict[str, Any], coeffs: tuple[float, float, float],
                    d: _Design) -> SpringStepData:
-        f_ext = read_only(model.external_force(t, params), np.float64)
-        return SpringStepData(pred.q, pred.qd, read_only(pred.p, np.float64), np.array(coeffs), f_ext, *d.fields)
+        return SpringStepData(pred.q, pred.qd, read_only(pred.p, np.float64), np.array(coeffs),
+                              loads(model, t, params), *d.fields)
 
     def make(t: float, pred: Any, params: dict[str, Any], coeffs: tuple[float, float, float]
              ) -> "CompiledSpringStep | None":
@@ -190,11 +195,25 @@ class CompiledSpringStep(CompiledStep):
     data of the step, and the conversion of what the iteration returns."""
 
     iteration = iteration
+    march = march
 
     def __init__(self, model: "StructuralModel", t: float, params: dict[str, Any], design: _Design,
                  data: SpringStepData):
         super().__init__(data)
         self.model, self.t, self.params, self.design = model, t, params, design
+
+    def loads(self, t: float) -> Array:
+        return loads(self.model, t, self.params)
+
+    def factor_buffers(self, steps: int) -> tuple[Array, ...]:
+        # the iteration's last (K_t, q, q̇, q̈, S, LU, du2, pivots, regularity test), one row a step
+        n, size = self.design.n, self.design.size
+        return (np.empty((steps, size)), *(np.empty((steps, n)) for _ in range(3)), np.empty((steps, size)),
+                np.empty((steps, size)), np.empty((steps, max(n - 2, 0))), np.empty((steps, n), np.int32),
+                np.empty((steps, 3)))
+
+    def at_time(self, t: float) -> "CompiledSpringStep":
+        return CompiledSpringStep(self.model, t, self.params, self.design, self.data)
 
     def linearization_and_factor(self, lf: tuple, counters: Counters, linearization: bool = True
                                  ) -> tuple[Any, Factor | None, None]:

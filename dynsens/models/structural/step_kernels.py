@@ -26,6 +26,8 @@ import numpy as np
 
 from ...integrators.newmark import correct_arrays
 from ...solver import newton_core as core
+from ...solver import compiled_march as compiled_march_module
+from ...solver.compiled_march import compiled_march, step_with, store_factor
 from ...solver import tridiagonal
 from ...solver._jit import inline, jit
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
@@ -71,8 +73,15 @@ def _is_step_data(ops: Any) -> bool:
     return is_step_data(ops, SpringStepData)
 
 
+_REGISTERED: list[bool] = []
+
+
 def _register() -> None:
-    """The overloads of the step operations for SpringStepData (numba only)."""
+    """The overloads of the step operations for SpringStepData (numba only; once, for the
+    iteration and the blocks of steps both)."""
+    if _REGISTERED:
+        return
+    _REGISTERED.append(True)
     from numba.extending import overload
 
     correct = inline(correct_arrays)
@@ -217,6 +226,29 @@ def _register() -> None:
         if _is_step_data(ops):
             return lambda ops, s: None       # nothing: the structural checks read the state only
 
+    @overload(step_with)
+    def _with(ops, q_pred, qd_pred, p_pred, coeffs, f_ext):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, q_pred, qd_pred, p_pred, coeffs, f_ext):  # type: ignore[no-untyped-def]
+            return SpringStepData(q_pred, qd_pred, p_pred, coeffs, f_ext, ops.mass, ops.spring_a, ops.spring_b,
+                                  ops.k1, ops.k2, ops.k3, ops.k_pos, ops.G, ops.D, ops.d_ptr, ops.d_col, ops.d_val,
+                                  ops.mass_storage, ops.damping_storage, ops.dense_lu, ops.perm, ops.s_row,
+                                  ops.s_col, ops.s_pos)
+        return impl
+
+    @overload(store_factor)
+    def _store(ops, lf, factors, k):  # type: ignore[no-untyped-def]
+        if not _is_step_data(ops):
+            return None
+
+        def impl(ops, lf, factors, k):  # type: ignore[no-untyped-def]
+            K, q, qd, qdd, S, lu, du2, piv, test = lf
+            factors[0][k], factors[1][k], factors[2][k], factors[3][k], factors[4][k] = K, q, qd, qdd, S
+            factors[5][k], factors[6][k], factors[7][k], factors[8][k] = lu, du2, piv, test
+        return impl
+
     @overload(core.step_block_norms)
     def _block_norms(ops, z, dz):  # type: ignore[no-untyped-def]
         if not _is_step_data(ops):
@@ -230,13 +262,14 @@ def _register() -> None:
 
 
 def _stamp() -> str:
-    """The cache key of the compiled iteration: the sources it inlines (the overloads here, the
-    spring law, the tridiagonal LU)."""
-    return sources_stamp((law, tridiagonal, sys.modules[__name__]))
+    """The cache key of the compiled iteration and blocks: the sources they inline (the overloads
+    here, the spring law, the tridiagonal LU, the block's loop)."""
+    return sources_stamp((law, tridiagonal, compiled_march_module, sys.modules[__name__]))
 
 
-# the compiled iteration (the overloads registered first)
+# the compiled iteration and blocks of steps (the overloads registered first)
 iteration = LazyIteration(_register, _stamp)
+march = LazyIteration(_register, _stamp, compiled_march)
 
 
 def _compiled_residual(stamp: str) -> Any:
