@@ -193,3 +193,21 @@ def test_a_mechanism_takes_its_steps_one_at_a_time(monkeypatch):
         dynsens.run_case(case, sensitivities=False)
     assert fills == [False]
 
+
+
+@compiled_only
+@pytest.mark.parametrize("mode", MODES)
+def test_a_replayed_grid_runs_in_blocks(monkeypatch, mode):
+    """The steps of an adaptive run replayed (as the finite differences of `check-gradients`
+    replay them), then on past its end with its last step size: in blocks, as one at a time."""
+    import dataclasses
+    from dynsens.timeloop.step_sequence import replaying
+    sensitivities, more = MODES[mode]
+    adaptive = dynsens.load_case_dict(_chain(10), "chain.yaml", ["integrator.adaptive={rtol: 1.0e-5, atol: 1.0e-8}"])
+    times = dynsens.run_case(adaptive, sensitivities=False).time
+    base = dynsens.load_case_dict(_chain(10, t_end=0.35), "chain.yaml", more)
+    case = dataclasses.replace(base, plan=replaying(base.plan, times))
+    blocks, steps, n_blocks, taken = _runs(monkeypatch, case, sensitivities)
+    assert_identical_runs(blocks, steps)
+    np.testing.assert_array_equal(blocks.time, steps.time)
+    assert blocks.time[-1] == 0.35 and n_blocks >= 2 and taken == blocks.counters["steps"]

@@ -93,3 +93,28 @@ def test_a_block_of_times_takes_one_set_of_inputs_once_settled(ts) -> None:
         assert np.array_equal(ext[rows], one[0])
         assert np.array_equal(f_ext[rows % f_ext.shape[0]], one[1][np.arange(B) % one[1].shape[0]])
         assert np.array_equal(g, one[2])
+
+
+def test_a_structural_models_kept_loads_are_those_evaluated_afresh() -> None:
+    """A structural model keeps f_ext of each parameter set and reuses it at another time once both
+    times are past every load's settling time: bit for bit what a fresh evaluation gives, before,
+    inside and after a pulse, for the run's parameters and a stacked (perturbed) set in turn."""
+    import scripts_path  # noqa: F401  (puts scripts/ on the path)
+    from make_cases import duffing_chain
+    d = duffing_chain(6, t_end=0.3)
+    d["model"]["loads"].append({"dof": "u2", "value": 5.0, "function": {"type": "step", "t0": 0.05}})
+    model = dynsens.load_case_dict(d, "chain.yaml").model
+    x = np.array([1.0, 0.5, 1.0e3, 1.0e5])
+    params = model.parameters(x)
+    stacked = model.stack_parameters([model.parameters(x * 1.001), model.parameters(x * 0.999)])
+    times = [0.0, 0.02, 0.05, 0.07, 0.1, 0.1 + 1e-12, 0.13, 0.2, 0.2, 0.29]
+    for t in times:
+        for prm in (params, stacked):
+            kept = model.external_force(t, prm)
+            model._last_loads.clear()
+            fresh = model.external_force(t, prm)
+            np.testing.assert_array_equal(kept, fresh, err_msg=f"t = {t}")
+    # past the pulse (0.1 s) and the step (0.05 s): one array for every later time
+    first = model.external_force(0.15, params)
+    assert model.external_force(0.25, params) is first
+    assert model.external_force(0.09, params) is not first

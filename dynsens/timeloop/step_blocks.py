@@ -1,13 +1,14 @@
 """Primal steps taken ahead in compiled blocks, handed out one record at a time.
 
 Where the derivative mode reads the step records only, never the solver between steps (all
-three modes: :attr:`~dynsens.derivatives.mode.DerivativeMode.steps_ahead`), the steps of a fixed
-grid can run ahead of the time loop: one compiled call (:mod:`dynsens.solver.compiled_march`)
-predicts, iterates, corrects and advances up to :data:`BLOCK_STEPS` steps, keeping each step's
-last linearization and factor when sensitivities follow, and the loop receives their records
-one by one, as if each had just been taken.  What follows a step in Python (the model's projection and range checks, the
-runaway monitor, the histories, the responses and their event watch) runs when its record is
-handed out, in order, so a run stopped by an event or an error reports the same step as
+three modes: :attr:`~dynsens.derivatives.mode.DerivativeMode.steps_ahead`), the steps of a grid
+known beforehand (fixed or replayed: :meth:`.step_sequence.StepSequence.ahead`) can run ahead of
+the time loop: one compiled call (:mod:`dynsens.solver.compiled_march`) predicts, iterates,
+corrects and advances up to :data:`BLOCK_STEPS` steps, keeping each step's last linearization
+and factor when sensitivities follow, and the loop receives their records one by one, as if
+each had just been taken.  What follows a step in Python (the model's projection and range
+checks, the runaway monitor, the histories, the responses and their event watch) runs when its
+record is handed out, in order, so a run stopped by an event or an error reports the same step as
 before; the steps computed beyond it are dropped.
 
 A block stops before a step it cannot take as it is (Newton failed, a singular matrix, a

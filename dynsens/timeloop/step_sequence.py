@@ -182,15 +182,32 @@ class ReplayedSteps(StepSequence):
         return self.done
 
     def take(self, stepper: PrimalStepper, i: int, t_prev: float, s: StepState) -> list[StepRecord]:
-        n = len(self.times) - 1
-        if i <= n:
-            h = self.times[i] - self.times[i - 1]
-        else:
-            h = min(self.times[n] - self.times[n - 1], self.t_end - t_prev)
+        h = self._size(i, t_prev)
         records = stepper.advance(i, t_prev, h, s)
         self.log.append((t_prev, h, records[-1].t))
-        self.done = i >= n and self.t_end - records[-1].t <= 1e-12 * max(abs(self.t_end), 1.0)
+        self.done = self._last(i, records[-1].t)
         return records
+
+    def _size(self, i: int, t_prev: float) -> float:
+        """The size (s) of step i from t_prev: the given grid's, then its last one up to t_end."""
+        n = len(self.times) - 1
+        if i <= n:
+            return self.times[i] - self.times[i - 1]
+        return min(self.times[n] - self.times[n - 1], self.t_end - t_prev)
+
+    def _last(self, i: int, t: float) -> bool:
+        """Whether step i, ending at t (s), is the last one."""
+        return i >= len(self.times) - 1 and self.t_end - t <= 1e-12 * max(abs(self.t_end), 1.0)
+
+    def ahead(self, i: int, t_prev: float, count: int) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        for j in range(i, i + count):
+            h = self._size(j, t_prev)
+            out.append((t_prev, h))
+            t_prev = t_prev + h             # (where an uncut step ends: PrimalStepper._solve)
+            if self._last(j, t_prev):
+                break
+        return out
 
     def progress(self) -> tuple[int, int]:
         return len(self.log), len(self.times) - 1

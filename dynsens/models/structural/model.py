@@ -100,7 +100,8 @@ class StructuralModel(StructuralMatrices, Model):
         self.corotated_damping = CorotatedDamping(kinds if rayleigh is not None and rayleigh_corotated else [],
                                                   rayleigh[1] if rayleigh is not None else -1, n)
         self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
-        self._last_loads: tuple[float, Any, np.ndarray] | None = None       # (t, params, f_ext)
+        # per parameter set (the run's, the partials' stacked one): (params, t, f_ext, settled)
+        self._last_loads: dict[int, tuple[Any, float, np.ndarray, float]] = {}
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
         self._patterns: dict[str, PatternAssembly] = {}          # sparse models: per _assemble site
         self._sums: dict[str, UnionCache] = {}                   # sparse models: per _add site
@@ -238,10 +239,11 @@ class StructuralModel(StructuralMatrices, Model):
 
     def external_force(self, t: float, params: dict[str, Any]) -> np.ndarray:
         """f_ext(t) (..., n) in force units; params may be stacked along a leading batch axis.
-        The loads of the last (t, params) are kept (read-only): every Newton iteration of a
-        step evaluates them at the same time."""
-        last = self._last_loads
-        if last is not None and last[0] == t and last[1] is params:
+        The loads of the last time of each parameter set are kept (read-only), and reused at
+        another time where both times are past the time functions' last change
+        (:meth:`.TimeFunction.settled_from`): the same numbers, not evaluated again each step."""
+        last = self._last_loads.get(id(params))
+        if last is not None and last[0] is params and (last[1] == t or min(t, last[1]) > last[3]):
             return last[2]
         pv = params["pv"]
         f = np.zeros(pv.shape[:-1] + (self.n + 1,), dtype=pv.dtype)
@@ -249,7 +251,11 @@ class StructuralModel(StructuralMatrices, Model):
             f[..., dof] += pv[..., amp] * fn.value(t, pv)
         f = f[..., :self.n]
         f.flags.writeable = False
-        self._last_loads = (t, params, f)
+        if last is None and len(self._last_loads) >= 4:     # (a run's sets: its own and the partials')
+            self._last_loads.clear()
+        settled = last[3] if last is not None and last[0] is params else \
+            max((fn.settled_from(pv) for _, _, fn in self.loads), default=-np.inf)
+        self._last_loads[id(params)] = (params, t, f, settled)
         return f
 
     # ------------------------------------------------------------------ residual contract
