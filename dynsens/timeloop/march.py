@@ -13,6 +13,7 @@ runs (tests/test_mode_free_loop.py).  What a case does not need is decided once 
 """
 from __future__ import annotations
 
+import functools
 import time as _time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -82,10 +83,10 @@ class RunPlan:
     adaptive: AdaptiveSettings | None = None
     replay_times: tuple[float, ...] | None = None
 
-    @property
+    @functools.cached_property
     def n_steps(self) -> int:
         """Number of steps of the fixed grid (the last one is shortened to land on t_end); the
-        nominal count of an adaptive run."""
+        nominal count of an adaptive run.  (Kept: the fixed grid reads it twice a step.)"""
         return max(1, int(np.ceil((self.t_end - self.t0) / self.dt - 1e-9)))
 
     def step_size(self, i: int) -> float:
