@@ -104,14 +104,7 @@ class Newmark:
             # plain Newmark: no remainder terms (the predictor is evaluated every step, also for
             # the (n, m) sensitivity matrices)
             return Prediction(*predict_arrays(s.q, s.qd, s.p, aux.a, aux.b, dt, b, g), 0.0, 0.0)
-        a_rest = (af * s.qdd - am * aux.a) / (1.0 - am)
-        b_rest = (af * s.pd - am * aux.b) / (1.0 - am)
-        return Prediction(
-            s.q + dt * s.qd + dt * dt * ((0.5 - b) * aux.a + b * a_rest),
-            s.qd + dt * ((1.0 - g) * aux.a + g * a_rest),
-            s.p + dt * ((1.0 - g) * aux.b + g * b_rest),
-            a_rest, b_rest,
-        )
+        return Prediction(*predict_alpha_arrays(s.q, s.qd, s.qdd, s.p, s.pd, aux.a, aux.b, dt, b, g, am, af))
 
     def correct(self, pred: Prediction, qdd: np.ndarray, lam: np.ndarray, pd: np.ndarray,
                 dt: float) -> StepState:
@@ -213,6 +206,19 @@ def predict_arrays(q: np.ndarray, qd: np.ndarray, p: np.ndarray, a: np.ndarray, 
     accelerations a, b (vectors or (n, m) matrices), step size dt (s)."""
     return (q + dt * qd + (dt * dt * (0.5 - beta)) * a, qd + (dt * (1.0 - gamma)) * a,
             p + (dt * (1.0 - gamma)) * b)
+
+
+def predict_alpha_arrays(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, p: np.ndarray, pd: np.ndarray,
+                         a: np.ndarray, b: np.ndarray, dt: float, beta: float, gamma: float, alpha_m: float,
+                         alpha_f: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """An α-member's predicted (q, q̇, p) and the parts (a_rest, b_rest) of the new algorithmic
+    accelerations known before the solve, from the previous step's state, its accelerations q̈,
+    ṗ and algorithmic accelerations a, b (vectors or (n, m) matrices), step size dt (s)."""
+    a_rest = (alpha_f * qdd - alpha_m * a) / (1.0 - alpha_m)
+    b_rest = (alpha_f * pd - alpha_m * b) / (1.0 - alpha_m)
+    return (q + dt * qd + dt * dt * ((0.5 - beta) * a + beta * a_rest),
+            qd + dt * ((1.0 - gamma) * a + gamma * a_rest),
+            p + dt * ((1.0 - gamma) * b + gamma * b_rest), a_rest, b_rest)
 
 
 def advance_arrays(a_rest: np.ndarray | float, b_rest: np.ndarray | float, qdd: np.ndarray, pd: np.ndarray,

@@ -99,7 +99,8 @@ class StepBlocks:
         done = np.zeros(1, np.intp)
         try:
             taken, how = compiled.march()(compiled.data, *leaves, hs, f_ext, scheme.beta, scheme.gamma,
-                                          scheme.c_a, *solver.iteration_arguments(), out, factors, done)
+                                          scheme.alpha_m, scheme.alpha_f, scheme.c_a, *solver.iteration_arguments(),
+                                          out, factors, done)
         except ZeroDivisionError:        # a law divided by zero: the Python path names the element
             taken, how = int(done[0]), BLOCK_STOPPED
         self.blocks += 1

@@ -119,9 +119,8 @@ class PrimalStepper:
 
     def run_ahead(self, ahead: GridAhead) -> None:
         """Let the steps of the grid ``ahead`` (:meth:`.step_sequence.StepSequence.ahead`) be
-        taken ahead in compiled blocks where the model has them (:mod:`.step_blocks`): only for
-        plain Newmark, and only when nothing but the records' states is read as they come."""
-        if self.scheme.alpha_m == 0.0 and self.scheme.alpha_f == 0.0 and self.solver.has_compiled_step:
+        taken ahead in compiled blocks where the model has them (:mod:`.step_blocks`)."""
+        if self.solver.has_compiled_step:
             self.blocks = StepBlocks(self, ahead)
 
     def initial(self, t0: float) -> StepRecord:
