@@ -212,3 +212,36 @@ def test_a_replayed_grid_runs_in_blocks(monkeypatch, mode):
     assert_identical_runs(blocks, steps)
     np.testing.assert_array_equal(blocks.time, steps.time)
     assert blocks.time[-1] == 0.35 and n_blocks >= 2 and taken == blocks.counters["steps"]
+
+
+@compiled_only
+@pytest.mark.parametrize("mode", ["primal", "direct"])
+def test_a_block_holds_no_more_than_its_byte_budget(monkeypatch, mode):
+    """The states and factors a block keeps stay within BLOCK_BYTES: a large model takes fewer
+    steps a block (here a budget of 20 kB: a few steps of the 30-mass chain), the same numbers."""
+    from dynsens.timeloop import step_blocks
+    sensitivities, more = MODES[mode]
+    case = dynsens.load_case_dict(_chain(), "chain.yaml", more)
+    n = 30
+    per_step = 8 * 4 * n + ((3 * (3 * n - 2) + 3 * n + (n - 2) + 3) * 8 + 4 * n if sensitivities else 0)
+    monkeypatch.setattr(step_blocks, "BLOCK_BYTES", 20_000)
+    blocks, steps, n_blocks, taken = _runs(monkeypatch, case, sensitivities)
+    assert_identical_runs(blocks, steps)
+    size = min(BLOCK_STEPS, 20_000 // per_step)
+    assert size < BLOCK_STEPS and n_blocks == -(-blocks.counters["steps"] // size)
+
+
+@compiled_only
+def test_a_run_with_sensitivities_whose_factor_is_large_takes_single_steps(monkeypatch):
+    """Above FACTOR_BYTES_MAX a step's factor is not copied out of a block: the run with
+    sensitivities takes its steps one at a time (asked once), its primal run still in blocks."""
+    from dynsens.timeloop import step_blocks
+    monkeypatch.setattr(step_blocks, "FACTOR_BYTES_MAX", 1_000)      # the 30-mass chain's: ~3 kB
+    case = dynsens.load_case_dict(_chain(), "chain.yaml")
+    filled: list[bool] = []
+    original = StepBlocks._fill
+    monkeypatch.setattr(StepBlocks, "_fill", lambda self, *a: filled.append(original(self, *a)) or filled[-1])
+    dynsens.run_case(case, sensitivities=True)
+    assert filled == [False]
+    dynsens.run_case(case, sensitivities=False)
+    assert filled[1:] and all(filled[1:])

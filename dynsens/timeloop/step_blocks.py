@@ -31,8 +31,14 @@ from ..solver.compiled_march import BLOCK_STOPPED
 if TYPE_CHECKING:  # pragma: no cover
     from .stepping import PrimalStepper, StepRecord
 
-#: grid steps a block takes at most (the histories of a block are kept until handed out)
+#: grid steps a block takes at most (the histories of a block are kept until handed out),
+#: and the bytes of its states and factors at most (a large model takes fewer steps a block)
 BLOCK_STEPS = 64
+BLOCK_BYTES = 16 * 2**20
+#: bytes of one step's factor above which a run with sensitivities takes its steps one at a
+#: time: copying the factor out of the block costs more than the Python a block saves (the
+#: 10 000-DOF chain, 1 MB a step, was no faster in blocks; the 1 000-mass chain, 0.1 MB, was)
+FACTOR_BYTES_MAX = 256 * 2**10
 
 #: the grid ahead of a step: (i, t_prev, count) -> [(t_prev, h)] of grid steps i, i + 1, ... (s),
 #: or None where it is not known before the steps are taken
@@ -89,12 +95,19 @@ class StepBlocks:
             # (decided by the model, the design and the step sequence: the same for the whole run)
             self.off = True
             return False
-        K = len(grid)
+        keep = solver.sensitivities        # the records carry their linearization and factor
+        leaves = [np.ascontiguousarray(v, np.float64) for v in (*s, *aux)]
+        factor_bytes = sum(f.nbytes for f in compiled.factor_buffers(1)) if keep else 0
+        if factor_bytes > FACTOR_BYTES_MAX:
+            self.off = True
+            return False
+        # a large model takes fewer steps a block: its states and factors within BLOCK_BYTES
+        per_step = sum(v.nbytes for v in leaves) + factor_bytes
+        K = max(1, min(len(grid), BLOCK_BYTES // max(per_step, 1)))
+        grid = grid[:K]
         hs = np.array([g[1] for g in grid])
         f_ext = np.stack([compiled.loads(g[2]) for g in grid])
-        leaves = [np.ascontiguousarray(v, np.float64) for v in (*s, *aux)]
         out = tuple(np.empty((K, v.shape[0])) for v in leaves) + (np.zeros((K, 5), np.int64), np.empty((K, 3)))
-        keep = solver.sensitivities        # the records carry their linearization and factor
         factors = compiled.factor_buffers(K if keep else 0)     # (no rows: one compiled signature)
         done = np.zeros(1, np.intp)
         try:
