@@ -148,7 +148,8 @@ class CompiledStep:
     ``march``: the family's blocks of steps, which take this step's data as their template."""
 
     iteration: LazyIteration
-    #: the family's compiled blocks of steps (:mod:`.compiled_march`), None where it has none
+    #: the family's compiled blocks of steps (:mod:`.compiled_march`), None where it has none;
+    #: a family with blocks keeps nothing at a converged state (its :meth:`keep` is not called)
     march: LazyIteration | None = None
 
     def __init__(self, data: Any):
