@@ -182,17 +182,18 @@ def test_no_blocks_where_a_step_must_be_taken_as_it_comes(monkeypatch, sets, kw)
 
 
 @compiled_only
-def test_a_mechanism_takes_its_steps_one_at_a_time(monkeypatch):
-    """A model family without compiled blocks (a mechanism): the stepper asks once and never again."""
+@pytest.mark.parametrize("sensitivities", [False, True])
+def test_a_mechanism_takes_its_steps_one_at_a_time(monkeypatch, sensitivities):
+    """A model family that declares no compiled blocks (a mechanism): never asked for one."""
     from pathlib import Path
-    fills: list[bool] = []
-    original = StepBlocks._fill
+    made: list[int] = []
+    original = StepBlocks.__init__
     with monkeypatch.context() as m:
-        m.setattr(StepBlocks, "_fill", lambda self, *a: fills.append(original(self, *a)) or fills[-1])
+        m.setattr(StepBlocks, "__init__", lambda self, *a: made.append(1) or original(self, *a))
         case = dynsens.load_case(Path(__file__).resolve().parent.parent / "cases" / "slider_crank.yaml",
                                  ["integrator.t_end=0.05"])
-        dynsens.run_case(case, sensitivities=False)
-    assert fills == [False]
+        dynsens.run_case(case, sensitivities=sensitivities)
+    assert made == []
 
 
 

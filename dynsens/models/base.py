@@ -42,7 +42,8 @@ Optional, with defaults here (each method's docstring says what it must return):
     map the derivative modes need; s itself), ``check_state(t, s, params)`` (ModelError out
     of range; nothing) and ``monitors(t, s, params)`` (scalar diagnostics; none).
 12. ``compiled_step(newton, refactor)``: the compiled Newton iteration of a step where the
-    model has one (None).
+    model has one (None); ``compiled_blocks``: whether its compiled steps also run in blocks
+    of steps (False).
 13. Messages and reports: ``diagnose_singular``, ``describe_equation``, ``dof_labels``;
     ``displacement_scale`` for the runaway monitor.
 14. Read where a model has them (by ``getattr``, not declared here): ``initial_state_gradient``
@@ -363,6 +364,10 @@ class Model(ABC):
     singular_hint = ("check the element parameters and the supports for zero or negative masses or "
                      "stiffnesses, unsupported (rigid-body) degrees of freedom, or stiffness and mass "
                      "terms too far apart in size for double precision (a tiny pivot ratio)")
+
+    #: whether the model's compiled steps also run in compiled blocks of steps
+    #: (:mod:`dynsens.timeloop.step_blocks`; declared by the model family, never probed)
+    compiled_blocks = False
 
     def compiled_step(self, newton: bool, refactor: bool) -> Callable[..., Any] | None:
         """A compiled Newton iteration for this model's steps, when it has one

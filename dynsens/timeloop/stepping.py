@@ -119,8 +119,9 @@ class PrimalStepper:
 
     def run_ahead(self, ahead: GridAhead) -> None:
         """Let the steps of the grid ``ahead`` (:meth:`.step_sequence.StepSequence.ahead`) be
-        taken ahead in compiled blocks where the model has them (:mod:`.step_blocks`)."""
-        if self.solver.has_compiled_step:
+        taken ahead in compiled blocks where the model declares them (``Model.compiled_blocks``;
+        :mod:`.step_blocks`)."""
+        if getattr(self.model, "compiled_blocks", False) and self.solver.has_compiled_step:
             self.blocks = StepBlocks(self, ahead)
 
     def initial(self, t0: float) -> StepRecord:

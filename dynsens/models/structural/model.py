@@ -58,6 +58,8 @@ class StructuralModel(StructuralMatrices, Model):
 
     #: (YAML entry, DOFs it acts on) of every element and load, set by the builder
     equation_sources: list[tuple[str, list[int]]] = []
+    #: a spring network's compiled steps run in blocks (:mod:`.step_kernels`)
+    compiled_blocks = True
 
     def __init__(self, *, dof_names: list[str], table: ParameterTable, sets: list[ElementKind], dim: int,
                  node_coords: dict[str, list[int]], loads: list[tuple[int, int, TimeFunction]],
