@@ -246,3 +246,21 @@ def test_a_run_with_sensitivities_whose_factor_is_large_takes_single_steps(monke
     assert filled == [False]
     dynsens.run_case(case, sensitivities=False)
     assert filled[1:] and all(filled[1:])
+
+
+def test_every_model_family_declares_whether_its_steps_run_in_blocks():
+    """Blocks or single steps are declared by each model family in its own class body (the base
+    class's False is the contract's default, not a declaration)."""
+    import dynsens.models.multibody.model as multibody
+    import dynsens.models.structural.model as structural
+    from dynsens.models.base import Model
+    families, todo = [], list(Model.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo.extend(cls.__subclasses__())
+        if cls.__module__.startswith("dynsens."):
+            families.append(cls)
+    assert {structural.StructuralModel, multibody.MultibodyModel} <= set(families)
+    undeclared = [cls.__name__ for cls in families if not isinstance(cls.__dict__.get("compiled_blocks"), bool)]
+    assert undeclared == []
+    assert structural.StructuralModel.compiled_blocks and not multibody.MultibodyModel.compiled_blocks

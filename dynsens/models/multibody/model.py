@@ -71,6 +71,9 @@ class MultibodyModel(Model):
     singular_hint = ("a mechanism at a singular (e.g. dead-centre) configuration, redundant "
                      "constraints, zero masses or unsupported (rigid-body) degrees of freedom: "
                      "change the geometry or the joint set")
+    #: no compiled blocks of steps yet: a step's drivers and pump are evaluated in Python and its
+    #: kinematics go to the model's cache step by step (BENCHMARKS.md, "Blocks of primal steps")
+    compiled_blocks = False
 
     def __init__(self, table: ParameterTable, bodies: list[BodyDef], ground: BodyDef,
                  joints: list[Joint], forces: list[ForceElement], cylinders: list[HydraulicCylinder],
