@@ -75,9 +75,7 @@ def warm_run(case: Case, run: str, steps: int = 150) -> float:
     t0 = time.perf_counter()
     if isinstance(case.model, StructuralModel):
         if run == "forward" and serves(case.model):
-            short = _short_case(case, steps, run)[0]
-            run_case(short)
-            run_case(short, sensitivities=False)      # its blocks of steps (timeloop/step_blocks.py)
+            run_case(_short_case(case, steps, run)[0])     # (its steps run in blocks: those compile too)
     elif isinstance(case.model, MultibodyModel):
         run_case(*_short_case(case, steps, run))
     return time.perf_counter() - t0

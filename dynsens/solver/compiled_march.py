@@ -62,15 +62,14 @@ def _march_steps(template, q, qd, qdd, lam, p, pd, a, b, h, f_ext, beta, gamma, 
     Returns (steps taken, BLOCK_DONE or BLOCK_STOPPED)."""
     plain = alpha_m == 0.0 and alpha_f == 0.0
     a_rest, b_rest = np.zeros_like(a), np.zeros_like(b)     # plain Newmark: nothing known before the solve
-    coeffs = np.empty(3)
     for k in range(h.shape[0]):
         if plain:
             q_pred, qd_pred, p_pred = predict_arrays(q, qd, p, a, b, h[k], beta, gamma)
         else:
             q_pred, qd_pred, p_pred, a_rest, b_rest = predict_alpha_arrays(q, qd, qdd, p, pd, a, b, h[k], beta,
                                                                            gamma, alpha_m, alpha_f)
-        coeffs[0], coeffs[1], coeffs[2] = corrector_coefficients(h[k], beta, gamma, c_a)
-        ops = step_with(template, q_pred, qd_pred, p_pred, coeffs.copy(), f_ext[k])
+        c_q, c_qd, c_p = corrector_coefficients(h[k], beta, gamma, c_a)
+        ops = step_with(template, q_pred, qd_pred, p_pred, np.array((c_q, c_qd, c_p)), f_ext[k])
         z = np.concatenate((qdd, lam, pd))
         result = core.newton_iterations(ops, z, rtol, atol, reuse_tol, max_iterations, newton, sensitivities,
                                         scales, present, history)

@@ -143,7 +143,7 @@ class StepSolver:
         st = self.settings
         history = np.empty(st.max_iterations)
         compiled = self.compiled_for(t, pred, params, coeffs)
-        args = (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities)
+        args = self._settings_arguments()
         result = None
         if compiled is not None:
             scales = np.array(self._scales)      # (compiled: typed arrays)
@@ -212,9 +212,14 @@ class StepSolver:
         """The arguments of a compiled block of steps after its steps (:mod:`.compiled_march`):
         the tolerances, Newton or one solve, whether sensitivities follow, the block scales (a new
         array: the compiled steps update it), the present blocks and a residual history."""
+        return (*self._settings_arguments(), np.array(self._scales), self._present_array,
+                np.empty(self.settings.max_iterations))
+
+    def _settings_arguments(self) -> tuple:
+        """The iteration's settings after its step data and unknowns: the tolerances, Newton or
+        one solve, whether sensitivities follow."""
         st = self.settings
-        return (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities,
-                np.array(self._scales), self._present_array, np.empty(st.max_iterations))
+        return (st.rtol, st.atol, self.reuse_tolerance, st.max_iterations, self.newton, self.sensitivities)
 
     def keep_scales(self, scales: np.ndarray) -> None:
         """The block scales (3,) after a compiled step: the solver's memory for the next step."""

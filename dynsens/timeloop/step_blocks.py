@@ -55,7 +55,6 @@ class StepBlocks:
         self.last: StepState | None = None        # the state of the last record handed out
         self.python_step = 0                     # a grid step a block stopped before
         self.off = False                         # the run's steps have no compiled blocks
-        self.blocks = 0
 
     def take(self, i: int, t_prev: float, h: float, s: StepState) -> "StepRecord | None":
         """The record of grid step i from the state s at t_prev by h (s), or None: the Python
@@ -116,7 +115,6 @@ class StepBlocks:
                                           out, factors, done)
         except ZeroDivisionError:        # a law divided by zero: the Python path names the element
             taken, how = int(done[0]), BLOCK_STOPPED
-        self.blocks += 1
         for k in range(taken):
             state = StepState(*(x[k] for x in out[:6]))
             lf = tuple(f[k] for f in factors) if keep else None
