@@ -207,11 +207,70 @@ def test_the_compiled_residual_is_the_models(build):
         z = rng.standard_normal(model.n)
         q, qd = correct_arrays(pred.q, pred.qd, pred.p, *coeffs, z, empty)[:2]
         python = model.residual(0.001, StepState(q, qd, z, empty, pred.p, empty), params)
-        compiled = structural_step_kernels.compiled_residual(step.data, z)
+        data = step.data
+        sets = tuple(np.asarray(getattr(data, k))[None] for k in ("mass", "k1", "k2", "k3", "d_ptr", "d_col", "d_val"))
+        compiled = structural_step_kernels.compiled_residuals(data, sets, q[None], qd[None], z[None],
+                                                              np.asarray(data.f_ext)[None, None])[0, 0]
         if blas_builds_agree():
             np.testing.assert_array_equal(compiled, python)
         else:
             np.testing.assert_allclose(compiled, python, rtol=0, atol=DIFFERENT_BLAS_RTOL * np.max(np.abs(python)))
+
+
+def _perturbed_sets(case, m_complex: bool = False) -> list:
+    """The design and its forward-difference neighbours (the partials' parameter sets)."""
+    x = case.x0.astype(complex) if m_complex else case.x0
+    h = 1e-6 * np.maximum(np.abs(case.x0), 1.0)
+    return [case.model.parameters(x)] + [case.model.parameters(x + h[j] * np.eye(x.size)[j])
+                                         for j in range(x.size)]
+
+
+def _numpy_batch(monkeypatch, model, ts, states, sets):  # type: ignore[no-untyped-def]
+    """The model's batched F_R without its compiled residuals (a fresh list: no kept stack)."""
+    with monkeypatch.context() as m:
+        m.setattr(structural_step, "batch_residuals", lambda model, params_list: None)
+        return model.residual_batch_steps(ts, states, list(sets))
+
+
+@compiled_only
+@pytest.mark.parametrize("build", [_chain, _network], ids=["chain", "network"])
+def test_the_partials_residuals_of_a_sparse_network_are_compiled_and_the_models(monkeypatch, build):
+    """The design partials' residuals of a sparse spring network (K states, B parameter sets in one
+    call) are the compiled step's F_R: bit for bit the model's numpy batch, which the direct and
+    adjoint runs therefore do not see (a run's gradients, below, are the same numbers)."""
+    case = dynsens.load_case_dict(build(), "chain.yaml")
+    model = case.model
+    sets = _perturbed_sets(case)
+    rng = np.random.default_rng(7)
+    empty = np.zeros(0)
+    states = [StepState(*(rng.standard_normal(model.n) for _ in range(3)), empty, empty, empty) for _ in range(4)]
+    ts = np.array([0.0, 0.01, 0.02, 0.3])
+    assert structural_step.batch_residuals(model, sets) is not None
+    compiled = model.residual_batch_steps(ts, states, sets)
+    python = _numpy_batch(monkeypatch, model, ts, states, sets)
+    assert compiled.shape == python.shape == (4, model.n, len(sets))
+    np.testing.assert_array_equal(compiled, python)
+    # whole runs with their partials so, direct and adjoint
+    for mode in ("direct", "adjoint"):
+        run = dynsens.load_case_dict(build(), "chain.yaml", [f"sensitivity.method={mode}"])
+        with_compiled = dynsens.run_case(run, sensitivities=True)
+        with monkeypatch.context() as m:
+            m.setattr(structural_step, "batch_residuals", lambda model, params_list: None)
+            without = dynsens.run_case(run, sensitivities=True)
+        assert_identical_runs(with_compiled, without)
+
+
+@compiled_only
+def test_compiled_partials_residuals_serve_real_sparse_spring_networks_only():
+    """Complex designs (complex-step partials), dense models (their batched BLAS products are not
+    one product per state) and models beyond springs keep the numpy batch."""
+    sparse = dynsens.load_case_dict(_chain(), "chain.yaml")
+    assert structural_step.batch_residuals(sparse.model, _perturbed_sets(sparse)) is not None
+    assert structural_step.batch_residuals(sparse.model, _perturbed_sets(sparse, m_complex=True)) is None
+    dense = dynsens.load_case_dict(_dense_chain(), "chain.yaml")
+    assert structural_step.batch_residuals(dense.model, _perturbed_sets(dense)) is None
+    truss = dynsens.load_case(CASES / "truss_impact.yaml")
+    assert structural_step.batch_residuals(truss.model, _perturbed_sets(truss)) is None
 
 
 @compiled_only

@@ -101,7 +101,8 @@ class StructuralModel(StructuralMatrices, Model):
         kinds = [d for d in (k.damped_kind() for k in self.sets) if d is not None]
         self.corotated_damping = CorotatedDamping(kinds if rayleigh is not None and rayleigh_corotated else [],
                                                   rayleigh[1] if rayleigh is not None else -1, n)
-        self._stacked: tuple[list[dict[str, Any]], dict[str, Any]] | None = None
+        # the partials' parameter sets: (the list, its stacked arrays, the compiled residuals or None)
+        self._stacked: tuple[list[dict[str, Any]], dict[str, Any], Any] | None = None
         # per parameter set (the run's, the partials' stacked one): (params, t, f_ext, settled)
         self._last_loads: dict[int, tuple[Any, float, np.ndarray, float]] = {}
         self._assembly_plans: dict[str, tuple[Any, ...]] = {}   # per _assemble site: kept indices
@@ -325,8 +326,14 @@ class StructuralModel(StructuralMatrices, Model):
             if self.traits.has_damping:
                 Ds = [p["D"] for p in params_list]
                 st["D"] = Ds if self.traits.sparse else np.stack(Ds)
-            self._stacked = (params_list, st)
-        st = self._stacked[1]
+            from .step import batch_residuals
+            self._stacked = (params_list, st, batch_residuals(self, params_list))
+        st, compiled = self._stacked[1], self._stacked[2]
+        if compiled is not None and all(s.q.dtype == np.float64 and s.qd.dtype == np.float64
+                                        and s.qdd.dtype == np.float64 for s in states):
+            # a sparse spring network: the compiled step's F_R of each state and set, with the loads
+            # formed here as below (the same numbers as the arrays below, in one compiled call)
+            return compiled(states, np.stack([self.external_force(t, st) for t in ts]))
         # states (K, 1, n) against parameter sets (B, ...): residuals (K, B, n)
         q, qd, qdd = (np.stack([getattr(s, f) for s in states])[:, None, :] for f in ("q", "qd", "qdd"))
         empty = np.zeros(q.shape[:-1] + (0,))

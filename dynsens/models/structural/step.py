@@ -7,7 +7,8 @@ Python path factors either as a tridiagonal band (a chain, after its reordering)
 matrix with LAPACK's getrf (a dense model below the band's break-even, any pattern), in real
 arithmetic.  The iteration runs compiled over the step operations of :mod:`.step_kernels`; its
 last factor becomes a :class:`~dynsens.solver.linalg.Factor` and its K_t the model's own
-linearization, for the sensitivities.
+linearization, for the sensitivities.  The design partials of a sparse network evaluate the same
+compiled F_R, for all their states and parameter sets in one call (:func:`batch_residuals`).
 
 Its runs are bit for bit those of the Python iteration (tests/test_structural_step.py).  A dense
 model's products (f_int, D q̇, the round-off test's |S| |z|) are numpy's BLAS calls, which a loop
@@ -21,7 +22,7 @@ random states, and whole runs bit for bit).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -32,7 +33,7 @@ from ...solver.compiled_iteration import REGULAR, CompiledStep, read_only
 from ...solver.linalg import Counters, Factor, SingularMatrixError
 from ..base import StepState
 from ..sparse_assembly import on_pattern
-from .step_kernels import SpringStepData, iteration, march
+from .step_kernels import SpringStepData, compiled_residuals, iteration, march
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import StructuralModel
@@ -85,9 +86,7 @@ class _Design:
         k_pos = np.full(rows.size, -1, dtype=np.intp)
         k_pos[~grounded] = plan.storage_positions(rows[~grounded], cols[~grounded])
         D_model = params.get("D")
-        D = sp.csr_matrix((n, n)) if D_model is None else sp.csr_matrix(D_model)    # (a copy: sorted here)
-        D.sum_duplicates()
-        D.sort_indices()
+        D = _damping_rows(model, params)
         d_rows = np.repeat(np.arange(n), np.diff(D.indptr))
         diagonal = np.arange(n)
         mass_storage = np.zeros(size)
@@ -125,6 +124,54 @@ class _Design:
         out = np.zeros(self.n * self.n)
         out[self.tangent_flat] = K[self.tangent_positions]
         return out.reshape(self.n, self.n)
+
+
+def _damping_rows(model: "StructuralModel", params: dict[str, Any]) -> sp.csr_matrix:
+    """The design's damping matrix by rows, columns sorted, duplicates summed (a copy)."""
+    n = model.n
+    D_model = params.get("D")
+    D = sp.csr_matrix((n, n)) if D_model is None else sp.csr_matrix(D_model)
+    D.sum_duplicates()
+    D.sort_indices()
+    return D
+
+
+def residual_data(model: "StructuralModel", params: dict[str, Any]) -> SpringStepData:
+    """The step data F_R reads of a sparse spring network's design ``params`` (real): its masses,
+    springs and damping by rows; what only S's factorization reads is left empty."""
+    D = _damping_rows(model, params)
+    a, b = model.spring_dofs[:, 0], model.spring_dofs[:, 1]
+    no_float, no_int, none = np.zeros(0), np.zeros(0, np.intp), np.zeros((0, 0))
+    return SpringStepData(*(read_only(x) for x in (
+        no_float, no_float, no_float, np.zeros(3), no_float, params["mass"], a, b, params["k1"], params["k2"],
+        params["k3"], no_int, none, none, D.indptr.astype(np.intp), D.indices.astype(np.intp), D.data,
+        no_float, no_float, np.array([False]), no_int, no_int, no_int, no_int)))
+
+
+def batch_residuals(model: "StructuralModel", params_list: list[dict[str, Any]]
+                    ) -> Callable[[list[StepState], Array], Array] | None:
+    """For :meth:`.StructuralModel.residual_batch_steps`: ``residuals(states, f_ext)``, F_R (K, n, B)
+    of the K states for the B designs of ``params_list`` with their loads f_ext (K, B, n),
+    compiled (the step's F_R, bit for bit the model's); None where the compiled step does not
+    serve them: not a sparse spring network (a dense model's batch multiplies by BLAS over all
+    states at once, which sums otherwise than one product per state), complex designs, compiled
+    code disabled.  The caller checks that the states are real."""
+    if not (enabled() and serves(model) and model.traits.sparse
+            and all(p["pv"].dtype == np.float64 for p in params_list)):
+        return None
+    datas = [residual_data(model, p) for p in params_list]
+    width = max(d.d_val.size for d in datas)
+
+    def padded(x: Array) -> Array:
+        return np.pad(x, (0, width - x.size))
+    sets = (np.stack([d.mass for d in datas]), *(np.stack([getattr(d, k) for d in datas]) for k in ("k1", "k2", "k3")),
+            np.stack([d.d_ptr for d in datas]), np.stack([padded(d.d_col) for d in datas]),
+            np.stack([padded(d.d_val) for d in datas]))
+
+    def residuals(states: list[StepState], f_ext: Array) -> Array:
+        q, qd, qdd = (np.stack([getattr(s, f) for s in states]) for f in ("q", "qd", "qdd"))
+        return compiled_residuals(datas[0], sets, q, qd, qdd, f_ext).transpose(0, 2, 1)
+    return residuals
 
 
 def _storage(factor: Factor) -> "BandPlan | DenseStorage | None":

@@ -5,7 +5,7 @@ arrays (which designs it serves, and what becomes of its results: :mod:`.step`):
 
 * the state is the scheme's corrector (:func:`dynsens.integrators.newmark.correct_arrays`);
 * F_R = M q̈ + f_int(q) − f_ext(t) + D q̇ with the spring law's forces and tangents
-  (:func:`.spring_law.spring_law`), summed as the Python path sums them: a sparse model's
+  (:func:`.spring_law.spring_law`, spring by spring in one pass), summed as the Python path sums them: a sparse model's
   products entry by entry in stored order, as scipy's; a dense model's through BLAS, as numpy's;
   f_ext(t) is the model's, evaluated once a step in Python;
 * S is formed where it is stored ((c_q K_t + c_q̇ D) + M, the Python path's sums): on the three
@@ -19,6 +19,7 @@ numba caches it on disk, keyed by the sources it inlines (:func:`_stamp`).
 """
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any, NamedTuple
 
@@ -33,7 +34,7 @@ from ...solver._jit import inline, jit
 from ...solver.compiled_iteration import (NON_FINITE_ENTRIES, REGULAR, SMALL_PIVOT, ZERO_PIVOT,
                                          LazyIteration, dense_solver, is_step_data, sources_stamp,
                                          step_kept)
-from ...solver.linalg import all_finite, pivot_test
+from ...solver.linalg import pivot_test
 from . import spring_law as law
 
 Array = np.ndarray
@@ -108,29 +109,28 @@ def _register() -> None:
             q, qd, qdd = s[0], s[1], s[2]
             n = q.shape[0]
             a, b = ops.spring_a, ops.spring_b
-            delta = np.empty(a.shape[0])
-            for e in range(a.shape[0]):
-                delta[e] = (q[a[e]] if a[e] < n else 0.0) - (q[b[e]] if b[e] < n else 0.0)
-            f, kt = law.spring_law(delta, ops.k1, ops.k2, ops.k3)
+            n_s = a.shape[0]
             dense = ops.G.shape[0] > 0
-            if dense:                   # the dense model's products: BLAS's, as numpy calls it
-                f_int = np.dot(f, ops.G)
-            else:                       # scipy's sparse products: entries in stored order
-                f_int = np.zeros(n)
-                for e in range(a.shape[0]):
+            # one pass over the springs: each spring's law (scalars: the same operations as the
+            # numpy model's arrays) and, for a sparse model, its forces added in stored order
+            f, kt, f_int = np.empty(n_s), np.empty(n_s), np.zeros(n)
+            for e in range(n_s):
+                delta = (q[a[e]] if a[e] < n else 0.0) - (q[b[e]] if b[e] < n else 0.0)
+                f[e], kt[e] = law.spring_law(delta, ops.k1[e], ops.k2[e], ops.k3[e])
+                if not dense:           # scipy's sparse products: entries in stored order
                     if a[e] < n:
                         f_int[a[e]] += f[e]
                     if b[e] < n:
                         f_int[b[e]] -= f[e]
-            R = (ops.mass * qdd + f_int) - ops.f_ext
-            if dense:
-                R = R + np.dot(ops.D, qd)
-            else:
-                for i in range(n):
-                    acc = 0.0
-                    for k in range(ops.d_ptr[i], ops.d_ptr[i + 1]):
-                        acc += ops.d_val[k] * qd[ops.d_col[k]]
-                    R[i] += acc
+            if dense:                   # the dense model's products: BLAS's, as numpy calls them
+                R = ((ops.mass * qdd + np.dot(f, ops.G)) - ops.f_ext) + np.dot(ops.D, qd)
+                return R, kt
+            R = np.empty(n)
+            for i in range(n):
+                acc = 0.0
+                for k in range(ops.d_ptr[i], ops.d_ptr[i + 1]):
+                    acc += ops.d_val[k] * qd[ops.d_col[k]]
+                R[i] = ((ops.mass[i] * qdd[i] + f_int[i]) - ops.f_ext[i]) + acc
             return R, kt
         return impl
 
@@ -161,20 +161,23 @@ def _register() -> None:
                     if pos >= 0:
                         K[pos] += sign * kt[e]
             c = ops.coeffs
-            S = ops.mass_storage + (c[0] * K + c[1] * ops.damping_storage)
+            S, lu = np.empty(K.shape[0]), np.empty(K.shape[0])
+            finite = True                   # all_finite(S), entry by entry in the same pass
+            for i in range(K.shape[0]):     # S, and the copy its factor overwrites, in one pass
+                S[i] = ops.mass_storage[i] + (c[0] * K[i] + c[1] * ops.damping_storage[i])
+                lu[i] = S[i]
+                finite = finite and math.isfinite(S[i])
             q, qd, qdd = s[0], s[1], s[2]
             du2 = np.zeros(max(n - 2, 0))
             if ops.dense_lu[0]:             # S by columns: getrf's LU of S, and x = S⁻¹ rhs
-                lu = S.copy()
                 piv = np.zeros(n, np.int32)
                 x = rhs.copy()
                 test = dense_factor_solve(lu.reshape(n, n), piv, x)
                 return test[0] == REGULAR, (K, q, qd, qdd.copy(), S, lu, du2, piv, test), x
-            lu = S.copy()
             piv = np.zeros(n, np.int32)
             x = np.zeros(n)
             test = np.zeros(3)              # (code, column of a zero pivot, pivot ratio)
-            if not all_finite(S):
+            if not finite:
                 test[0] = NON_FINITE_ENTRIES
             else:
                 dl, d, du = lu[:n - 1], lu[n - 1:2 * n - 1], lu[2 * n - 1:]
@@ -272,23 +275,41 @@ iteration = LazyIteration(_register, _stamp)
 march = LazyIteration(_register, _stamp, compiled_march)
 
 
-def _compiled_residual(stamp: str) -> Any:
-    """F_R at the unknowns z, compiled, its cache entries keyed by ``stamp`` as the iteration's."""
+def _compiled_residuals(stamp: str) -> Any:
+    """F_R of a spring network at K states for B parameter sets, compiled, its cache entries
+    keyed by ``stamp`` as the iteration's."""
 
-    def residual(ops, z):  # type: ignore[no-untyped-def]
+    def residuals(template, sets, q, qd, qdd, f_ext):  # type: ignore[no-untyped-def]
         stamp          # noqa: B018 - a closure variable: part of numba's cache key
-        return core.step_residual(ops, core.step_correct(ops, z))[0]
-    return jit(residual)
+        mass, k1, k2, k3, d_ptr, d_col, d_val = sets
+        K, B, n = f_ext.shape
+        out = np.empty((K, B, n))
+        empty = np.zeros(0)
+        t = template
+        for b in range(B):
+            for k in range(K):
+                ops = SpringStepData(q[k], qd[k], empty, t.coeffs, f_ext[k, b], mass[b], t.spring_a, t.spring_b,
+                                     k1[b], k2[b], k3[b], t.k_pos, t.G, t.D, d_ptr[b], d_col[b], d_val[b],
+                                     t.mass_storage, t.damping_storage, t.dense_lu, t.perm, t.s_row, t.s_col,
+                                     t.s_pos)
+                out[k, b] = core.step_residual(ops, (q[k], qd[k], qdd[k], empty, empty, empty))[0]
+        return out
+    return jit(residuals)
 
 
-_RESIDUAL: Any = None
+_RESIDUALS: Any = None
 
 
-def compiled_residual(ops: SpringStepData, z: np.ndarray) -> np.ndarray:
-    """F_R at the unknowns z as the compiled iteration forms it (not used by a run: the check
-    that it is the model's bit for bit, tests/test_structural_step.py)."""
-    global _RESIDUAL
-    if _RESIDUAL is None:
+def compiled_residuals(template: SpringStepData, sets: tuple[np.ndarray, ...], q: np.ndarray, qd: np.ndarray,
+                       qdd: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
+    """F_R (K, B, n) as the compiled iteration forms it, at the K states (q, q̇, q̈) (K, n) each,
+    for B designs of one spring network with the loads f_ext (K, B, n): the network's arrays are
+    ``template``'s, the designs' are ``sets`` = (mass (B, n), k₁, k₂, k₃ (B, n_s), damping by
+    rows: pointers (B, n + 1), columns and values (B, ≥ nnz)).  The design partials' residuals
+    of a sparse spring network (:meth:`.StructuralModel.residual_batch_steps`), bit for bit
+    the model's (tests/test_structural_step.py); one compiled function for any B."""
+    global _RESIDUALS
+    if _RESIDUALS is None:
         iteration()                 # the overloads first
-        _RESIDUAL = _compiled_residual(_stamp())
-    return _RESIDUAL(ops, z)
+        _RESIDUALS = _compiled_residuals(_stamp())
+    return _RESIDUALS(template, sets, q, qd, qdd, f_ext)  # type: ignore[no-any-return]
