@@ -26,11 +26,15 @@ DEFAULT_MEMORY_BUDGET = 2 * 2**30     # bytes (sensitivity.memory_budget default
 
 
 def _matrix_bytes(a: Any) -> int:
+    """Memory of a linearization's block (bytes): dense, sparse (its stored arrays) or None."""
     if a is None:
         return 0
+    if isinstance(a, np.ndarray):       # (first: counted for every record of a dense model)
+        return a.nbytes
     if sp.issparse(a):
         a = a.tocsr() if not hasattr(a, "indices") else a
-        return int(a.data.nbytes + a.indices.nbytes + getattr(a, "indptr", np.zeros(0)).nbytes)
+        indptr = getattr(a, "indptr", None)
+        return int(a.data.nbytes + a.indices.nbytes + (0 if indptr is None else indptr.nbytes))
     return int(np.asarray(a).nbytes)
 
 

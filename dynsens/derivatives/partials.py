@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import functools
 
-from typing import Any, Callable, Literal
+from collections.abc import Sequence
+from typing import Any, Callable, Literal, overload
 
 import numpy as np
 
@@ -26,6 +27,34 @@ from ..models.base import Model, StepState
 PartialsMethod = Literal["forward", "central", "complex"]
 METHODS: tuple[str, ...] = ("forward", "central", "complex")
 DEFAULT_STEPS = {"forward": 1e-8, "central": 1e-5, "complex": 1e-20}
+
+
+class PerturbedSets(Sequence[Any]):
+    """The model's parameter sets at x + step_j e_j for each design variable j (m,), each
+    evaluated on first access and kept."""
+
+    def __init__(self, model: Model, x: np.ndarray, steps: np.ndarray):
+        self.model, self.x, self.steps = model, x, steps
+        self._sets: dict[int, Any] = {}
+
+    def __len__(self) -> int:
+        return self.x.size
+
+    @overload
+    def __getitem__(self, j: int) -> Any: ...
+
+    @overload
+    def __getitem__(self, j: slice) -> list[Any]: ...
+
+    def __getitem__(self, j: int | slice) -> Any:
+        if isinstance(j, slice):
+            return [self[i] for i in range(len(self))[j]]
+        j = range(len(self))[j]         # (an index out of range raises IndexError here)
+        if j not in self._sets:
+            unit = np.zeros(self.x.size)
+            unit[j] = 1.0
+            self._sets[j] = self.model.parameters(self.x + self.steps[j] * unit)
+        return self._sets[j]
 
 
 class DesignPartials:
@@ -56,29 +85,23 @@ class DesignPartials:
         self.h = rel * ref
         self.rel_step = rel
         self.params0 = model.parameters(self.x)
-        eye = np.eye(self.m)
-        if method == "forward":
-            self._plus = [model.parameters(self.x + self.h[j] * eye[j]) for j in range(self.m)]
-        elif method == "central":
-            self._plus = [model.parameters(self.x + self.h[j] * eye[j]) for j in range(self.m)]
-            self._minus = [model.parameters(self.x - self.h[j] * eye[j]) for j in range(self.m)]
-        else:
-            self._plus = [model.parameters(self.x + 1j * self.h[j] * eye[j]) for j in range(self.m)]
+        # each variable's perturbed parameter set, evaluated when first read: a run whose
+        # partials take coloured perturbations may never read most of them (m = 1 000 sets of
+        # 1 000 parameters: 0.1 s a run)
+        self._plus = PerturbedSets(model, self.x, 1j * self.h if method == "complex" else self.h)
+        self._minus = PerturbedSets(model, self.x, -self.h)
 
-        # The parameter sets one partials call evaluates, in a fixed list (models may cache
-        # stacked parameters on its identity), with the state offset of each entry: entry b is
-        # evaluated at s + coef[b]·∇s[:, col[b]] (coef = 0 for the unperturbed entry).
+        # The parameter sets one partials call evaluates (:attr:`_batch`), with the state
+        # offset of each entry: entry b is evaluated at s + coef[b]·∇s[:, col[b]] (coef = 0
+        # for the unperturbed entry).
         m, h = self.m, self.h
         if method == "forward":
-            self._batch = [self.params0] + self._plus
             self._col = np.concatenate([[0], np.arange(m)])
             self._coef: np.ndarray = np.concatenate([[0.0], h])
         elif method == "central":
-            self._batch = self._plus + self._minus
             self._col = np.concatenate([np.arange(m), np.arange(m)])
             self._coef = np.concatenate([h, -h])
         else:
-            self._batch = self._plus
             self._col = np.arange(m)
             self._coef = 1j * h
         self._states: tuple[StepState, StepState, StepState] | None = None
@@ -89,6 +112,17 @@ class DesignPartials:
         self.colours = colour_columns(pattern, m)
         self._residual_batch = (self._batch if self.colours is None or pattern is None
                                 else self._colour_batch(pattern))
+
+    @functools.cached_property
+    def _batch(self) -> list[Any]:
+        """The parameter sets of one uncoloured partials call, in a fixed list (models may cache
+        stacked parameters on its identity): forward, the design's then each variable's; central,
+        all + then all −; complex, the imaginary steps."""
+        if self.method == "forward":
+            return [self.params0] + list(self._plus)
+        if self.method == "central":
+            return list(self._plus) + list(self._minus)
+        return list(self._plus)
 
     @functools.cached_property
     def _stacked(self) -> Any:
@@ -134,7 +168,7 @@ class DesignPartials:
             d = np.zeros(m)
             d[group] = h[group]
             return d
-        def sets(own: list[Any], sign: complex) -> list[Any]:
+        def sets(own: Sequence[Any], sign: complex) -> list[Any]:
             # a group of one variable reuses the run's own set (``own``), others are evaluated
             return [own[g[0]] if len(g) == 1 else model.parameters(self.x + sign * step(g)) for g in groups]
         if self.method == "forward":
@@ -337,12 +371,14 @@ def initial_state_gradient(model: Model, partials: DesignPartials
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """∇q0, ∇q̇0, ∇p0 (each (n, m)) by differentiating ``model.initial_state`` numerically.
 
-    Models whose initial state comes from a solve (mechanism assembly) may override this
-    with ``model.initial_state_gradient(params0, partials)``.
+    Models whose initial state comes from a solve (mechanism assembly), or that know it does
+    not depend on the design, may override this with ``model.initial_state_gradient(params0,
+    partials)`` (None from it: numerically, as here).
     """
     custom = getattr(model, "initial_state_gradient", None)
-    if custom is not None:
-        return custom(partials.params0, partials)
+    found = custom(partials.params0, partials) if custom is not None else None
+    if found is not None:
+        return found  # type: ignore[no-any-return]
     t = model.traits
 
     def flat(params: Any) -> np.ndarray:

@@ -19,7 +19,7 @@ Required (abstract):
    ("semi-analytical").  The returned object is opaque to the integrator.
 3. ``initial_state(params)`` returns ``(q0, qd0, p0)``; its design derivative is taken
    numerically unless the model defines ``initial_state_gradient(params0, partials)``
-   (:mod:`dynsens.derivatives.partials`).
+   (:mod:`dynsens.derivatives.partials`; a model's method may return None: numerically then).
 4. ``residual(t, s, params)`` returns F_R (n_z,) for a :class:`StepState` ``s``.
 5. ``linearize(t, s, params)`` returns the exact partial derivatives of F_R with respect
    to z, q, q̇ and p (:class:`Linearization`); the integrator forms the iteration matrix

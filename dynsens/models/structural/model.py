@@ -235,6 +235,16 @@ class StructuralModel(StructuralMatrices, Model):
             qd0[d] = pv[i]
         return q0, qd0, np.zeros(0, dtype=pv.dtype)
 
+    def initial_state_gradient(self, params0: dict[str, Any], partials: Any
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """∇q0, ∇q̇0, ∇p0 (n, m) each: zero when no initial condition is given (the state starts
+        at rest whatever the design: no perturbed parameter set is evaluated for it); None
+        otherwise (numerically, :func:`dynsens.derivatives.partials.initial_state_gradient`)."""
+        if self.init_q or self.init_qd:
+            return None
+        m = partials.m
+        return np.zeros((self.n, m)), np.zeros((self.n, m)), np.zeros((0, m))
+
     # ------------------------------------------------------------------ element kernels
     def _ext(self, v: np.ndarray) -> np.ndarray:
         """v with a trailing zero entry: the slot of fixed DOFs and ground."""
