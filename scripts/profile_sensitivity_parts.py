@@ -16,9 +16,12 @@ direct mode
 adjoint mode
   records kept         the forward run's step records kept for the sweep (``RecordStore.add_step``)
   design term          Σ ∂_xF_Rᵀ μ (``residual_partials_transposed_steps``)
-  transposed solves    μ = −S⁻ᵀ z̄ (``AdjointMode._solve``)
-  transposed products  (R_q, R_q̇, R_p)ᵀ μ (``AdjointMode._state_transpose``)
-  scheme transposes    the Newmark maps' transposes (predict, correct, advance, start)
+  compiled adjoint block  the compiled adjoint steps (``adjoint_step.run_block``: the transposed
+                       advance, corrector, solve, products and predictor of a run of records)
+  transposed solves    μ = −S⁻ᵀ z̄ where the steps run as Python (``AdjointMode._solve``)
+  transposed products  (R_q, R_q̇, R_p)ᵀ μ there (``PythonAdjointStep.state_transpose``, and the
+                       initial solve's)
+  scheme transposes    the Newmark maps' transposes there (predict, correct, advance, start)
   adjoint seeds        ∂J/∂y at the grid instants (``OutputSeeds.seeds_block``)
 
 Each part is the wall time of its calls (the outermost when they nest), per step of the run; the
@@ -92,13 +95,13 @@ class Parts:
 PARTS = Parts()
 DIRECT_PARTS = ("design partials", "compiled block", "Python steps: pseudo load", "Python steps: solve",
                 "Python steps: predict, correct, advance", "output derivatives")
-ADJOINT_PARTS = ("records kept", "design term", "transposed solves", "transposed products",
-                 "scheme transposes", "adjoint seeds")
+ADJOINT_PARTS = ("records kept", "design term", "compiled adjoint block", "transposed solves",
+                 "transposed products", "scheme transposes", "adjoint seeds")
 
 
 def instrument() -> None:
     """Wrap the functions of each part (before any run)."""
-    from dynsens.derivatives import adjoint, checkpoints, direct, direct_step, output_seeds, partials
+    from dynsens.derivatives import adjoint, adjoint_step, checkpoints, direct, direct_step, output_seeds, partials
     from dynsens.integrators.newmark import Newmark
     P = partials.DesignPartials
     PARTS.wrap(P, "residual_partials_steps", "design partials")
@@ -111,10 +114,14 @@ def instrument() -> None:
     for name in ("predict", "correct", "advance"):
         PARTS.wrap(step, name, "Python steps: predict, correct, advance")
     PARTS.wrap(P, "residual_partials_transposed_steps", "design term")
+    PARTS.wrap(adjoint_step, "run_block", "compiled adjoint block")
     PARTS.wrap(adjoint.AdjointMode, "_solve", "transposed solves")
     PARTS.wrap(adjoint.AdjointMode, "_state_transpose", "transposed products")
-    for name in ("predict_transpose", "correct_transpose", "advance_transpose", "start_transpose"):
-        PARTS.wrap(Newmark, name, "scheme transposes")
+    back = adjoint_step.PythonAdjointStep
+    PARTS.wrap(back, "state_transpose", "transposed products")
+    for name in ("predict_transpose", "correct_transpose", "advance_transpose"):
+        PARTS.wrap(back, name, "scheme transposes")
+    PARTS.wrap(Newmark, "start_transpose", "scheme transposes")
     PARTS.wrap(output_seeds.OutputSeeds, "seeds_block", "adjoint seeds")
     PARTS.wrap(checkpoints.RecordStore, "add_step", "records kept")
 

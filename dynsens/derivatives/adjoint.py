@@ -31,13 +31,14 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from ..integrators.newmark import Aux, Newmark, Prediction
+from ..integrators.newmark import Aux, Newmark
 from ..models.base import Model, Output, StepState
 from ..responses.base import OutputTrace
 from .partials import DesignPartials, initial_state_gradient
 from ..solver.linalg import Counters
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
+from . import adjoint_step
 from .checkpoints import RecordStore
 from .direct import trail_length
 from .finite import check_adjoint_gradient, check_adjoint_step
@@ -77,11 +78,9 @@ class AdjointMode:
         self.grid_time = grid_time     # time (s) of grid step k, as the forward loop had it
         self._pending = 0
         self._projection_xbar = np.zeros((partials.m, 0))   # x̄ of the steps' projections (sweep)
-        # the scheme's transposed maps, bound once (called per step of the sweep)
+        # the start's transposed map, bound once; the steps' are those of :mod:`.adjoint_step`
         self._start_transposed = scheme.start_transpose
-        self._advance_transposed = scheme.advance_transpose
-        self._correct_transposed = scheme.correct_transpose
-        self._predict_transposed = scheme.predict_transpose
+        self._ops = adjoint_step.PythonAdjointStep(scheme, self._solve)
 
     # ------------------------------------------------------------------ forward: keep records
     def start(self, rec: StepRecord) -> None:
@@ -178,18 +177,41 @@ class AdjointMode:
                                                         "derivative of the residual")
                 queue.clear()
 
+        def take(rec: StepRecord, mu: np.ndarray) -> None:
+            check_adjoint_step(rec, mu, names)
+            queue.append((rec.t, rec.solved, mu, rec.step))
+            if len(queue) >= self.block:
+                flush()
+
         def sweep(block: list[tuple[int, StepRecord, int | None]]) -> None:
             ybars = seeds([(k, rec) for _, rec, k in block if k is not None])
+            # the steps (all records but the initial one, the sweep's last) compiled where
+            # :mod:`.adjoint_step` serves them, each record's seed added first
+            steps = [rec for idx, rec, _ in block if idx != 0]
+            if adjoint_step.serves(self.scheme, steps, bar):
+                found = [ybars.get(k) if k is not None else None for _, _, k in block[:len(steps)]]
+                stacked = np.zeros((len(steps), sum(sizes), r))
+                for k, ybar in enumerate(found):
+                    if ybar is not None:
+                        stacked[k] = ybar
+                bar[:], aux[:], mus = adjoint_step.run_block(
+                    self.scheme, steps, bar, aux, stacked, np.array([y is not None for y in found]), self.n_q)
+                self.counters.backward_solves += len(steps)
+                for rec, mu in zip(steps, mus):
+                    # counted where each factor's own solve counts it (a recomputed segment's
+                    # factors count apart from the run's)
+                    rec.factor.counters.solves += 1
+                    rec.factor.counters.solve_columns += r
+                    # in the layout of the Python steps' μ (LAPACK's solve returns columns in
+                    # Fortran order): the design term's sums over a block follow memory order
+                    take(rec, np.asfortranarray(mu))
+                block = block[len(steps):]
             for idx, rec, grid_k in block:
                 ybar = ybars.get(grid_k) if grid_k is not None else None
                 if ybar is not None:
                     for f, (a, b) in enumerate(fields):
                         bar[f] += ybar[a:b]
-                mu = self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux)
-                check_adjoint_step(rec, mu, names)
-                queue.append((rec.t, rec.solved, mu, rec.step))
-                if len(queue) >= self.block:
-                    flush()
+                take(rec, self._initial_step(rec, bar, aux) if idx == 0 else self._step(rec, bar, aux))
 
         block: list[tuple[int, StepRecord, int | None]] = []
         for item in self.store.backward():
@@ -222,7 +244,8 @@ class AdjointMode:
 
     def _state_transpose(self, lin: Any, mu: np.ndarray, pq: np.ndarray, pqd: np.ndarray,
                          pp: np.ndarray) -> None:
-        """Bars of (q, q̇, p) += (R_q, R_q̇, R_p)ᵀ μ, in place (the pseudo load's state part)."""
+        """Bars of (q, q̇, p) += (R_q, R_q̇, R_p)ᵀ μ, in place (the pseudo load's state part of
+        the initial solve)."""
         for block, target in ((lin.R_q, pq), (lin.R_qd, pqd), (lin.R_p, pp)):
             if block is not None and target.shape[0]:
                 target += transpose_times(block, mu)
@@ -240,17 +263,8 @@ class AdjointMode:
         bars of step i become those of step i − 1, in place; returns μ of the step.  The
         scheme's maps are transposed by the scheme (:class:`~dynsens.integrators.newmark.Newmark`),
         the pseudo load's state part and the solve here."""
-        h = rec.h
         if rec.projection is not None and rec.projection.feedback:   # the projection came last: first here
             bar[0], bar[1], x_part = rec.projection.transpose(bar[0], bar[1], self.partials)
             self._projection_xbar += x_part
-        s_bar, rest_bar = self._advance_transposed(Aux(*aux), StepState(*bar))
-        (q_b, qd_b, p_b), z_bar = self._correct_transposed(s_bar, h)
-        mu = self._solve(rec, np.concatenate(z_bar))
-        pq, pqd, pp = q_b.copy(), qd_b.copy(), p_b.copy()
-        self._state_transpose(rec.lin, mu, pq, pqd, pp)
-        s_prev, aux_prev = self._predict_transposed(Prediction(pq, pqd, pp, rest_bar.a, rest_bar.b), h,
-                                                    np.zeros_like(s_bar.lam))
-        bar[:] = s_prev
-        aux[:] = aux_prev
+        bar[:], aux[:], mu = adjoint_step.adjoint_step(self._ops, rec, tuple(bar), tuple(aux))
         return mu

@@ -100,7 +100,7 @@ class PythonDirectStep:
 
 
 # ----------------------------------------------------------------------------- the compiled block
-_F64 = np.dtype(np.float64)
+F64 = np.dtype(np.float64)
 
 
 class DenseBlock(NamedTuple):
@@ -161,11 +161,11 @@ def band_real(rec: StepRecord) -> bool:
 
 
 def _dense_real(a: Any) -> bool:
-    return type(a) is np.ndarray and a.dtype == _F64
+    return type(a) is np.ndarray and a.dtype == F64
 
 
 def _csc_real(a: Any) -> bool:
-    return isinstance(a, sp.csc_matrix) and a.dtype == _F64
+    return isinstance(a, sp.csc_matrix) and a.dtype == F64
 
 
 def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> str | None:
@@ -174,16 +174,20 @@ def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_p
     every record :func:`dense_real`, or every record :func:`band_real` with its R_q and R_q̇ on
     the first record's patterns and its band plan's reordering."""
     if not (HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0
-            and design_part.dtype == _F64 and all(v.dtype == _F64 for v in ds) and trail):
+            and design_part.dtype == F64 and all(v.dtype == F64 for v in ds) and trail):
         return None
     if all(dense_real(r) for r in trail):
         return "dense"
-    if all(band_real(r) for r in trail) and all(
-            _same_layout(trail[0].lin.R_q, r.lin.R_q) and _same_layout(trail[0].lin.R_qd, r.lin.R_qd)
-            and _same_reordering(trail[0].factor.tridiagonal_real.plan.perm, r.factor.tridiagonal_real.plan.perm)
-            for r in trail[1:]):
-        return "band"
-    return None
+    return "band" if band_trail(trail) else None
+
+
+def band_trail(trail: list[StepRecord]) -> bool:
+    """Whether a :class:`BandBlock` holds these records: every record :func:`band_real`, with its
+    R_q and R_q̇ on the first record's patterns and its band plan's reordering."""
+    return all(band_real(r) for r in trail) and all(
+        _same_layout(trail[0].lin.R_q, r.lin.R_q) and _same_layout(trail[0].lin.R_qd, r.lin.R_qd)
+        and _same_reordering(trail[0].factor.tridiagonal_real.plan.perm, r.factor.tridiagonal_real.plan.perm)
+        for r in trail[1:])
 
 
 def serves(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> bool:
@@ -210,7 +214,7 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
     Returns (∇s of each record, ∇s, ∇aux after the last)."""
     K = len(trail)
     kind = kind or block_kind(scheme, trail, ds, design_part)
-    block = (_band_block if kind == "band" else _dense_block)(
+    block = (band_block if kind == "band" else _dense_block)(
         trail, np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
         np.array([n_q, n_lam]))
     # (leaves in one layout: the compiled block is typed by its arguments)
@@ -229,7 +233,8 @@ def _dense_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, siz
         h, scheme, sizes)
 
 
-def _band_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> BandBlock:
+def band_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> BandBlock:
+    """The records of ``trail`` (which :func:`band_trail` holds) stacked for a compiled block."""
     lus = [r.factor.tridiagonal_real for r in trail]
     perm = lus[0].plan.perm        # (one for the block: :func:`block_kind`)
 

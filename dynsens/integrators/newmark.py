@@ -132,32 +132,23 @@ class Newmark:
         """Transpose of :meth:`advance` (a = a_rest + c_a q̈, b = b_rest + c_a ṗ): ``s_bar`` plus
         c_a times the bars of a, b on q̈, ṗ, and the bars of the prediction's a_rest, b_rest
         (as an :class:`Aux`; the other fields of the prediction :meth:`advance` does not read)."""
-        c = self.c_a
-        q, qd, qdd, lam, p, pd = s_bar     # (a tuple, not _replace: called per step of the sweep)
-        return StepState(q, qd, qdd + c * aux_bar.a, lam, p, pd + c * aux_bar.b), aux_bar
+        s, rest = advance_transpose_arrays(tuple(s_bar), tuple(aux_bar), self.c_a)
+        return StepState(*s), Aux(*rest)
 
     def correct_transpose(self, s_bar: StepState, dt: float
                           ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
         """Transpose of :meth:`correct` for step size dt (s): the bars of the prediction's
         q, q̇, p (its a_rest, b_rest the corrector does not read) and of the unknowns
         z = (q̈, λ, ṗ)."""
-        c_q, c_qd, c_p = self.coefficients(dt)
-        q, qd, qdd, lam, p, pd = s_bar
-        return (q, qd, p), (qdd + c_q * q + c_qd * qd, lam, pd + c_p * p)
+        return correct_transpose_arrays(tuple(s_bar), *self.coefficients(dt))
 
     def predict_transpose(self, pred_bar: Prediction, dt: float, lam_bar: np.ndarray) -> tuple[StepState, Aux]:
         """Transpose of :meth:`predict` for step size dt (s): the bars of the previous state
         and of its algorithmic accelerations.  The predictor does not read λ: its bar is
         ``lam_bar`` (zeros of λ's shape, passed in since the scheme does not know the sizes)."""
-        beta, gamma, am, af, h = self.beta, self.gamma, self.alpha_m, self.alpha_f, dt
-        pq, pqd, pp = pred_bar.q, pred_bar.qd, pred_bar.p
-        # a_rest = (α_f q̈ − α_m a)/(1 − α_m) is read by q^pred and q̇^pred; b_rest likewise
-        a_rest = pred_bar.a_rest + (h * h * beta) * pq + (h * gamma) * pqd
-        b_rest = pred_bar.b_rest + (h * gamma) * pp
-        s_bar = StepState(pq, h * pq + pqd, (af / (1.0 - am)) * a_rest, lam_bar, pp, (af / (1.0 - am)) * b_rest)
-        aux_bar = Aux((h * h * (0.5 - beta)) * pq + (h * (1.0 - gamma)) * pqd - (am / (1.0 - am)) * a_rest,
-                      (h * (1.0 - gamma)) * pp - (am / (1.0 - am)) * b_rest)
-        return s_bar, aux_bar
+        s, aux = predict_transpose_arrays(pred_bar.q, pred_bar.qd, pred_bar.p, pred_bar.a_rest, pred_bar.b_rest,
+                                          lam_bar, dt, self.beta, self.gamma, self.alpha_m, self.alpha_f)
+        return StepState(*s), Aux(*aux)
 
     # ------------------------------------------------------------------ error and stability
     def error_constants(self) -> tuple[float, float]:
@@ -227,6 +218,37 @@ def advance_arrays(a_rest: np.ndarray | float, b_rest: np.ndarray | float, qdd: 
     if c_a == 1.0:
         return a_rest + qdd, b_rest + pd
     return a_rest + c_a * qdd, b_rest + c_a * pd
+
+
+def advance_transpose_arrays(s_bar: tuple, aux_bar: tuple, c_a: float) -> tuple[tuple, tuple]:
+    """Transpose of :func:`advance_arrays`: the state's bars ``s_bar`` (q, q̇, q̈, λ, p, ṗ) with
+    c_a times the bars of a, b (``aux_bar``) added to q̈, ṗ, and the bars of a_rest, b_rest."""
+    q, qd, qdd, lam, p, pd = s_bar
+    a, b = aux_bar
+    return (q, qd, qdd + c_a * a, lam, p, pd + c_a * b), (a, b)
+
+
+def correct_transpose_arrays(s_bar: tuple, c_q: float, c_qd: float, c_p: float) -> tuple[tuple, tuple]:
+    """Transpose of :func:`correct_arrays` with its coefficients: the bars of the predicted
+    (q, q̇, p) and of the unknowns (q̈, λ, ṗ), from the state's bars ``s_bar``."""
+    q, qd, qdd, lam, p, pd = s_bar
+    return (q, qd, p), (qdd + c_q * q + c_qd * qd, lam, pd + c_p * p)
+
+
+def predict_transpose_arrays(pq: np.ndarray, pqd: np.ndarray, pp: np.ndarray, a_rest_bar: np.ndarray | float,
+                             b_rest_bar: np.ndarray | float, lam_bar: np.ndarray, dt: float, beta: float, gamma: float,
+                             alpha_m: float, alpha_f: float) -> tuple[tuple, tuple]:
+    """Transpose of the predictor (:func:`predict_arrays`, :func:`predict_alpha_arrays`) for
+    step size dt (s): from the bars of the predicted (q, q̇, p) and of a_rest, b_rest, the bars
+    of the previous state (λ's: ``lam_bar``) and of its algorithmic accelerations (a, b)."""
+    h, am, af = dt, alpha_m, alpha_f
+    # a_rest = (α_f q̈ − α_m a)/(1 − α_m) is read by q^pred and q̇^pred; b_rest likewise
+    a_rest = a_rest_bar + (h * h * beta) * pq + (h * gamma) * pqd
+    b_rest = b_rest_bar + (h * gamma) * pp
+    s_bar = (pq, h * pq + pqd, (af / (1.0 - am)) * a_rest, lam_bar, pp, (af / (1.0 - am)) * b_rest)
+    aux_bar = ((h * h * (0.5 - beta)) * pq + (h * (1.0 - gamma)) * pqd - (am / (1.0 - am)) * a_rest,
+               (h * (1.0 - gamma)) * pp - (am / (1.0 - am)) * b_rest)
+    return s_bar, aux_bar
 
 
 def correct_arrays(q_pred: np.ndarray, qd_pred: np.ndarray, p_pred: np.ndarray, c_q: float, c_qd: float,

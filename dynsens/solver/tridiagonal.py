@@ -85,3 +85,28 @@ def gttrs(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: 
     """Solve A x = b in place with the factor of :func:`gttrf` for one right-hand side b (n,),
     contiguous: :func:`gttrs_columns` of b as a single column."""
     gttrs_columns(dl, d, du, du2, ipiv, b.reshape((b.shape[0], 1)))
+
+
+@register_jitable
+def gttrs_transposed_columns(dl: np.ndarray, d: np.ndarray, du: np.ndarray, du2: np.ndarray, ipiv: np.ndarray,
+                             B: np.ndarray) -> None:
+    """Solve Aᵀ X = B in place for the m right-hand sides of B (n, m), row-major, with the
+    factor of :func:`gttrf`: each column's operations are dgttrs's with TRANS = 'T' (dgtts2),
+    taken for all columns at once (the adjoint's transposed solves)."""
+    n, m = B.shape
+    # Uᵀ X = B
+    for v in range(m):
+        B[0, v] = B[0, v] / d[0]
+    if n > 1:
+        for v in range(m):
+            B[1, v] = (B[1, v] - du[0] * B[0, v]) / d[1]
+    for i in range(2, n):
+        for v in range(m):
+            B[i, v] = (B[i, v] - du[i - 1] * B[i - 1, v] - du2[i - 2] * B[i - 2, v]) / d[i]
+    # Lᵀ X = B
+    for i in range(n - 2, -1, -1):
+        ip = ipiv[i] - 1
+        for v in range(m):
+            temp = B[i, v] - dl[i] * B[i + 1, v]
+            B[i, v] = B[ip, v]
+            B[ip, v] = temp

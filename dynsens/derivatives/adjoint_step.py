@@ -1,0 +1,246 @@
+r"""One step of the adjoint sweep (method.md §7), defined once for every backend.
+
+:func:`adjoint_step` is the transpose of one direct step (:func:`.direct_step.direct_step`),
+taken backwards: the scheme's advance and corrector transposed, μ = −S⁻ᵀ z̄ with the step's
+factor, the pseudo load's state part transposed ((R_q, R_q̇, R_p)ᵀ μ onto the predicted state's
+bars), the predictor transposed.  Like the direct step it reaches the scheme and the linear
+algebra only through operations (``adj_*``):
+
+* run as Python, they are the methods of :class:`PythonAdjointStep` (any scheme, model, matrix
+  kind, real or complex; the adjoint mode transposes a step's projection before it);
+* compiled, they are numba overloads for :class:`~.direct_step.BandBlock`, the records of sparse
+  steps whose factor is a tridiagonal band (chains) with plain Newmark, and :func:`adjoint_block`
+  takes a run of such records, with the responses' seeds at their grid instants, without
+  returning to the interpreter.  Its products are scipy's CSC sums
+  (:func:`dynsens.solver.sparse_products.csc_transpose_times`, which the Python steps call too)
+  and its solve dgttrs's arithmetic with TRANS = 'T'
+  (:func:`dynsens.solver.tridiagonal.gttrs_transposed_columns`): the same numbers everywhere.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..integrators.newmark import (Newmark, advance_transpose_arrays, corrector_coefficients,
+                                   correct_transpose_arrays, predict_transpose_arrays)
+from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
+from ..solver.sparse_products import transpose_times
+from ..timeloop.stepping import StepRecord
+from .direct_step import F64, BandBlock, band_block, band_trail
+
+# the scheme's transposed maps, callable from compiled code as they are
+for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
+    register_jitable(_scheme_map)
+
+
+# ----------------------------------------------------------------------------- step operations
+# Each is the method of the same name of a Python step object (``rec``: what the object needs of
+# the step); the compiled block overloads them, so these bodies run in Python only.
+
+def adj_advance_transpose(ops: Any, rec: Any, bar: tuple, aux: tuple) -> tuple[tuple, tuple]:
+    """The state's bars with the scheme's advance transposed, and the bars of a_rest, b_rest."""
+    return ops.advance_transpose(rec, bar, aux)
+
+
+def adj_correct_transpose(ops: Any, rec: Any, s_bar: tuple) -> tuple[tuple, tuple]:
+    """The bars of the predicted (q, q̇, p) and of the unknowns z = (q̈, λ, ṗ)."""
+    return ops.correct_transpose(rec, s_bar)
+
+
+def adj_solve(ops: Any, rec: Any, z_bar: tuple) -> np.ndarray:
+    """μ = −S⁻ᵀ z̄ (n_z, r) with the step's factor."""
+    return ops.solve(rec, z_bar)
+
+
+def adj_state_transpose(ops: Any, rec: Any, mu: np.ndarray, pred_bar: tuple) -> tuple:
+    """The predicted state's bars plus (R_q, R_q̇, R_p)ᵀ μ (new arrays)."""
+    return ops.state_transpose(rec, mu, pred_bar)
+
+
+def adj_predict_transpose(ops: Any, rec: Any, pred_bar: tuple, rest_bar: tuple, s_bar: tuple
+                          ) -> tuple[tuple, tuple]:
+    """The bars of the previous step's state and algorithmic accelerations."""
+    return ops.predict_transpose(rec, pred_bar, rest_bar, s_bar)
+
+
+@register_jitable
+def adjoint_step(ops: Any, rec: Any, bar: tuple, aux: tuple) -> tuple[tuple, tuple, np.ndarray]:
+    """Transpose of one direct step: the bars (q, q̇, q̈, λ, p, ṗ) and (a, b) of the step ``rec``
+    become those of the step before it; returns them and μ of the step."""
+    s_bar, rest_bar = adj_advance_transpose(ops, rec, bar, aux)
+    pred_bar, z_bar = adj_correct_transpose(ops, rec, s_bar)
+    mu = adj_solve(ops, rec, z_bar)
+    pred_bar = adj_state_transpose(ops, rec, mu, pred_bar)
+    bar, aux = adj_predict_transpose(ops, rec, pred_bar, rest_bar, s_bar)
+    return bar, aux, mu
+
+
+class PythonAdjointStep:
+    """The step operations as Python, for a step record ``rec``."""
+
+    def __init__(self, scheme: Newmark, solve: Any):
+        self.scheme, self._solve = scheme, solve     # solve(rec, z̄) -> μ
+
+    def advance_transpose(self, rec: StepRecord, bar: tuple, aux: tuple) -> tuple[tuple, tuple]:
+        return advance_transpose_arrays(bar, aux, self.scheme.c_a)
+
+    def correct_transpose(self, rec: StepRecord, s_bar: tuple) -> tuple[tuple, tuple]:
+        return correct_transpose_arrays(s_bar, *self.scheme.coefficients(rec.h))
+
+    def solve(self, rec: StepRecord, z_bar: tuple) -> np.ndarray:
+        return self._solve(rec, np.concatenate(z_bar))
+
+    def state_transpose(self, rec: StepRecord, mu: np.ndarray, pred_bar: tuple) -> tuple:
+        out = [b.copy() for b in pred_bar]
+        for block, target in zip((rec.lin.R_q, rec.lin.R_qd, rec.lin.R_p), out):
+            if block is not None and target.shape[0]:
+                target += transpose_times(block, mu)
+        return tuple(out)
+
+    def predict_transpose(self, rec: StepRecord, pred_bar: tuple, rest_bar: tuple, s_bar: tuple
+                          ) -> tuple[tuple, tuple]:
+        sc = self.scheme
+        return predict_transpose_arrays(pred_bar[0], pred_bar[1], pred_bar[2], rest_bar[0], rest_bar[1],
+                                        np.zeros_like(s_bar[3]), rec.h, sc.beta, sc.gamma, sc.alpha_m, sc.alpha_f)
+
+
+# ----------------------------------------------------------------------------- the compiled block
+def serves(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]) -> bool:
+    """Whether :func:`run_block` takes these records (in the sweep's order): compiled code
+    enabled, plain Newmark, real bars, every record a tridiagonal band's on the first one's
+    patterns (:func:`.direct_step.band_trail`)."""
+    return bool(HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0 and records
+                and all(b.dtype == F64 for b in bar) and band_trail(records))
+
+
+def run_block(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray], aux: list[np.ndarray],
+              seeds: np.ndarray, seeded: np.ndarray, n_q: int) -> tuple[list[np.ndarray], list[np.ndarray],
+                                                                        np.ndarray]:
+    """The adjoint steps of ``records`` (which :func:`serves`), in the sweep's order, from the
+    bars ``bar`` (six leaves (·, r)) and ``aux`` (two); before record k's step, where
+    ``seeded[k]``, the seed seeds[k] (n_x, r) on the state's bars.  Returns the bars after the
+    last step and every step's μ (K, n_z, r)."""
+    block = band_block(records, np.array([r.h for r in records], float),
+                        np.array([scheme.beta, scheme.gamma, scheme.c_a]), np.array([n_q, 0]))
+    out = _block()(block, tuple(np.ascontiguousarray(b) for b in bar), tuple(np.ascontiguousarray(a) for a in aux),
+                   np.ascontiguousarray(seeds, np.float64), seeded)
+    return list(out[0]), list(out[1]), out[2]
+
+
+def _make_block(stamp: str) -> Any:
+    def block(ops, bar, aux, seeds, seeded):  # type: ignore[no-untyped-def]
+        stamp       # noqa: B018 - a closure variable: part of numba's cache key
+        return adjoint_block(ops, bar, aux, seeds, seeded)
+    return jit(block)
+
+
+@register_jitable
+def adjoint_block(ops: Any, bar: tuple, aux: tuple, seeds: np.ndarray, seeded: np.ndarray) -> tuple:
+    """:func:`adjoint_step` for each record k of the block, record k's seed added first; the bars
+    after the last and every μ (K, n_z, r)."""
+    K = ops.h.shape[0]
+    n_q, r = bar[0].shape
+    mus = np.empty((K, bar[2].shape[0] + bar[3].shape[0] + bar[5].shape[0], r))
+    for k in range(K):
+        if seeded[k]:
+            bar = add_seed(bar, seeds[k])
+        bar, aux, mu = adjoint_step(ops, k, bar, aux)
+        mus[k] = mu
+    return bar, aux, mus
+
+
+@register_jitable
+def add_seed(bar: tuple, seed: np.ndarray) -> tuple:
+    """The bars (q, q̇, q̈, λ, p, ṗ) plus the seed (n_x, r) on the flat state, leaf by leaf."""
+    out = []
+    start = 0
+    for i in range(6):
+        n = bar[i].shape[0]
+        out.append(bar[i] + seed[start:start + n])
+        start += n
+    return (out[0], out[1], out[2], out[3], out[4], out[5])
+
+
+_COMPILED: list[Any] = []
+
+
+def _block() -> Any:
+    """The compiled :func:`adjoint_block` (the overloads registered first)."""
+    if not _COMPILED:
+        import sys
+
+        from ..solver import sparse_products, tridiagonal
+        from ..solver.compiled_iteration import sources_stamp
+        from . import direct_step
+        _register()
+        _COMPILED.append(_make_block(sources_stamp((sys.modules[__name__], direct_step, tridiagonal,
+                                                    sparse_products))))
+    return _COMPILED[0]
+
+
+def _register() -> None:
+    """The overloads of the step operations for :class:`~.direct_step.BandBlock` (numba only)."""
+    from numba.extending import overload
+
+    from ..solver.compiled_iteration import is_step_data
+    from ..solver.sparse_products import csc_transpose_times
+    from ..solver.tridiagonal import gttrs_transposed_columns
+
+    coefficients = inline(corrector_coefficients)
+    transposed = inline(csc_transpose_times)
+
+    def band(ops: Any) -> bool:
+        return is_step_data(ops, BandBlock)
+
+    @overload(adj_advance_transpose)
+    def _advance(ops, rec, bar, aux):  # type: ignore[no-untyped-def]
+        if band(ops):
+            return lambda ops, rec, bar, aux: advance_transpose_arrays(bar, aux, ops.scheme[2])
+
+    @overload(adj_correct_transpose)
+    def _correct(ops, rec, s_bar):  # type: ignore[no-untyped-def]
+        if band(ops):
+            def impl(ops, rec, s_bar):  # type: ignore[no-untyped-def]
+                c_q, c_qd, c_p = coefficients(ops.h[rec], ops.scheme[0], ops.scheme[1], ops.scheme[2])
+                return correct_transpose_arrays(s_bar, c_q, c_qd, c_p)
+            return impl
+
+    @overload(adj_solve)
+    def _solve(ops, rec, z_bar):  # type: ignore[no-untyped-def]
+        if band(ops):
+            def impl(ops, rec, z_bar):  # type: ignore[no-untyped-def]
+                # Factor.solve_transposed(−z̄) of a tridiagonal factor: the rows reordered, dgttrs's
+                # TRANS = 'T' arithmetic for each column, the rows put back (z = q̈: no λ, no ṗ)
+                zq = z_bar[0]
+                n, r = zq.shape
+                perm = ops.perm
+                B = np.empty((n, r))
+                for i in range(n):
+                    for j in range(r):
+                        B[i, j] = -zq[perm[i], j]
+                gttrs_transposed_columns(ops.dl[rec], ops.d[rec], ops.du[rec], ops.du2[rec], ops.ipiv[rec], B)
+                mu = np.empty((n, r))
+                for i in range(n):
+                    for j in range(r):
+                        mu[perm[i], j] = B[i, j]
+                return mu
+            return impl
+
+    @overload(adj_state_transpose)
+    def _state(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
+        if band(ops):
+            def impl(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
+                pq = pred_bar[0] + transposed(ops.R_q_values[rec], ops.R_q_indptr, ops.R_q_indices, mu)
+                pqd = pred_bar[1] + transposed(ops.R_qd_values[rec], ops.R_qd_indptr, ops.R_qd_indices, mu)
+                return pq, pqd, pred_bar[2].copy()
+            return impl
+
+    @overload(adj_predict_transpose)
+    def _predict(ops, rec, pred_bar, rest_bar, s_bar):  # type: ignore[no-untyped-def]
+        if band(ops):
+            def impl(ops, rec, pred_bar, rest_bar, s_bar):  # type: ignore[no-untyped-def]
+                return predict_transpose_arrays(pred_bar[0], pred_bar[1], pred_bar[2], rest_bar[0], rest_bar[1],
+                                                np.zeros_like(s_bar[3]), ops.h[rec], ops.scheme[0], ops.scheme[1],
+                                                0.0, 0.0)
+            return impl
