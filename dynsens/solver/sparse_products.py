@@ -39,13 +39,13 @@ def csc_transpose_times(values: np.ndarray, indptr: np.ndarray, indices: np.ndar
     """Aᵀ x for the CSC matrix A = (values, indptr, indices) with n_rows rows and x (n_rows, m):
     (n_cols, m)."""
     m = x.shape[1]
-    y = np.zeros((indptr.shape[0] - 1, m))
+    y = np.empty((indptr.shape[0] - 1, m))
     for j in range(indptr.shape[0] - 1):
-        for k in range(indptr[j], indptr[j + 1]):
-            i = indices[k]
-            a = values[k]
-            for v in range(m):
-                y[j, v] += a * x[i, v]
+        for v in range(m):
+            acc = 0.0               # scipy's sum: from zero, the stored entries in order
+            for k in range(indptr[j], indptr[j + 1]):
+                acc += values[k] * x[indices[k], v]
+            y[j, v] = acc
     return y
 
 
