@@ -125,9 +125,11 @@ def warm(paths: list[Path], steps: int = 150, echo: bool = True) -> float:
     return time.perf_counter() - t0
 
 
-# what the default warm-up compiles besides the mechanisms: the spring networks' compiled step (the
-# shipped chain made sparse) and the sparse multibody linearization (a shipped mechanism made sparse)
+# what the default warm-up compiles besides the mechanisms: the spring networks' compiled step and
+# sensitivity blocks, direct and adjoint (the shipped chain made sparse), and the sparse multibody
+# linearization (a shipped mechanism made sparse)
 SPARSE_EXTRAS = (("duffing_chain", ("model.linear_algebra=sparse",)),
+                 ("duffing_chain", ("model.linear_algebra=sparse", "sensitivity.method=adjoint")),
                  ("slider_crank", ("model.linear_algebra=sparse",)))
 
 
