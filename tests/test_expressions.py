@@ -25,3 +25,21 @@ def test_values_and_complex_step():
     d = np.imag(e.evaluate({"a": 2.0 + 1j * h, "b": 0.5})) / h
     fd = (f(2.0 + 1e-7, 0.5) - f(2.0 - 1e-7, 0.5)) / 2e-7
     assert d == pytest.approx(fd, rel=1e-7)
+
+
+def test_a_symbol_alone_is_its_value_and_is_checked_as_any_expression():
+    """A bare symbol (every element's own design variable) returns the symbol's value as it is,
+    without the general evaluation; a non-finite or complex value takes the general path, with its
+    errors; anything more than the symbol is not bare."""
+    e = compile_expression(" k1 ")
+    assert e.bare == "k1"
+    for value in (2.5, np.float64(-3.0), 0.0):
+        got = e.evaluate({"k1": value})
+        assert got is value
+        assert e.derivative_problem({"k1": float(value)}) is None
+    assert e.evaluate({"k1": 2.0 + 1e-20j}) == 2.0 + 1e-20j          # complex steps as before
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ExpressionError, match="a finite number was expected"):
+            e.evaluate({"k1": bad})
+    for text in ("pi", "-k1", "k1 + 0", "2*k1", "sqrt(k1)"):
+        assert compile_expression(text).bare is None, text

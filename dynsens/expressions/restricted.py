@@ -72,6 +72,10 @@ _BINOPS: dict[type, Callable[[Number, Number], Number]] = {
 }
 
 
+# the types of a real symbol value that a bare symbol's expression returns as it is
+_REAL = (float, np.float64)
+
+
 class ExpressionError(DynsensError, ValueError):
     """An expression could not be parsed, names something unknown, or has no finite value."""
 
@@ -98,6 +102,8 @@ class Expression:
     text: str
     symbols: frozenset[str]
     _fn: Callable[[Mapping[str, Number]], Number]
+    #: the symbol when the expression is that symbol alone (every element's own design variable)
+    bare: str | None = None
 
     def evaluate(self, env: Mapping[str, Number]) -> Number:
         """Value of the expression with the symbol values in ``env`` (units as the symbols).
@@ -106,6 +112,10 @@ class Expression:
         zero, an overflow, a value outside a function's domain (e.g. ``log(-1)``), a complex
         result from real values, or any other non-finite result.
         """
+        if self.bare is not None:
+            value = env[self.bare]
+            if type(value) in _REAL and math.isfinite(value):
+                return value        # the symbol's own value, which the checks below would pass
         try:
             with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
                 value = self._fn(env)
@@ -128,6 +138,8 @@ class Expression:
         The complex-step derivative of a smooth expression does not depend on the step; at a
         singular point (``sqrt(c)`` at c = 0) it grows like a power of 1/step.  Two steps,
         1e-30 and 1e-20, tell the two apart."""
+        if self.bare is not None and type(env[self.bare]) in _REAL and math.isfinite(env[self.bare]):
+            return None             # a symbol alone: its derivative is 1
         for name in sorted(self.symbols):
             d = []
             for h in (1e-30, 1e-20):
@@ -329,7 +341,9 @@ def compile_expression(text: str, known: frozenset[str] | set[str] | None = None
     except (RecursionError, MemoryError):
         raise ExpressionError(f"expression '{_short(text)}' nests too deeply: split it into simpler terms") \
             from None
-    return Expression(text, frozenset(compiler.names), fn)
+    body = tree.body
+    bare = body.id if isinstance(body, ast.Name) and body.id in compiler.names else None
+    return Expression(text, frozenset(compiler.names), fn, bare)
 
 
 def _short(text: str) -> str:
