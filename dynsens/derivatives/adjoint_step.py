@@ -27,7 +27,7 @@ from ..integrators.newmark import (Newmark, advance_transpose_arrays, corrector_
 from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
-from .direct_step import F64, BandBlock, band_block, band_trail
+from .direct_step import F64, BandBlock, band_block, band_solve, band_trail
 
 # the scheme's transposed maps, callable from compiled code as they are
 for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
@@ -185,7 +185,6 @@ def _register() -> None:
 
     from ..solver.compiled_iteration import is_step_data
     from ..solver.sparse_products import csc_transpose_times
-    from ..solver.tridiagonal import gttrs_transposed_columns
 
     coefficients = inline(corrector_coefficients)
     transposed = inline(csc_transpose_times)
@@ -218,23 +217,8 @@ def _register() -> None:
     @overload(adj_solve)
     def _solve(ops, rec, z_bar):  # type: ignore[no-untyped-def]
         if band(ops):
-            def impl(ops, rec, z_bar):  # type: ignore[no-untyped-def]
-                # Factor.solve_transposed(−z̄) of a tridiagonal factor: the rows reordered, dgttrs's
-                # TRANS = 'T' arithmetic for each column, the rows put back (z = q̈: no λ, no ṗ)
-                zq = z_bar[0]
-                n, r = zq.shape
-                perm = ops.perm
-                B = np.empty((n, r))
-                for i in range(n):
-                    for j in range(r):
-                        B[i, j] = -zq[perm[i], j]
-                gttrs_transposed_columns(ops.dl[rec], ops.d[rec], ops.du[rec], ops.du2[rec], ops.ipiv[rec], B)
-                mu = np.empty((n, r))
-                for i in range(n):
-                    for j in range(r):
-                        mu[perm[i], j] = B[i, j]
-                return mu
-            return impl
+            # Factor.solve_transposed(−z̄) of a tridiagonal factor (z = q̈: no λ, no ṗ)
+            return lambda ops, rec, z_bar: band_solve(ops, rec, z_bar[0], True)
 
     @overload(adj_state_transpose)
     def _state(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]

@@ -30,6 +30,7 @@ from ..models.base import StepState
 from .partials import pseudo_load_with
 from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
 from ..solver.linalg import Factor
+from ..solver.tridiagonal import gttrs_columns, gttrs_transposed_columns
 from ..timeloop.stepping import StepRecord, split_unknowns
 
 
@@ -181,6 +182,29 @@ def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_p
     return "band" if band_trail(trail) else None
 
 
+@register_jitable
+def band_solve(block: Any, k: int, rhs: np.ndarray, transposed: bool) -> np.ndarray:
+    """x (n, m) with S x = −rhs, or Sᵀ x = −rhs when ``transposed``, for record k of a
+    :class:`BandBlock`: TridiagonalFactor's solve (the rows reordered, dgttrs's arithmetic for each
+    column, the same for one right-hand side or several, with TRANS = 'T' when transposed, the rows
+    put back)."""
+    n, m = rhs.shape
+    perm = block.perm
+    B = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            B[i, j] = -rhs[perm[i], j]
+    if transposed:
+        gttrs_transposed_columns(block.dl[k], block.d[k], block.du[k], block.du2[k], block.ipiv[k], B)
+    else:
+        gttrs_columns(block.dl[k], block.d[k], block.du[k], block.du2[k], block.ipiv[k], B)
+    x = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            x[perm[i], j] = B[i, j]
+    return x
+
+
 def band_trail(trail: list[StepRecord]) -> bool:
     """Whether a :class:`BandBlock` holds these records: every record :func:`band_real`, with its
     R_q and R_q̇ on the first record's patterns and its band plan's reordering."""
@@ -313,7 +337,6 @@ def _register() -> None:
 
     from ..solver.compiled_iteration import is_step_data
     from ..solver.sparse_products import csc_times
-    from ..solver.tridiagonal import gttrs_columns as tridiagonal_solve
 
     # LAPACK's dgetrs as scipy exports it (the routine scipy.linalg.lapack's getrs calls), by a
     # symbol name: a compiled function that calls a ctypes pointer could not be cached
@@ -374,22 +397,7 @@ def _register() -> None:
                 return x.T
             return impl
         if band(ops):
-            def band_impl(ops, rec, P):  # type: ignore[no-untyped-def]
-                # TridiagonalFactor.solve's: the rows reordered, dgttrs's arithmetic for each
-                # column (the same for one right-hand side or several), the rows put back
-                n, m = P.shape
-                perm = ops.perm
-                B = np.empty((n, m))
-                for i in range(n):
-                    for j in range(m):
-                        B[i, j] = -P[perm[i], j]
-                tridiagonal_solve(ops.dl[rec], ops.d[rec], ops.du[rec], ops.du2[rec], ops.ipiv[rec], B)
-                x = np.empty((n, m))
-                for i in range(n):
-                    for j in range(m):
-                        x[perm[i], j] = B[i, j]
-                return x
-            return band_impl
+            return lambda ops, rec, P: band_solve(ops, rec, P, False)
         return None
 
     @overload(sens_correct)
