@@ -9,9 +9,9 @@ column per response:
     z̄ = correctᵀ/advanceᵀ of the state's bar,   μ = −S⁻ᵀ z̄,
     bar of the predicted state += (R_q, R_q̇, R_p)ᵀ μ,   x̄ += ∂_xF_Rᵀ μ,   bar of X_{i−1} = predictᵀ(…)
 
-The scheme's maps (correct, advance, predict, start) are transposed by the scheme itself
-(``Newmark.*_transpose``); this module adds the pseudo load's state part, the solve and the
-design term.
+One backward step is :func:`.adjoint_step.adjoint_step`, defined once: run as Python for any
+record, compiled over runs of chain records; this module adds the seeds, the initial step, the
+design term and the records' bookkeeping.
 
 plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  A step whose end state
 the model projected onto its constraints transposes that projection first (its design term
@@ -260,9 +260,9 @@ class AdjointMode:
 
     def _step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
         """Transpose of one direct step (predict, pseudo load, solve, correct, advance): the
-        bars of step i become those of step i − 1, in place; returns μ of the step.  The
-        scheme's maps are transposed by the scheme (:class:`~dynsens.integrators.newmark.Newmark`),
-        the pseudo load's state part and the solve here."""
+        bars of step i become those of step i − 1, in place; returns μ of the step
+        (:func:`.adjoint_step.adjoint_step` with the Python operations, after the transpose of
+        the step's projection when the run continued from the projected state)."""
         if rec.projection is not None and rec.projection.feedback:   # the projection came last: first here
             bar[0], bar[1], x_part = rec.projection.transpose(bar[0], bar[1], self.partials)
             self._projection_xbar += x_part
