@@ -89,6 +89,28 @@ def test_the_compiled_adjoint_steps_equal_the_python_steps(monkeypatch, build, o
 
 
 @compiled_only
+@pytest.mark.parametrize("overrides, what", [
+    (("integrator.solver.max_iterations=2",), "step_cuts"),
+    (("integrator.adaptive={rtol: 1e-5, atol: 1e-9}",), "adaptive"),
+], ids=["step-cuts", "adaptive"])
+def test_records_of_cut_and_adaptive_steps_take_the_compiled_block_alike(monkeypatch, overrides, what):
+    """Step records of varying size, with sub-steps between the grid instants (step cuts) or a
+    grid the controller chose (adaptive steps): the block reads each record's own h and adds
+    the seeds at the grid instants only; bit for bit the Python steps."""
+    case = dynsens.load_case_dict(_sparse_network(), "chain.yaml", list(overrides))
+    compiled, python, taken = _both(monkeypatch, case)
+    # every record but the initial one: a cut step's records are its sub-steps
+    assert sum(taken) == compiled.counters["steps"] + compiled.counters["step_cuts"] > 0
+    if what == "step_cuts":
+        assert compiled.counters["step_cuts"] > 0
+    else:
+        assert len(set(np.round(np.diff(compiled.time), 12))) > 2        # steps of many sizes
+    assert_identical_runs(compiled, python)
+    for name, res in compiled.responses.items():
+        np.testing.assert_array_equal(res.gradient, python.responses[name].gradient, err_msg=name)
+
+
+@compiled_only
 def test_the_compiled_adjoint_equals_the_direct_gradient(monkeypatch):
     """The compiled sweep is the adjoint: its gradients are the direct mode's to round-off."""
     case = dynsens.load_case_dict(_sparse_network(), "chain.yaml")
