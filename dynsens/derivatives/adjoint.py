@@ -202,9 +202,7 @@ class AdjointMode:
                     # factors count apart from the run's)
                     rec.factor.counters.solves += 1
                     rec.factor.counters.solve_columns += r
-                    # in the layout of the Python steps' μ (LAPACK's solve returns columns in
-                    # Fortran order): the design term's sums over a block follow memory order
-                    take(rec, np.asfortranarray(mu))
+                    take(rec, mu)
                 block = block[len(steps):]
             for idx, rec, grid_k in block:
                 ybar = ybars.get(grid_k) if grid_k is not None else None

@@ -22,12 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from ..integrators.newmark import (Newmark, advance_transpose_arrays, corrector_coefficients,
+from ..integrators.newmark import (Aux, Newmark, Prediction, advance_transpose_arrays, corrector_coefficients,
                                    correct_transpose_arrays, predict_transpose_arrays)
-from ..solver._jit import HAVE_NUMBA, enabled, inline, jit, register_jitable
+from ..models.base import StepState
+from ..solver._jit import inline, jit, register_jitable
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
-from .direct_step import F64, BandBlock, band_block, band_solve, band_trail
+from .direct_step import BandBlock, band_block, band_solve, band_trail, compiled_plain
 
 # the scheme's transposed maps, callable from compiled code as they are
 for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
@@ -77,16 +78,17 @@ def adjoint_step(ops: Any, rec: Any, bar: tuple, aux: tuple) -> tuple[tuple, tup
 
 
 class PythonAdjointStep:
-    """The step operations as Python, for a step record ``rec``."""
+    """The step operations as Python, for a step record ``rec``: the scheme's transposed maps
+    are its methods (which call the array functions the compiled block calls)."""
 
     def __init__(self, scheme: Newmark, solve: Any):
         self.scheme, self._solve = scheme, solve     # solve(rec, z̄) -> μ
 
     def advance_transpose(self, rec: StepRecord, bar: tuple, aux: tuple) -> tuple[tuple, tuple]:
-        return advance_transpose_arrays(bar, aux, self.scheme.c_a)
+        return self.scheme.advance_transpose(Aux(*aux), StepState(*bar))
 
     def correct_transpose(self, rec: StepRecord, s_bar: tuple) -> tuple[tuple, tuple]:
-        return correct_transpose_arrays(s_bar, *self.scheme.coefficients(rec.h))
+        return self.scheme.correct_transpose(StepState(*s_bar), rec.h)
 
     def solve(self, rec: StepRecord, z_bar: tuple) -> np.ndarray:
         return self._solve(rec, np.concatenate(z_bar))
@@ -100,32 +102,33 @@ class PythonAdjointStep:
 
     def predict_transpose(self, rec: StepRecord, pred_bar: tuple, rest_bar: tuple, s_bar: tuple
                           ) -> tuple[tuple, tuple]:
-        sc = self.scheme
-        return predict_transpose_arrays(pred_bar[0], pred_bar[1], pred_bar[2], rest_bar[0], rest_bar[1],
-                                        np.zeros_like(s_bar[3]), rec.h, sc.beta, sc.gamma, sc.alpha_m, sc.alpha_f)
+        pq, pqd, pp = pred_bar
+        return self.scheme.predict_transpose(Prediction(pq, pqd, pp, rest_bar[0], rest_bar[1]), rec.h,
+                                             np.zeros_like(s_bar[3]))
 
 
 # ----------------------------------------------------------------------------- the compiled block
 def serves(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]) -> bool:
-    """Whether :func:`run_block` takes these records (in the sweep's order): compiled code
-    enabled, plain Newmark, real bars, every record a tridiagonal band's on the first one's
-    patterns (:func:`.direct_step.band_trail`)."""
-    return bool(HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0 and records
-                and all(b.dtype == F64 for b in bar) and band_trail(records))
+    """Whether :func:`run_block` takes these records (in the sweep's order): a block may run
+    (:func:`.direct_step.compiled_plain`: compiled code, plain Newmark, real arrays), every record
+    a tridiagonal band's on the first one's patterns (:func:`.direct_step.band_trail`)."""
+    return bool(records) and compiled_plain(scheme, bar) and band_trail(records)
 
 
 def run_block(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray], aux: list[np.ndarray],
-              seeds: np.ndarray, seeded: np.ndarray, n_q: int) -> tuple[list[np.ndarray], list[np.ndarray],
-                                                                        np.ndarray]:
+              seeds: np.ndarray, seeded: np.ndarray, n_q: int
+              ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """The adjoint steps of ``records`` (which :func:`serves`), in the sweep's order, from the
     bars ``bar`` (six leaves (·, r)) and ``aux`` (two); before record k's step, where
     ``seeded[k]``, the seed seeds[k] (n_x, r) on the state's bars.  Returns the bars after the
-    last step and every step's μ (K, n_z, r)."""
+    last step and every step's μ (n_z, r), as the Python steps leave them."""
     block = band_block(records, np.array([r.h for r in records], float),
                         np.array([scheme.beta, scheme.gamma, scheme.c_a]), np.array([n_q, 0]))
     out = _block()(block, tuple(np.ascontiguousarray(b) for b in bar), tuple(np.ascontiguousarray(a) for a in aux),
                    np.ascontiguousarray(seeds, np.float64), seeded)
-    return list(out[0]), list(out[1]), out[2]
+    # each μ in the layout of the Python steps' (LAPACK's solve returns Fortran-ordered columns):
+    # the design term's sums over a block follow memory order
+    return list(out[0]), list(out[1]), [np.asfortranarray(mu) for mu in out[2]]
 
 
 def _make_block(stamp: str) -> Any:
@@ -140,7 +143,7 @@ def adjoint_block(ops: Any, bar: tuple, aux: tuple, seeds: np.ndarray, seeded: n
     """:func:`adjoint_step` for each record k of the block, record k's seed added first; the bars
     after the last and every μ (K, n_z, r)."""
     K = ops.h.shape[0]
-    n_q, r = bar[0].shape
+    r = bar[0].shape[1]
     mus = np.empty((K, bar[2].shape[0] + bar[3].shape[0] + bar[5].shape[0], r))
     for k in range(K):
         if seeded[k]:

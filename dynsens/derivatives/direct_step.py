@@ -101,7 +101,7 @@ class PythonDirectStep:
 
 
 # ----------------------------------------------------------------------------- the compiled block
-F64 = np.dtype(np.float64)
+_F64 = np.dtype(np.float64)
 
 
 class DenseBlock(NamedTuple):
@@ -162,11 +162,11 @@ def band_real(rec: StepRecord) -> bool:
 
 
 def _dense_real(a: Any) -> bool:
-    return type(a) is np.ndarray and a.dtype == F64
+    return type(a) is np.ndarray and a.dtype == _F64
 
 
 def _csc_real(a: Any) -> bool:
-    return isinstance(a, sp.csc_matrix) and a.dtype == F64
+    return isinstance(a, sp.csc_matrix) and a.dtype == _F64
 
 
 def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_part: np.ndarray) -> str | None:
@@ -174,12 +174,17 @@ def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_p
     Python steps): compiled code enabled, plain Newmark, real sensitivities and design partials,
     every record :func:`dense_real`, or every record :func:`band_real` with its R_q and R_q̇ on
     the first record's patterns and its band plan's reordering."""
-    if not (HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0
-            and design_part.dtype == F64 and all(v.dtype == F64 for v in ds) and trail):
+    if not (trail and compiled_plain(scheme, [design_part, *ds])):
         return None
     if all(dense_real(r) for r in trail):
         return "dense"
     return "band" if band_trail(trail) else None
+
+
+def compiled_plain(scheme: Newmark, arrays: list[np.ndarray]) -> bool:
+    """Whether a compiled block may run: compiled code enabled, plain Newmark, real arrays."""
+    return HAVE_NUMBA and enabled() and scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0 and \
+        all(a.dtype == _F64 for a in arrays)
 
 
 @register_jitable
