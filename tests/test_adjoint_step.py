@@ -4,11 +4,17 @@ Both run :func:`dynsens.derivatives.adjoint_step.adjoint_step`; compiled, its op
 overloads for a block of sparse records whose factor is a tridiagonal band (chains): scipy's CSC
 transposed products summed in their order, dgttrs's arithmetic with TRANS = 'T', the scheme's
 transposed maps.  No BLAS on either side: whole runs agree bit for bit everywhere (gradients of
-every response, counters), with checkpoints and recomputed segments too.
+every response, counters), with checkpoints and recomputed segments too.  Or they are the
+overloads for a block of dense real records (mechanisms, small structural models): the BLAS
+routines numpy's products call (gemm, gemv, dot by shape) for the transposed products and LAPACK
+getrs with TRANS = 'T', as the Python path's numpy products and ``Factor.solve_transposed``: bit
+for bit where numba's BLAS is numpy's build, to 1e-5 of each gradient's largest entry where it is
+not (the minimum versions).
 """
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,11 +23,16 @@ from scipy.linalg import lapack
 import dynsens
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from bench_peers import chain_case
-from helpers import assert_identical_runs
+from helpers import DIFFERENT_BLAS_RTOL, assert_identical_runs, blas_builds_agree
 from make_cases import duffing_chain
 from dynsens.derivatives import adjoint_step
 from dynsens.integrators.newmark import make_scheme
+from dynsens.models.base import Linearization
 from dynsens.solver._jit import enabled
+from dynsens.solver.linalg import Counters, Factor
+from dynsens.timeloop.stepping import StepRecord
+
+CASES = Path(__file__).resolve().parent.parent / "cases"
 
 compiled_only = pytest.mark.skipif(
     not enabled(), reason=f"DYNSENS_KERNEL={os.environ.get('DYNSENS_KERNEL')}: no compiled code")
@@ -62,9 +73,11 @@ def _sparse_network() -> dict:
 def _both(monkeypatch: pytest.MonkeyPatch, case: dynsens.Case) -> tuple:
     taken = _blocks_taken(monkeypatch)
     compiled = dynsens.run_case(case, sensitivities=True)
+    blocks = len(taken)
     with monkeypatch.context() as m:
-        m.setattr(adjoint_step, "serves", lambda *a: False)
+        m.setattr(adjoint_step, "block_kind", lambda *a: None)
         python = dynsens.run_case(case, sensitivities=True)
+    assert len(taken) == blocks          # the reference took the Python steps only
     return compiled, python, taken
 
 
@@ -126,16 +139,114 @@ def test_the_compiled_adjoint_equals_the_direct_gradient(monkeypatch):
 
 
 @compiled_only
-@pytest.mark.parametrize("overrides, why", [
-    (("integrator.scheme=hht", "integrator.alpha=0.1"), "HHT-α is not plain Newmark"),
-    (("model.linear_algebra=dense",), "dense records (a dense LU or band of a dense model)"),
+@pytest.mark.parametrize("build, overrides, why", [
+    (_sparse_network, ("integrator.scheme=hht", "integrator.alpha=0.1"), "HHT-α is not plain Newmark"),
+    (lambda: duffing_chain(60, t_end=0.05), ("model.linear_algebra=dense", "sensitivity.method=adjoint"),
+     "a dense model of 60 unknowns: its S factored as a band, its R_q dense"),
 ])
-def test_records_the_block_does_not_serve_take_the_python_steps(monkeypatch, overrides, why):
+def test_records_the_block_does_not_serve_take_the_python_steps(monkeypatch, build, overrides, why):
     taken = _blocks_taken(monkeypatch)
-    result = dynsens.run_case(dynsens.load_case_dict(_sparse_network(), "chain.yaml", list(overrides)),
-                              sensitivities=True)
+    result = dynsens.run_case(dynsens.load_case_dict(build(), "chain.yaml", list(overrides)), sensitivities=True)
     assert result.method == "adjoint"
     assert taken == [], why
+
+
+@compiled_only
+@pytest.mark.parametrize("name, why", [
+    ("pendulum_projection", "its steps are projected"),
+    ("cart_pole", "its steps are projected"),
+])
+def test_projected_steps_take_the_python_steps(monkeypatch, name, why):
+    taken = _blocks_taken(monkeypatch)
+    result = dynsens.run_case(_short(name, 40), sensitivities=True)
+    assert result.method == "adjoint"
+    assert taken == [], why
+
+
+# ----------------------------------------------------------------------------- dense records
+# shipped cases whose adjoint steps the dense block takes: mechanisms (multipliers, the weir's
+# and the lever's pressures) and small structural models
+SERVED_DENSE = ["duffing_chain", "four_bar", "hydraulic_lever", "pendulum_3d", "point_pendulum", "rheonomic",
+                "slider_crank", "torsional_pair", "truss_impact", "tyrolean_weir"]
+
+
+def _short(name: str, steps: int, *extra: str) -> dynsens.Case:
+    case = dynsens.load_case(CASES / f"{name}.yaml")
+    return dynsens.load_case(CASES / f"{name}.yaml", [f"integrator.t_end={case.plan.t0 + steps * case.plan.dt!r}",
+                                                      "sensitivity.method=adjoint", *extra])
+
+
+def _same(a: np.ndarray, b: np.ndarray, what: str) -> None:
+    if blas_builds_agree():
+        np.testing.assert_array_equal(a, b, err_msg=what)
+    else:
+        scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
+        np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
+
+
+@compiled_only
+@pytest.mark.parametrize("name", SERVED_DENSE)
+def test_the_dense_block_equals_the_python_steps(monkeypatch, name):
+    """Every step record but the initial one is taken by the dense block; every response's
+    gradient as the Python steps' (bit for bit where the BLAS builds agree), values and counters
+    alike."""
+    case = _short(name, 150)
+    compiled, python, taken = _both(monkeypatch, case)
+    assert compiled.method == "adjoint"
+    assert sum(taken) == compiled.counters["steps"] + compiled.counters["step_cuts"] > 0, taken
+    assert_identical_runs(compiled, python)
+    graded = [n for n, r in compiled.responses.items() if r.gradient is not None]
+    assert graded
+    for n in graded:
+        _same(np.asarray(compiled.responses[n].gradient), np.asarray(python.responses[n].gradient), n)
+
+
+def _dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int) -> list[StepRecord]:
+    n_z = n_q + n_lam + n_p
+    out = []
+    for k in range(K):
+        S = rng.standard_normal((n_z, n_z)) + n_z * np.eye(n_z)
+        lin = Linearization(S, rng.standard_normal((n_z, n_q)), rng.standard_normal((n_z, n_q)),
+                            rng.standard_normal((n_z, n_p)) if n_p else None)
+        factor = Factor(S, Counters(), dense_general=True)
+        h = 1e-3 * (1.0 + 0.5 * k)       # step sizes vary (step cuts, adaptive steps)
+        out.append(StepRecord(k + 1, 0.0, h, None, lin, factor, 2))   # type: ignore[arg-type]
+    return out
+
+
+@compiled_only
+@pytest.mark.parametrize("K, n_lam, n_p, r", [(1, 0, 0, 1), (5, 4, 2, 3), (12, 2, 1, 1), (7, 0, 3, 2), (6, 1, 1, 3)])
+def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, r):
+    """Random dense records (multipliers, first-order states, one response or several, varying
+    step sizes), seeds on some of them: the block's bars and μ are the Python steps'."""
+    rng = np.random.default_rng(K + 10 * n_p + 100 * r + 1000 * n_lam)
+    n_q = 9
+    records = _dense_records(rng, K, n_q, n_lam, n_p)
+    sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)
+    bar = [rng.standard_normal((n, r)) for n in sizes]
+    aux = [rng.standard_normal((n_q, r)), rng.standard_normal((n_p, r))]
+    seeded = np.array([k % 3 == 0 for k in range(K)])
+    seeds = rng.standard_normal((K, sum(sizes), r)) * seeded[:, None, None]
+    scheme = make_scheme("newmark")
+    assert adjoint_step.block_kind(scheme, records, bar) == "dense"
+    got_bar, got_aux, got_mu, finite = adjoint_step.run_block(scheme, records, bar, aux, seeds, seeded, n_q)
+    assert finite
+
+    def solve(rec, zbar):  # type: ignore[no-untyped-def]
+        return rec.factor.solve_transposed(-zbar)
+    ops = adjoint_step.PythonAdjointStep(scheme, solve)
+    ends = np.cumsum(sizes)
+    b, a = tuple(bar), tuple(aux)
+    for k, rec in enumerate(records):
+        if seeded[k]:
+            b = tuple(leaf + seeds[k][end - n:end] for leaf, n, end in zip(b, sizes, ends))
+        b, a, mu = adjoint_step.adjoint_step(ops, rec, b, a)
+        _same(got_mu[k], mu, f"mu of record {k}")
+        assert got_mu[k].flags.f_contiguous == mu.flags.f_contiguous       # LAPACK's layout
+    for i, (x, y) in enumerate(zip(got_bar, b)):
+        _same(x, y, f"bar {i}")
+    for i, (x, y) in enumerate(zip(got_aux, a)):
+        _same(x, y, f"aux {i}")
 
 
 def test_without_compiled_code_the_python_steps_run(monkeypatch):

@@ -124,13 +124,16 @@ class AdjointMode:
         if self.store.n_grid != K:
             raise RuntimeError(f"adjoint: {K} output instants for {self.store.n_grid} grid steps")
         xbar = np.zeros((m, r))
+        # the instants where each output has a weight (one test per output, not one per instant)
+        weighted: dict[int, np.ndarray] = {oid: np.any(W.reshape(W.shape[0], -1), axis=1)
+                                           for oid, W in stacked.items()}
 
         def seeds(grid: list[tuple[int, StepRecord]]) -> dict[int, np.ndarray]:
             """∂J/∂y (flat state) at grid instants, adding their ∂_x J to x̄."""
             nonlocal xbar
             ks, recs, ws = [], [], []
             for k, rec in grid:
-                w = {oid: W[k] for oid, W in stacked.items() if np.any(W[k])}
+                w = {oid: W[k] for oid, W in stacked.items() if weighted[oid][k]}
                 if w:
                     ks.append(k)
                     recs.append(rec)
@@ -177,8 +180,9 @@ class AdjointMode:
                                                         "derivative of the residual")
                 queue.clear()
 
-        def take(rec: StepRecord, mu: np.ndarray) -> None:
-            check_adjoint_step(rec, mu, names)
+        def take(rec: StepRecord, mu: np.ndarray, finite: bool = False) -> None:
+            if not finite:                  # (a compiled block checks its μ at once)
+                check_adjoint_step(rec, mu, names)
             queue.append((rec.t, rec.solved, mu, rec.step))
             if len(queue) >= self.block:
                 flush()
@@ -188,21 +192,23 @@ class AdjointMode:
             # the steps (all records but the initial one, the sweep's last) compiled where
             # :mod:`.adjoint_step` serves them, each record's seed added first
             steps = [rec for idx, rec, _ in block if idx != 0]
-            if adjoint_step.serves(self.scheme, steps, bar):
+            kind = adjoint_step.block_kind(self.scheme, steps, bar)
+            if kind is not None:
                 found = [ybars.get(k) if k is not None else None for _, _, k in block[:len(steps)]]
                 stacked = np.zeros((len(steps), sum(sizes), r))
                 for k, ybar in enumerate(found):
                     if ybar is not None:
                         stacked[k] = ybar
-                bar[:], aux[:], mus = adjoint_step.run_block(
-                    self.scheme, steps, bar, aux, stacked, np.array([y is not None for y in found]), self.n_q)
+                bar[:], aux[:], mus, finite = adjoint_step.run_block(
+                    self.scheme, steps, bar, aux, stacked, np.array([y is not None for y in found]), self.n_q,
+                    kind)
                 self.counters.backward_solves += len(steps)
                 for rec, mu in zip(steps, mus):
                     # counted where each factor's own solve counts it (a recomputed segment's
                     # factors count apart from the run's)
                     rec.factor.counters.solves += 1
                     rec.factor.counters.solve_columns += r
-                    take(rec, mu)
+                    take(rec, mu, finite)
                 block = block[len(steps):]
             for idx, rec, grid_k in block:
                 ybar = ybars.get(grid_k) if grid_k is not None else None

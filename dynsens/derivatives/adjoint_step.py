@@ -8,12 +8,16 @@ algebra only through operations (``adj_*``):
 
 * run as Python, they are the methods of :class:`PythonAdjointStep` (any scheme, model, matrix
   kind, real or complex; the adjoint mode transposes a step's projection before it);
-* compiled, they are numba overloads for :class:`~.direct_step.BandBlock`, the records of sparse
-  steps whose factor is a tridiagonal band (chains) with plain Newmark, and :func:`adjoint_block`
-  takes a run of such records, with the responses' seeds at their grid instants, without
-  returning to the interpreter.  Its products are scipy's CSC sums
-  (:func:`dynsens.solver.sparse_products.csc_transpose_times`, which the Python steps call too)
-  and its solve dgttrs's arithmetic with TRANS = 'T'
+* compiled, they are numba overloads for the direct step's blocks of plain-Newmark records
+  (:mod:`.direct_step`): :class:`~.direct_step.DenseBlock`, dense real linearizations and LU
+  factors (mechanisms, small structural models), and :class:`~.direct_step.BandBlock`, sparse
+  records whose factor is a tridiagonal band (chains); :func:`adjoint_block` takes a run of such
+  records, with the responses' seeds at their grid instants, without returning to the
+  interpreter.  The dense block's products are the BLAS routines numpy's products call and its solve
+  LAPACK getrs with TRANS = 'T', as the Python path's numpy products and
+  ``Factor.solve_transposed``: the same numbers where numba's BLAS is numpy's build.  The band
+  block's products are scipy's CSC sums (:func:`dynsens.solver.sparse_products.csc_transpose_times`,
+  which the Python steps call too) and its solve dgttrs's arithmetic with TRANS = 'T'
   (:func:`dynsens.solver.tridiagonal.gttrs_transposed_columns`): the same numbers everywhere.
 """
 from __future__ import annotations
@@ -28,7 +32,8 @@ from ..models.base import StepState
 from ..solver._jit import inline, jit, register_jitable
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
-from .direct_step import BandBlock, band_block, band_solve, band_trail, compiled_plain
+from .direct_step import (BandBlock, DenseBlock, band_block, band_solve, band_trail, compiled_plain, dense_block,
+                          dense_real, dense_solve)
 
 # the scheme's transposed maps, callable from compiled code as they are
 for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
@@ -108,27 +113,43 @@ class PythonAdjointStep:
 
 
 # ----------------------------------------------------------------------------- the compiled block
+def block_kind(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]) -> str | None:
+    """``dense`` or ``band``, the compiled block that takes these records (in the sweep's order),
+    or None (the Python steps): a block may run (:func:`.direct_step.compiled_plain`: compiled
+    code, plain Newmark, real arrays), and every record is :func:`.direct_step.dense_real`, or
+    every record a tridiagonal band's on the first one's patterns (:func:`.direct_step.band_trail`)."""
+    if not (records and compiled_plain(scheme, bar)):
+        return None
+    if all(dense_real(r) for r in records):
+        return "dense"
+    return "band" if band_trail(records) else None
+
+
 def serves(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]) -> bool:
-    """Whether :func:`run_block` takes these records (in the sweep's order): a block may run
-    (:func:`.direct_step.compiled_plain`: compiled code, plain Newmark, real arrays), every record
-    a tridiagonal band's on the first one's patterns (:func:`.direct_step.band_trail`)."""
-    return bool(records) and compiled_plain(scheme, bar) and band_trail(records)
+    """Whether :func:`run_block` takes these records (:func:`block_kind`)."""
+    return block_kind(scheme, records, bar) is not None
 
 
 def run_block(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray], aux: list[np.ndarray],
-              seeds: np.ndarray, seeded: np.ndarray, n_q: int
-              ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
-    """The adjoint steps of ``records`` (which :func:`serves`), in the sweep's order, from the
-    bars ``bar`` (six leaves (·, r)) and ``aux`` (two); before record k's step, where
-    ``seeded[k]``, the seed seeds[k] (n_x, r) on the state's bars.  Returns the bars after the
-    last step and every step's μ (n_z, r), as the Python steps leave them."""
-    block = band_block(records, np.array([r.h for r in records], float),
-                        np.array([scheme.beta, scheme.gamma, scheme.c_a]), np.array([n_q, 0]))
+              seeds: np.ndarray, seeded: np.ndarray, n_q: int, kind: str | None = None
+              ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray], bool]:
+    """The adjoint steps of ``records`` (which :func:`serves`; ``kind``: their
+    :func:`block_kind` when known), in the sweep's order, from the bars ``bar`` (six leaves
+    (·, r)) and ``aux`` (two); before record k's step, where ``seeded[k]``, the seed seeds[k]
+    (n_x, r) on the state's bars.  Returns the bars after the last step, every step's μ (n_z, r)
+    as the Python steps leave them, and whether all of them are finite (one sum: False may also
+    be an overflowing sum of finite entries)."""
+    kind = kind or block_kind(scheme, records, bar)
+    n_lam = bar[3].shape[0]
+    block = (band_block if kind == "band" else dense_block)(
+        records, np.array([r.h for r in records], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
+        np.array([n_q, n_lam]))
     out = _block()(block, tuple(np.ascontiguousarray(b) for b in bar), tuple(np.ascontiguousarray(a) for a in aux),
                    np.ascontiguousarray(seeds, np.float64), seeded)
     # each μ in the layout of the Python steps' (LAPACK's solve returns Fortran-ordered columns):
     # the design term's sums over a block follow memory order
-    return list(out[0]), list(out[1]), [np.asfortranarray(mu) for mu in out[2]]
+    return list(out[0]), list(out[1]), [np.asfortranarray(mu) for mu in out[2]], \
+        bool(np.isfinite(np.sum(out[2])))
 
 
 def _make_block(stamp: str) -> Any:
@@ -183,23 +204,32 @@ def _block() -> Any:
 
 
 def _register() -> None:
-    """The overloads of the step operations for :class:`~.direct_step.BandBlock` (numba only)."""
+    """The overloads of the step operations for :class:`~.direct_step.DenseBlock` and
+    :class:`~.direct_step.BandBlock` (numba only).  The two differ in the solve and the products."""
     from numba.extending import overload
 
     from ..solver.compiled_iteration import is_step_data
     from ..solver.sparse_products import csc_transpose_times
+    from .direct_step import register_overloads
 
+    register_overloads()        # the direct step's dense_solve
     coefficients = inline(corrector_coefficients)
     transposed = inline(csc_transpose_times)
 
     def band(ops: Any) -> bool:
         return is_step_data(ops, BandBlock)
 
+    def dense(ops: Any) -> bool:
+        return is_step_data(ops, DenseBlock)
+
+    def either(ops: Any) -> bool:
+        return band(ops) or dense(ops)
+
     # The scheme's maps act entry by entry: they take the bars (n, r) flattened, which compiled
     # loops run three times faster than over rows of one column (the same numbers)
     @overload(adj_advance_transpose)
     def _advance(ops, rec, bar, aux):  # type: ignore[no-untyped-def]
-        if band(ops):
+        if either(ops):
             def impl(ops, rec, bar, aux):  # type: ignore[no-untyped-def]
                 r = bar[0].shape[1]
                 s, rest = advance_transpose_arrays(flat6(bar), (aux[0].ravel(), aux[1].ravel()), ops.scheme[2])
@@ -208,7 +238,7 @@ def _register() -> None:
 
     @overload(adj_correct_transpose)
     def _correct(ops, rec, s_bar):  # type: ignore[no-untyped-def]
-        if band(ops):
+        if either(ops):
             def impl(ops, rec, s_bar):  # type: ignore[no-untyped-def]
                 r = s_bar[0].shape[1]
                 c_q, c_qd, c_p = coefficients(ops.h[rec], ops.scheme[0], ops.scheme[1], ops.scheme[2])
@@ -222,6 +252,9 @@ def _register() -> None:
         if band(ops):
             # Factor.solve_transposed(−z̄) of a tridiagonal factor (z = q̈: no λ, no ṗ)
             return lambda ops, rec, z_bar: band_solve(ops, rec, z_bar[0], True)
+        if dense(ops):
+            # Factor.solve_transposed(−z̄) with z̄ = (q̈, λ, ṗ)'s bars stacked
+            return lambda ops, rec, z_bar: dense_solve(ops, rec, np.concatenate(z_bar), True)
 
     @overload(adj_state_transpose)
     def _state(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
@@ -233,10 +266,17 @@ def _register() -> None:
                                                        mu).ravel()
                 return shaped(pq, r), shaped(pqd, r), pred_bar[2].copy()
             return impl
+        if dense(ops):
+            def dense_impl(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
+                pp = pred_bar[2] + product_transposed(ops.R_p[rec], mu) if pred_bar[2].shape[0] \
+                    else pred_bar[2].copy()
+                return (pred_bar[0] + product_transposed(ops.R_q[rec], mu),
+                        pred_bar[1] + product_transposed(ops.R_qd[rec], mu), pp)
+            return dense_impl
 
     @overload(adj_predict_transpose)
     def _predict(ops, rec, pred_bar, rest_bar, s_bar):  # type: ignore[no-untyped-def]
-        if band(ops):
+        if either(ops):
             def impl(ops, rec, pred_bar, rest_bar, s_bar):  # type: ignore[no-untyped-def]
                 r = pred_bar[0].shape[1]
                 s, aux = predict_transpose_arrays(pred_bar[0].ravel(), pred_bar[1].ravel(), pred_bar[2].ravel(),
@@ -245,6 +285,22 @@ def _register() -> None:
                                                   ops.scheme[1], 0.0, 0.0)
                 return shaped6(s, r), (shaped(aux[0], r), shaped(aux[1], r))
             return impl
+
+
+@register_jitable
+def product_transposed(A: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Aᵀ μ (n, r) for a dense A (n_z, n) and μ (n_z, r) by the BLAS routine numpy's ``A.T @ μ``
+    takes for these shapes: dot for one entry, gemv for one column or one row, else gemm."""
+    n, r = A.shape[1], mu.shape[1]
+    if n == 1 and r == 1:
+        out = np.empty((1, 1))
+        out[0, 0] = np.dot(np.ascontiguousarray(A[:, 0]), np.ascontiguousarray(mu[:, 0]))
+        return out
+    if r == 1:
+        return (A.T @ np.ascontiguousarray(mu[:, 0])).reshape((n, 1))
+    if n == 1:
+        return (np.ascontiguousarray(A[:, 0]) @ mu).reshape((1, r))
+    return A.T @ mu
 
 
 @register_jitable

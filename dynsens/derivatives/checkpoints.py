@@ -73,12 +73,16 @@ class RecordStore:
 
     def _bytes(self, rec: StepRecord) -> int:
         """Memory a record adds: its state, and its linearization and factor unless shared."""
-        n = sum(v.nbytes for v in rec.state)
-        for obj, size in ((rec.lin, lambda o: sum(_matrix_bytes(b) for b in (o.R_z, o.R_q, o.R_qd, o.R_p))),
-                          (rec.factor, factor_bytes)):
-            if obj is not None and self._seen.get(id(obj)) is not obj:
-                self._seen[id(obj)] = obj
-                n += size(obj)
+        n = 0
+        for v in rec.state:
+            n += v.nbytes
+        seen, lin, factor = self._seen, rec.lin, rec.factor
+        if lin is not None and seen.get(id(lin)) is not lin:
+            seen[id(lin)] = lin
+            n += _matrix_bytes(lin.R_z) + _matrix_bytes(lin.R_q) + _matrix_bytes(lin.R_qd) + _matrix_bytes(lin.R_p)
+        if factor is not None and seen.get(id(factor)) is not factor:
+            seen[id(factor)] = factor
+            n += factor_bytes(factor)
         return n
 
     def add_initial(self, rec: StepRecord) -> None:

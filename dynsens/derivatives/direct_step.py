@@ -210,6 +210,14 @@ def band_solve(block: Any, k: int, rhs: np.ndarray, transposed: bool) -> np.ndar
     return x
 
 
+def dense_solve(block: Any, k: int, rhs: np.ndarray, transposed: bool) -> np.ndarray:
+    """x (n, m) with S x = −rhs, or Sᵀ x = −rhs when ``transposed``, for record k of a
+    :class:`DenseBlock`: LAPACK getrs (TRANS = 'N' or 'T') on the record's getrf LU, as
+    ``Factor.solve`` / ``Factor.solve_transposed`` call it; x in column-major order, as LAPACK
+    returns it.  Compiled only (an overload); as Python it is never called."""
+    raise NotImplementedError("dense_solve runs compiled only")
+
+
 def band_trail(trail: list[StepRecord]) -> bool:
     """Whether a :class:`BandBlock` holds these records: every record :func:`band_real`, with its
     R_q and R_q̇ on the first record's patterns and its band plan's reordering."""
@@ -243,7 +251,7 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
     Returns (∇s of each record, ∇s, ∇aux after the last)."""
     K = len(trail)
     kind = kind or block_kind(scheme, trail, ds, design_part)
-    block = (band_block if kind == "band" else _dense_block)(
+    block = (band_block if kind == "band" else dense_block)(
         trail, np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
         np.array([n_q, n_lam]))
     # (leaves in one layout: the compiled block is typed by its arguments)
@@ -253,7 +261,8 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
     return states, states[-1], type(daux)(out[6][K - 1], out[7][K - 1])
 
 
-def _dense_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> DenseBlock:
+def dense_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> DenseBlock:
+    """The records of ``trail`` (each :func:`dense_real`) stacked for a compiled block."""
     zeros = np.zeros((trail[0].factor.n, 0))
     return DenseBlock(
         np.array([r.lin.R_q for r in trail]), np.array([r.lin.R_qd for r in trail]),
@@ -311,9 +320,19 @@ def _block() -> Any:
 
         from ..solver import sparse_products, tridiagonal
         from ..solver.compiled_iteration import sources_stamp
-        _register()
+        register_overloads()
         _COMPILED.append(_make_block(sources_stamp((sys.modules[__name__], tridiagonal, sparse_products))))
     return _COMPILED[0]
+
+
+_REGISTERED: list[bool] = []
+
+
+def register_overloads() -> None:
+    """Register the overloads of this module (once: the adjoint's block uses :func:`dense_solve`)."""
+    if not _REGISTERED:
+        _register()
+        _REGISTERED.append(True)
 
 
 @register_jitable
@@ -384,23 +403,27 @@ def _register() -> None:
             return band_impl
         return None
 
+    @overload(dense_solve)
+    def _dense_solve(block, k, rhs, transposed):  # type: ignore[no-untyped-def]
+        def impl(block, k, rhs, transposed):  # type: ignore[no-untyped-def]
+            n, m = rhs.shape
+            x = np.empty((m, n))            # −rhs in column-major order, as LAPACK takes it
+            for i in range(n):
+                for j in range(m):
+                    x[j, i] = -rhs[i, j]
+            trans = np.array([ord("T") if transposed else ord("N")], np.uint8)
+            ints = np.array([n, m, n, n, 0], np.int32)      # n, nrhs, lda, ldb, info
+            lu = block.lu[k]
+            piv = block.piv[k]
+            getrs(trans.ctypes, ints[0:].ctypes, ints[1:].ctypes, lu.ctypes, ints[2:].ctypes, piv.ctypes,
+                  x.ctypes, ints[3:].ctypes, ints[4:].ctypes)
+            return x.T
+        return impl
+
     @overload(sens_solve)
     def _solve(ops, rec, P):  # type: ignore[no-untyped-def]
         if dense(ops):
-            def impl(ops, rec, P):  # type: ignore[no-untyped-def]
-                n, m = P.shape
-                x = np.empty((m, n))            # −P in column-major order, as LAPACK takes it
-                for i in range(n):
-                    for j in range(m):
-                        x[j, i] = -P[i, j]
-                trans = np.array([ord("N")], np.uint8)
-                ints = np.array([n, m, n, n, 0], np.int32)      # n, nrhs, lda, ldb, info
-                lu = ops.lu[rec]
-                piv = ops.piv[rec]
-                getrs(trans.ctypes, ints[0:].ctypes, ints[1:].ctypes, lu.ctypes, ints[2:].ctypes, piv.ctypes,
-                      x.ctypes, ints[3:].ctypes, ints[4:].ctypes)
-                return x.T
-            return impl
+            return lambda ops, rec, P: dense_solve(ops, rec, P, False)
         if band(ops):
             return lambda ops, rec, P: band_solve(ops, rec, P, False)
         return None
