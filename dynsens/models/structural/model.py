@@ -111,6 +111,7 @@ class StructuralModel(StructuralMatrices, Model):
         self._unions = UnionCache()                              # sparse iteration matrices
         self._diag_mass: tuple[np.ndarray, Any] | None = None    # (mass vector, its sparse diag(M))
         self._pattern_kept: tuple[int, np.ndarray] | None = None  # dense models: see _dense_pattern
+        self._design_rows: tuple[np.ndarray, ...] | None = None  # design_pattern, made once
 
     # ------------------------------------------------------------------ the element sets by kind
     def elements_of(self, type_name: str) -> Any:

@@ -253,9 +253,10 @@ class CompiledSpringStep(CompiledStep):
         return loads(self.model, t, self.params)
 
     def factor_buffers(self, steps: int) -> tuple[Array, ...]:
-        # the iteration's last (K_t, q, q̇, q̈, S, LU, du2, pivots, regularity test), one row a step
+        # the iteration's last (K_t, q, q̇, q̈, S, LU, du2, pivots, regularity test), one row a step;
+        # S's rows empty (not kept: its factor and K_t are what the sensitivities read)
         n, size = self.design.n, self.design.size
-        return (np.empty((steps, size)), *(np.empty((steps, n)) for _ in range(3)), np.empty((steps, size)),
+        return (np.empty((steps, size)), *(np.empty((steps, n)) for _ in range(3)), np.empty((steps, 0)),
                 np.empty((steps, size)), np.empty((steps, max(n - 2, 0))), np.empty((steps, n), np.int32),
                 np.empty((steps, 3)))
 
@@ -269,7 +270,7 @@ class CompiledSpringStep(CompiledStep):
         with ``linearization``: the sensitivities need it, the primal steps do not; S None: the
         Python path's round-off test never reads a compiled step's)."""
         K, q, qd, qdd, S, lu, du2, piv, test = lf
-        if not S.size:
+        if not K.size:              # no linearization (a block's rows keep no S: K_t tells)
             return None, None, None
         d = self.design
         factor = None

@@ -247,8 +247,9 @@ def _register() -> None:
             return None
 
         def impl(ops, lf, factors, k):  # type: ignore[no-untyped-def]
+            # S itself is not kept: the sensitivities read its factor, and K_t for the linearization
             K, q, qd, qdd, S, lu, du2, piv, test = lf
-            factors[0][k], factors[1][k], factors[2][k], factors[3][k], factors[4][k] = K, q, qd, qdd, S
+            factors[0][k], factors[1][k], factors[2][k], factors[3][k] = K, q, qd, qdd
             factors[5][k], factors[6][k], factors[7][k], factors[8][k] = lu, du2, piv, test
         return impl
 
