@@ -33,7 +33,7 @@ from ..solver._jit import inline, jit, register_jitable
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
 from .direct_step import (BandBlock, DenseBlock, band_block, band_solve, band_trail, compiled_plain, dense_block,
-                          dense_real, dense_solve)
+                          dense_real, dense_solve, values_of)
 
 # the scheme's transposed maps, callable from compiled code as they are
 for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
@@ -261,9 +261,10 @@ def _register() -> None:
         if band(ops):
             def impl(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
                 r = mu.shape[1]
-                pq = pred_bar[0].ravel() + transposed(ops.R_q_values[rec], ops.R_q_indptr, ops.R_q_indices, mu).ravel()
-                pqd = pred_bar[1].ravel() + transposed(ops.R_qd_values[rec], ops.R_qd_indptr, ops.R_qd_indices,
-                                                       mu).ravel()
+                pq = pred_bar[0].ravel() + transposed(values_of(ops.R_q_values, rec), ops.R_q_indptr,
+                                                      ops.R_q_indices, mu).ravel()
+                pqd = pred_bar[1].ravel() + transposed(values_of(ops.R_qd_values, rec), ops.R_qd_indptr,
+                                                       ops.R_qd_indices, mu).ravel()
                 return shaped(pq, r), shaped(pqd, r), pred_bar[2].copy()
             return impl
         if dense(ops):

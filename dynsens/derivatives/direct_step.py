@@ -122,7 +122,7 @@ class BandBlock(NamedTuple):
     band (gttrf, after the plan's reordering ``perm``), for the compiled :func:`direct_block`:
     R_q and R_q̇ (n, n) on one CSC pattern each, their values stacked (K, nnz)."""
 
-    R_q_values: np.ndarray     # (K, nnz)
+    R_q_values: np.ndarray     # (K, nnz), or (1, nnz) when all records share one matrix
     R_q_indptr: np.ndarray     # (n + 1,) column pointers
     R_q_indices: np.ndarray    # (nnz,) row indices
     R_qd_values: np.ndarray
@@ -285,9 +285,18 @@ def band_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes
 
 
 def _stacked(mats: list[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(values (K, nnz), indptr, indices) of a block's sparse matrices on one pattern."""
+    """(values (K, nnz), indptr, indices) of a block's sparse matrices on one pattern; values
+    (1, nnz) when every record holds the same matrix (a spring network's damping matrix), read
+    by :func:`values_of` for each record."""
     first = mats[0]
-    return np.array([a.data for a in mats]), first.indptr.astype(np.intp), first.indices.astype(np.intp)
+    values = first.data[None] if all(a is first for a in mats) else np.array([a.data for a in mats])
+    return values, first.indptr.astype(np.intp), first.indices.astype(np.intp)
+
+
+@register_jitable
+def values_of(values: np.ndarray, k: int) -> np.ndarray:
+    """Record k's CSC values in a :class:`BandBlock`'s stack (one row: shared by every record)."""
+    return values[k] if values.shape[0] > 1 else values[0]
 
 
 def _make_block(stamp: str) -> Any:
@@ -397,8 +406,8 @@ def _register() -> None:
         if band(ops):
             def band_impl(ops, rec, design_part, dpred):  # type: ignore[no-untyped-def]
                 # Linearization.state_product's sums: R_q ∇q, then + R_q̇ ∇q̇ (scipy's products)
-                out = times(ops.R_q_values[rec], ops.R_q_indptr, ops.R_q_indices, dpred[0])
-                out = out + times(ops.R_qd_values[rec], ops.R_qd_indptr, ops.R_qd_indices, dpred[1])
+                out = times(values_of(ops.R_q_values, rec), ops.R_q_indptr, ops.R_q_indices, dpred[0])
+                out = out + times(values_of(ops.R_qd_values, rec), ops.R_qd_indptr, ops.R_qd_indices, dpred[1])
                 return design_part + out
             return band_impl
         return None
