@@ -4,16 +4,23 @@ Governing equation -> Newmark-beta time integration -> Newton-Raphson, run once 
 state and once more, with matrix right-hand sides, for the design sensitivities.
 """
 import os as _os
+import sys as _sys
 from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 if _TYPE_CHECKING:  # pragma: no cover
     from . import study as _study
 
 # The per-step matrices are small (mechanisms, chains) or sparse: a threaded BLAS only adds
-# overhead and, on a busy machine, contention.  Parallelism in dynsens is across simulations
-# (finite-difference columns, optimization starts).  Set the variables yourself to override.
+# overhead and, on a busy machine, contention, and its sums then depend on the thread count.
+# Parallelism in dynsens is across simulations (finite-difference columns, optimization
+# starts).  Set the variables yourself to override.
+_USER_SET_THREADS = "OPENBLAS_NUM_THREADS" in _os.environ
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
+if not _USER_SET_THREADS and "numpy" in _sys.modules:
+    # numpy or scipy imported before dynsens read no variable: their OpenBLAS is told directly
+    from ._blas_threads import single_threaded_openblas as _single_threaded_openblas
+    _single_threaded_openblas()
 
 __version__ = "0.1.0"
 

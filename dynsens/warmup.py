@@ -126,11 +126,13 @@ def warm(paths: list[Path], steps: int = 150, echo: bool = True) -> float:
 
 
 # what the default warm-up compiles besides the mechanisms: the spring networks' compiled step and
-# sensitivity blocks, direct and adjoint (the shipped chain made sparse), and the sparse multibody
-# linearization (a shipped mechanism made sparse)
+# sensitivity blocks, direct and adjoint (the shipped chain made sparse), the sparse multibody
+# linearization (a shipped mechanism made sparse) and the adjoint's dense block (a mechanism's
+# adjoint run)
 SPARSE_EXTRAS = (("duffing_chain", ("model.linear_algebra=sparse",)),
                  ("duffing_chain", ("model.linear_algebra=sparse", "sensitivity.method=adjoint")),
-                 ("slider_crank", ("model.linear_algebra=sparse",)))
+                 ("slider_crank", ("model.linear_algebra=sparse",)),
+                 ("slider_crank", ("sensitivity.method=adjoint",)))
 
 
 @dataclass(frozen=True)

@@ -76,14 +76,19 @@ class RecordStore:
         n = 0
         for v in rec.state:
             n += v.nbytes
-        seen, lin, factor = self._seen, rec.lin, rec.factor
-        if lin is not None and seen.get(id(lin)) is not lin:
-            seen[id(lin)] = lin
+        lin = rec.lin
+        if self._first_time(lin):
             n += _matrix_bytes(lin.R_z) + _matrix_bytes(lin.R_q) + _matrix_bytes(lin.R_qd) + _matrix_bytes(lin.R_p)
-        if factor is not None and seen.get(id(factor)) is not factor:
-            seen[id(factor)] = factor
-            n += factor_bytes(factor)
+        if self._first_time(rec.factor):
+            n += factor_bytes(rec.factor)
         return n
+
+    def _first_time(self, obj: Any) -> bool:
+        """Whether ``obj`` (a linearization or factor, or None) is not counted yet; marks it."""
+        if obj is None or self._seen.get(id(obj)) is obj:
+            return False
+        self._seen[id(obj)] = obj
+        return True
 
     def add_initial(self, rec: StepRecord) -> None:
         """The record of the initial solve (always kept)."""
