@@ -208,6 +208,34 @@ def blas_builds_agree() -> bool:
 DIFFERENT_BLAS_RTOL = 1e-5
 
 
+def assert_same_or_blas_close(a: np.ndarray, b: np.ndarray, what: str) -> None:
+    """Compiled against Python numbers: bit for bit where the BLAS builds agree, else within
+    DIFFERENT_BLAS_RTOL of b's largest entry."""
+    if blas_builds_agree():
+        np.testing.assert_array_equal(a, b, err_msg=what)
+    else:
+        scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
+        np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
+
+
+def random_dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int) -> list:
+    """K step records with random dense real linearizations and LU factors (S well conditioned),
+    n_q + n_lam + n_p unknowns, step sizes varying as after step cuts or adaptive steps."""
+    from dynsens.models.base import Linearization
+    from dynsens.solver.linalg import Counters, Factor
+    from dynsens.timeloop.stepping import StepRecord
+    n_z = n_q + n_lam + n_p
+    out = []
+    for k in range(K):
+        S = rng.standard_normal((n_z, n_z)) + n_z * np.eye(n_z)
+        lin = Linearization(S, rng.standard_normal((n_z, n_q)), rng.standard_normal((n_z, n_q)),
+                            rng.standard_normal((n_z, n_p)) if n_p else None)
+        factor = Factor(S, Counters(), dense_general=True)
+        h = 1e-3 * (1.0 + 0.5 * k)
+        out.append(StepRecord(k + 1, 0.0, h, None, lin, factor, 2))   # type: ignore[arg-type]
+    return out
+
+
 def assert_identical_runs(compiled, python):
     """Two runs agree bit for bit (counters, responses with their gradients, every history
     field) where numba's BLAS is numpy's build; otherwise to :data:`DIFFERENT_BLAS_RTOL` of each

@@ -23,14 +23,11 @@ from scipy.linalg import lapack
 import dynsens
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from bench_peers import chain_case
-from helpers import DIFFERENT_BLAS_RTOL, assert_identical_runs, blas_builds_agree
+from helpers import assert_identical_runs, assert_same_or_blas_close, random_dense_records
 from make_cases import duffing_chain
 from dynsens.derivatives import adjoint_step
 from dynsens.integrators.newmark import make_scheme
-from dynsens.models.base import Linearization
 from dynsens.solver._jit import enabled
-from dynsens.solver.linalg import Counters, Factor
-from dynsens.timeloop.stepping import StepRecord
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 
@@ -176,14 +173,6 @@ def _short(name: str, steps: int, *extra: str) -> dynsens.Case:
                                                       "sensitivity.method=adjoint", *extra])
 
 
-def _same(a: np.ndarray, b: np.ndarray, what: str) -> None:
-    if blas_builds_agree():
-        np.testing.assert_array_equal(a, b, err_msg=what)
-    else:
-        scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
-        np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
-
-
 @compiled_only
 @pytest.mark.parametrize("name", SERVED_DENSE)
 def test_the_dense_block_equals_the_python_steps(monkeypatch, name):
@@ -198,20 +187,8 @@ def test_the_dense_block_equals_the_python_steps(monkeypatch, name):
     graded = [n for n, r in compiled.responses.items() if r.gradient is not None]
     assert graded
     for n in graded:
-        _same(np.asarray(compiled.responses[n].gradient), np.asarray(python.responses[n].gradient), n)
-
-
-def _dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int) -> list[StepRecord]:
-    n_z = n_q + n_lam + n_p
-    out = []
-    for k in range(K):
-        S = rng.standard_normal((n_z, n_z)) + n_z * np.eye(n_z)
-        lin = Linearization(S, rng.standard_normal((n_z, n_q)), rng.standard_normal((n_z, n_q)),
-                            rng.standard_normal((n_z, n_p)) if n_p else None)
-        factor = Factor(S, Counters(), dense_general=True)
-        h = 1e-3 * (1.0 + 0.5 * k)       # step sizes vary (step cuts, adaptive steps)
-        out.append(StepRecord(k + 1, 0.0, h, None, lin, factor, 2))   # type: ignore[arg-type]
-    return out
+        assert_same_or_blas_close(np.asarray(compiled.responses[n].gradient),
+                                  np.asarray(python.responses[n].gradient), n)
 
 
 @compiled_only
@@ -221,7 +198,7 @@ def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, 
     step sizes), seeds on some of them: the block's bars and μ are the Python steps'."""
     rng = np.random.default_rng(K + 10 * n_p + 100 * r + 1000 * n_lam)
     n_q = 9
-    records = _dense_records(rng, K, n_q, n_lam, n_p)
+    records = random_dense_records(rng, K, n_q, n_lam, n_p)
     sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)
     bar = [rng.standard_normal((n, r)) for n in sizes]
     aux = [rng.standard_normal((n_q, r)), rng.standard_normal((n_p, r))]
@@ -241,12 +218,12 @@ def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, 
         if seeded[k]:
             b = tuple(leaf + seeds[k][end - n:end] for leaf, n, end in zip(b, sizes, ends))
         b, a, mu = adjoint_step.adjoint_step(ops, rec, b, a)
-        _same(got_mu[k], mu, f"mu of record {k}")
+        assert_same_or_blas_close(got_mu[k], mu, f"mu of record {k}")
         assert got_mu[k].flags.f_contiguous == mu.flags.f_contiguous       # LAPACK's layout
     for i, (x, y) in enumerate(zip(got_bar, b)):
-        _same(x, y, f"bar {i}")
+        assert_same_or_blas_close(x, y, f"bar {i}")
     for i, (x, y) in enumerate(zip(got_aux, a)):
-        _same(x, y, f"aux {i}")
+        assert_same_or_blas_close(x, y, f"aux {i}")
 
 
 def test_without_compiled_code_the_python_steps_run(monkeypatch):

@@ -18,7 +18,7 @@ import pytest
 import scipy.sparse as sp
 
 import dynsens
-from helpers import DIFFERENT_BLAS_RTOL, assert_identical_runs, blas_builds_agree
+from helpers import assert_identical_runs, assert_same_or_blas_close, random_dense_records
 from dynsens.derivatives import direct, direct_step
 from dynsens.integrators.newmark import Aux, make_scheme
 from dynsens.models.base import Linearization, StepState
@@ -52,14 +52,6 @@ def _blocks_taken(monkeypatch: pytest.MonkeyPatch, kinds: list[str] | None = Non
     return taken
 
 
-def _same(a: np.ndarray, b: np.ndarray, what: str) -> None:
-    if blas_builds_agree():
-        np.testing.assert_array_equal(a, b, err_msg=what)
-    else:
-        scale = max(float(np.max(np.abs(b), initial=0.0)), 1e-300)
-        np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
-
-
 # ----------------------------------------------------------------------------- whole runs
 # shipped cases whose sensitivity steps the compiled block takes (dense real records, plain
 # Newmark): mechanisms and dense structural models
@@ -87,7 +79,7 @@ def test_the_compiled_block_equals_the_python_steps(monkeypatch, name, overrides
         python = dynsens.run_case(case, sensitivities=True)
     assert_identical_runs(compiled, python)
     for field, a in compiled.sensitivity_history.items():
-        _same(a, python.sensitivity_history[field], field)
+        assert_same_or_blas_close(a, python.sensitivity_history[field], field)
 
 
 @compiled_only
@@ -112,25 +104,12 @@ def test_without_compiled_code_the_python_steps_run(monkeypatch):
 
 
 # ----------------------------------------------------------------------------- random records
-def _records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int) -> list[StepRecord]:
-    n_z = n_q + n_lam + n_p
-    out = []
-    for k in range(K):
-        S = rng.standard_normal((n_z, n_z)) + n_z * np.eye(n_z)
-        lin = Linearization(S, rng.standard_normal((n_z, n_q)), rng.standard_normal((n_z, n_q)),
-                            rng.standard_normal((n_z, n_p)) if n_p else None)
-        factor = Factor(S, Counters(), dense_general=True)
-        h = 1e-3 * (1.0 + 0.5 * k)       # step sizes vary (step cuts, adaptive steps)
-        out.append(StepRecord(k + 1, 0.0, h, None, lin, factor, 2))   # type: ignore[arg-type]
-    return out
-
-
 @compiled_only
 @pytest.mark.parametrize("K, n_p, m", [(1, 0, 1), (5, 2, 3), (12, 1, 4)])
 def test_a_block_of_random_records_equals_the_python_steps(K, n_p, m):
     rng = np.random.default_rng(K + 10 * n_p + 100 * m)
     n_q, n_lam = 9, 4
-    records = _records(rng, K, n_q, n_lam, n_p)
+    records = random_dense_records(rng, K, n_q, n_lam, n_p)
     sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)
     ds = StepState(*(rng.standard_normal((n, m)) for n in sizes))
     daux = Aux(rng.standard_normal((n_q, m)), rng.standard_normal((n_p, m)))
@@ -144,9 +123,9 @@ def test_a_block_of_random_records_equals_the_python_steps(K, n_p, m):
     for k, rec in enumerate(records):
         s, a = direct_step.direct_step(ops, (rec.lin, rec.factor, rec.h, None), s, a, design_part[k])
         for field, x, y in zip(StepState._fields, states[k], s):
-            _same(x, y, f"record {k}: {field}")
+            assert_same_or_blas_close(x, y, f"record {k}: {field}")
     for x, y in zip([*ds_end, *daux_end], [*s, *a]):
-        _same(x, y, "after the block")
+        assert_same_or_blas_close(x, y, "after the block")
 
 
 @compiled_only
@@ -154,7 +133,7 @@ def test_a_wrong_state_part_would_be_seen():
     """The comparison above can fail: one entry of one record's R_q moved by 1e-12 relative
     changes the block's result."""
     rng = np.random.default_rng(3)
-    records = _records(rng, 3, 6, 2, 1)
+    records = random_dense_records(rng, 3, 6, 2, 1)
     ds = StepState(*(rng.standard_normal((n, 2)) for n in (6, 6, 6, 2, 1, 1)))
     daux = Aux(rng.standard_normal((6, 2)), rng.standard_normal((1, 2)))
     design_part = rng.standard_normal((3, 9, 2))
@@ -168,7 +147,7 @@ def test_a_wrong_state_part_would_be_seen():
 
 def test_what_the_block_does_not_serve():
     rng = np.random.default_rng(5)
-    records = _records(rng, 2, 4, 1, 0)
+    records = random_dense_records(rng, 2, 4, 1, 0)
     ds = StepState(*(np.zeros((n, 2)) for n in (4, 4, 4, 1, 0, 0)))
     part = np.zeros((2, 5, 2))
     plain = make_scheme("newmark")
