@@ -80,9 +80,13 @@ def test_scipy_optimize_driver_reaches_the_dynsens_optimum(tmp_path: Path) -> No
     prob.run_driver()
     assert prob.driver.result.success, prob.driver.result.message
     x_om = np.array([prob.get_val(f"truss.{n}")[0] for n in NAMES])
-    # the same optimum (the same SLSQP on the same scaling: measured 2.5e-10 apart): areas and
-    # mass within 1e-6, both constraints active
-    np.testing.assert_allclose(x_om, ours.x, rtol=1e-6)
+    # the same optimum: mass within 1e-6 (measured 1.1e-8 apart), both constraints active.  The
+    # areas agree to the optimizer's tolerance, not to round-off: the two SLSQP runs scale the
+    # problem with different arithmetic (OpenMDAO's ref, dynsens's bounds), their first steps
+    # already differ in the last bits (one lands exactly on a bound, the other 2e-11 above it), and
+    # the mass is flat along the two active constraints there: the areas end 2e-5 apart (measured;
+    # 2.5e-10 apart only while a multi-threaded BLAS happened to round both alike)
+    np.testing.assert_allclose(x_om, ours.x, rtol=1e-4)
     assert prob.get_val("truss.mass")[0] == pytest.approx(ours.f, rel=1e-6)
     assert prob.get_val("truss.stress_ks")[0] == pytest.approx(1.0, abs=1e-4)
     assert prob.get_val("truss.buckling_ks")[0] == pytest.approx(1.0, abs=1e-4)
