@@ -192,6 +192,35 @@ def test_the_dense_block_equals_the_python_steps(monkeypatch, name):
 
 
 @compiled_only
+@pytest.mark.parametrize("name, overrides, what", [
+    ("tyrolean_weir", (), "event"),             # the whole run, to its event: t_F's gradient too
+    ("slider_crank", ("integrator.solver.max_iterations=2",), "step_cuts"),
+    ("slider_crank", ("integrator.adaptive={rtol: 1.0e-5, atol: 1.0e-8}",), "adaptive"),
+    ("slider_crank", ("sensitivity.memory_budget=20000",), "checkpoints"),
+], ids=["weir-event", "step-cuts", "adaptive", "checkpoints"])
+def test_mechanism_records_take_the_dense_block_alike(monkeypatch, name, overrides, what):
+    """A mechanism's records after an event, step cuts, adaptive steps, or recomputed from
+    checkpoints: the dense block reads each record's own h and factor; gradients as the Python
+    steps' (bit for bit where the BLAS builds agree)."""
+    over = ["sensitivity.method=adjoint", *overrides]
+    case = dynsens.load_case(CASES / f"{name}.yaml", over) if what == "event" else _short(name, 200, *overrides)
+    compiled, python, taken = _both(monkeypatch, case)
+    assert compiled.method == "adjoint" and sum(taken) > 0
+    if what == "event":
+        assert compiled.status == "terminated" and compiled.responses["t_F"].gradient is not None
+    elif what == "step_cuts":
+        assert compiled.counters["step_cuts"] > 0
+    elif what == "adaptive":
+        assert len(set(np.round(np.diff(compiled.time), 12))) > 2
+    else:
+        assert compiled.counters["recomputed_steps"] > 0
+    assert_identical_runs(compiled, python)
+    for n, r in compiled.responses.items():
+        if r.gradient is not None:
+            assert_same_or_blas_close(np.asarray(r.gradient), np.asarray(python.responses[n].gradient), n)
+
+
+@compiled_only
 @pytest.mark.parametrize("K, n_lam, n_p, r", [(1, 0, 0, 1), (5, 4, 2, 3), (12, 2, 1, 1), (7, 0, 3, 2), (6, 1, 1, 3)])
 def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, r):
     """Random dense records (multipliers, first-order states, one response or several, varying
