@@ -218,9 +218,11 @@ def assert_same_or_blas_close(a: np.ndarray, b: np.ndarray, what: str) -> None:
         np.testing.assert_allclose(a, b, rtol=0, atol=DIFFERENT_BLAS_RTOL * scale, err_msg=what)
 
 
-def random_dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int) -> list:
+def random_dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int, n_p: int,
+                         with_R_p: bool = True) -> list:
     """K step records with random dense real linearizations and LU factors (S well conditioned),
-    n_q + n_lam + n_p unknowns, step sizes varying as after step cuts or adaptive steps."""
+    n_q + n_lam + n_p unknowns, step sizes varying as after step cuts or adaptive steps; without
+    R_p (a residual that does not depend on p) unless ``with_R_p``."""
     from dynsens.models.base import Linearization
     from dynsens.solver.linalg import Counters, Factor
     from dynsens.timeloop.stepping import StepRecord
@@ -229,7 +231,7 @@ def random_dense_records(rng: np.random.Generator, K: int, n_q: int, n_lam: int,
     for k in range(K):
         S = rng.standard_normal((n_z, n_z)) + n_z * np.eye(n_z)
         lin = Linearization(S, rng.standard_normal((n_z, n_q)), rng.standard_normal((n_z, n_q)),
-                            rng.standard_normal((n_z, n_p)) if n_p else None)
+                            rng.standard_normal((n_z, n_p)) if n_p and with_R_p else None)
         factor = Factor(S, Counters(), dense_general=True)
         h = 1e-3 * (1.0 + 0.5 * k)
         out.append(StepRecord(k + 1, 0.0, h, None, lin, factor, 2))   # type: ignore[arg-type]

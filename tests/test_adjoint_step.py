@@ -221,13 +221,15 @@ def test_mechanism_records_take_the_dense_block_alike(monkeypatch, name, overrid
 
 
 @compiled_only
-@pytest.mark.parametrize("K, n_lam, n_p, r", [(1, 0, 0, 1), (5, 4, 2, 3), (12, 2, 1, 1), (7, 0, 3, 2), (6, 1, 1, 3)])
-def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, r):
-    """Random dense records (multipliers, first-order states, one response or several, varying
-    step sizes), seeds on some of them: the block's bars and μ are the Python steps'."""
+@pytest.mark.parametrize("K, n_lam, n_p, r, with_R_p", [(1, 0, 0, 1, True), (5, 4, 2, 3, True), (12, 2, 1, 1, True),
+                                                       (7, 0, 3, 2, True), (6, 1, 1, 3, True), (4, 1, 2, 2, False)])
+def test_a_dense_block_of_random_records_equals_the_python_steps(K, n_lam, n_p, r, with_R_p):
+    """Random dense records (multipliers, first-order states with or without R_p, one response or
+    several, varying step sizes), seeds on some of them: the block's bars and μ are the Python
+    steps'."""
     rng = np.random.default_rng(K + 10 * n_p + 100 * r + 1000 * n_lam)
     n_q = 9
-    records = random_dense_records(rng, K, n_q, n_lam, n_p)
+    records = random_dense_records(rng, K, n_q, n_lam, n_p, with_R_p)
     sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)
     bar = [rng.standard_normal((n, r)) for n in sizes]
     aux = [rng.standard_normal((n_q, r)), rng.standard_normal((n_p, r))]

@@ -105,11 +105,13 @@ def test_without_compiled_code_the_python_steps_run(monkeypatch):
 
 # ----------------------------------------------------------------------------- random records
 @compiled_only
-@pytest.mark.parametrize("K, n_p, m", [(1, 0, 1), (5, 2, 3), (12, 1, 4)])
-def test_a_block_of_random_records_equals_the_python_steps(K, n_p, m):
+@pytest.mark.parametrize("K, n_p, m, with_R_p", [(1, 0, 1, True), (5, 2, 3, True), (12, 1, 4, True),
+                                                (4, 2, 2, False)])
+def test_a_block_of_random_records_equals_the_python_steps(K, n_p, m, with_R_p):
+    """Random dense records (first-order states with or without R_p, varying step sizes)."""
     rng = np.random.default_rng(K + 10 * n_p + 100 * m)
     n_q, n_lam = 9, 4
-    records = random_dense_records(rng, K, n_q, n_lam, n_p)
+    records = random_dense_records(rng, K, n_q, n_lam, n_p, with_R_p)
     sizes = (n_q, n_q, n_q, n_lam, n_p, n_p)
     ds = StepState(*(rng.standard_normal((n, m)) for n in sizes))
     daux = Aux(rng.standard_normal((n_q, m)), rng.standard_normal((n_p, m)))

@@ -269,8 +269,9 @@ def _register() -> None:
             return impl
         if dense(ops):
             def dense_impl(ops, rec, mu, pred_bar):  # type: ignore[no-untyped-def]
-                pp = pred_bar[2] + product_transposed(ops.R_p[rec], mu) if pred_bar[2].shape[0] \
-                    else pred_bar[2].copy()
+                # (R_p without columns: the record had none, and the Python step skips it too)
+                pp = pred_bar[2] + product_transposed(ops.R_p[rec], mu) \
+                    if pred_bar[2].shape[0] and ops.R_p.shape[2] else pred_bar[2].copy()
                 return (pred_bar[0] + product_transposed(ops.R_q[rec], mu),
                         pred_bar[1] + product_transposed(ops.R_qd[rec], mu), pp)
             return dense_impl

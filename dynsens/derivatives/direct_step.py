@@ -399,7 +399,7 @@ def _register() -> None:
                 # pseudo_load_with's sums (Linearization.state_product's), in its order
                 out = ops.R_q[rec] @ dpred[0]
                 out = out + ops.R_qd[rec] @ dpred[1]
-                if dpred[2].shape[0]:
+                if dpred[2].shape[0] and ops.R_p.shape[2]:     # (no columns: the record had no R_p)
                     out = out + ops.R_p[rec] @ dpred[2]
                 return design_part + out
             return impl
