@@ -129,7 +129,7 @@ def warm(paths: list[Path], steps: int = 150, echo: bool = True) -> float:
 # sensitivity blocks, direct and adjoint (the shipped chain made sparse), the sparse multibody
 # linearization (a shipped mechanism made sparse) and the adjoint's dense block (a mechanism's
 # adjoint run)
-SPARSE_EXTRAS = (("duffing_chain", ("model.linear_algebra=sparse",)),
+EXTRA_RUNS = (("duffing_chain", ("model.linear_algebra=sparse",)),
                  ("duffing_chain", ("model.linear_algebra=sparse", "sensitivity.method=adjoint")),
                  ("slider_crank", ("model.linear_algebra=sparse",)),
                  ("slider_crank", ("sensitivity.method=adjoint",)))
@@ -210,7 +210,7 @@ def main(argv: list[str] | None = None) -> None:
     cases: list[tuple[Path, tuple[str, ...]]] = [(p, ()) for p in args.cases]
     if not args.cases:
         cases = [(CASES_DIR / f"{n}.yaml", ()) for n in DEFAULT_CASES] + \
-            [(CASES_DIR / f"{n}.yaml", o) for n, o in SPARSE_EXTRAS]
+            [(CASES_DIR / f"{n}.yaml", o) for n, o in EXTRA_RUNS]
         cases = [(p, o) for p, o in cases if p.exists()]
     if not cases:
         print("no case files found: pass the cases to warm")

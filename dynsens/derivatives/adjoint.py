@@ -9,11 +9,10 @@ column per response:
     z̄ = correctᵀ/advanceᵀ of the state's bar,   μ = −S⁻ᵀ z̄,
     bar of the predicted state += (R_q, R_q̇, R_p)ᵀ μ,   x̄ += ∂_xF_Rᵀ μ,   bar of X_{i−1} = predictᵀ(…)
 
-One backward step is :func:`.adjoint_step.adjoint_step`, defined once: run as Python for any
-record, compiled over runs of chain records; this module adds the seeds, the initial step, the
-design term and the records' bookkeeping.
-
-plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  A step whose end state
+plus the responses' seeds at the grid instants (:mod:`.output_seeds`).  One backward step is
+:func:`.adjoint_step.adjoint_step`, defined once: run as Python for any record, compiled over
+runs of dense or chain records; this module adds the seeds, the initial step, the design term
+and the records' bookkeeping.  A step whose end state
 the model projected onto its constraints transposes that projection first (its design term
 joins x̄; dynsens/models/multibody/projection.py).  At t0 the initial solve
 and the design derivative of the initial state (the mechanism's assembly included) close the
@@ -36,7 +35,6 @@ from ..models.base import Model, Output, StepState
 from ..responses.base import OutputTrace
 from .partials import DesignPartials, initial_state_gradient
 from ..solver.linalg import Counters
-from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
 from . import adjoint_step
 from .checkpoints import RecordStore
@@ -246,20 +244,12 @@ class AdjointMode:
         self.counters.backward_solves += 1
         return rec.factor.solve_transposed(-zbar)
 
-    def _state_transpose(self, lin: Any, mu: np.ndarray, pq: np.ndarray, pqd: np.ndarray,
-                         pp: np.ndarray) -> None:
-        """Bars of (q, q̇, p) += (R_q, R_q̇, R_p)ᵀ μ, in place (the pseudo load's state part of
-        the initial solve)."""
-        for block, target in ((lin.R_q, pq), (lin.R_qd, pqd), (lin.R_p, pp)):
-            if block is not None and target.shape[0]:
-                target += transpose_times(block, mu)
-
     def _initial_step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:
         """Transpose of the initial solve S0 ∇z0 = −(∂_xF_R + R_q ∇q0 + R_q̇ ∇q̇0 + R_p ∇p0) and
         of the start of the scheme's a0 = q̈0, b0 = ṗ0; leaves the bars of ∇q0, ∇q̇0, ∇p0."""
         bar[:] = self._start_transposed(Aux(*aux), StepState(*bar))
         mu = self._solve(rec, np.concatenate([bar[2], bar[3], bar[5]]))
-        self._state_transpose(rec.lin, mu, bar[0], bar[1], bar[4])
+        bar[0], bar[1], bar[4] = self._ops.state_transpose(rec, mu, (bar[0], bar[1], bar[4]))
         return mu
 
     def _step(self, rec: StepRecord, bar: list[np.ndarray], aux: list[np.ndarray]) -> np.ndarray:

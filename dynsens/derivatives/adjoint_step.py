@@ -32,8 +32,7 @@ from ..models.base import StepState
 from ..solver._jit import inline, jit, register_jitable
 from ..solver.sparse_products import transpose_times
 from ..timeloop.stepping import StepRecord
-from .direct_step import (BandBlock, DenseBlock, band_block, band_solve, band_trail, compiled_plain, dense_block,
-                          dense_real, dense_solve, values_of)
+from .direct_step import BandBlock, DenseBlock, band_solve, dense_solve, records_kind, stacked_block, values_of
 
 # the scheme's transposed maps, callable from compiled code as they are
 for _scheme_map in (advance_transpose_arrays, correct_transpose_arrays, predict_transpose_arrays):
@@ -118,11 +117,7 @@ def block_kind(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]
     or None (the Python steps): a block may run (:func:`.direct_step.compiled_plain`: compiled
     code, plain Newmark, real arrays), and every record is :func:`.direct_step.dense_real`, or
     every record a tridiagonal band's on the first one's patterns (:func:`.direct_step.band_trail`)."""
-    if not (records and compiled_plain(scheme, bar)):
-        return None
-    if all(dense_real(r) for r in records):
-        return "dense"
-    return "band" if band_trail(records) else None
+    return records_kind(scheme, records, bar)
 
 
 def serves(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray]) -> bool:
@@ -140,10 +135,7 @@ def run_block(scheme: Newmark, records: list[StepRecord], bar: list[np.ndarray],
     as the Python steps leave them, and whether all of them are finite (one sum: False may also
     be an overflowing sum of finite entries)."""
     kind = kind or block_kind(scheme, records, bar)
-    n_lam = bar[3].shape[0]
-    block = (band_block if kind == "band" else dense_block)(
-        records, np.array([r.h for r in records], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
-        np.array([n_q, n_lam]))
+    block = stacked_block(kind, records, scheme, n_q, bar[3].shape[0])
     out = _block()(block, tuple(np.ascontiguousarray(b) for b in bar), tuple(np.ascontiguousarray(a) for a in aux),
                    np.ascontiguousarray(seeds, np.float64), seeded)
     # each μ in the layout of the Python steps' (LAPACK's solve returns Fortran-ordered columns):

@@ -174,11 +174,18 @@ def block_kind(scheme: Newmark, trail: list[StepRecord], ds: StepState, design_p
     Python steps): compiled code enabled, plain Newmark, real sensitivities and design partials,
     every record :func:`dense_real`, or every record :func:`band_real` with its R_q and R_q̇ on
     the first record's patterns and its band plan's reordering."""
-    if not (trail and compiled_plain(scheme, [design_part, *ds])):
+    return records_kind(scheme, trail, [design_part, *ds])
+
+
+def records_kind(scheme: Newmark, records: list[StepRecord], arrays: list[np.ndarray]) -> str | None:
+    """``dense`` or ``band``, the kind of compiled block (the direct or the adjoint one) that
+    takes these records, or None: a block may run (:func:`compiled_plain` with the mode's
+    ``arrays``), and every record is :func:`dense_real`, or :func:`band_trail` holds them."""
+    if not (records and compiled_plain(scheme, arrays)):
         return None
-    if all(dense_real(r) for r in trail):
+    if all(dense_real(r) for r in records):
         return "dense"
-    return "band" if band_trail(trail) else None
+    return "band" if band_trail(records) else None
 
 
 def compiled_plain(scheme: Newmark, arrays: list[np.ndarray]) -> bool:
@@ -251,14 +258,21 @@ def run_block(scheme: Newmark, trail: list[StepRecord], ds: StepState, daux: Any
     Returns (∇s of each record, ∇s, ∇aux after the last)."""
     K = len(trail)
     kind = kind or block_kind(scheme, trail, ds, design_part)
-    block = (band_block if kind == "band" else dense_block)(
-        trail, np.array([r.h for r in trail], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
-        np.array([n_q, n_lam]))
+    block = stacked_block(kind, trail, scheme, n_q, n_lam)
     # (leaves in one layout: the compiled block is typed by its arguments)
     out = _block()(block, tuple(np.ascontiguousarray(v) for v in ds), tuple(np.ascontiguousarray(v) for v in daux),
                    np.ascontiguousarray(design_part, np.float64))
     states = list(map(StepState._make, zip(*out[:6])))
     return states, states[-1], type(daux)(out[6][K - 1], out[7][K - 1])
+
+
+def stacked_block(kind: str | None, records: list[StepRecord], scheme: Newmark, n_q: int, n_lam: int
+                  ) -> "DenseBlock | BandBlock":
+    """The records (of :func:`records_kind` ``kind``) stacked for a compiled block, with their
+    step sizes, the scheme's (β, γ, c_a) and the sizes (n_q, n_λ)."""
+    return (band_block if kind == "band" else dense_block)(
+        records, np.array([r.h for r in records], float), np.array([scheme.beta, scheme.gamma, scheme.c_a]),
+        np.array([n_q, n_lam]))
 
 
 def dense_block(trail: list[StepRecord], h: np.ndarray, scheme: np.ndarray, sizes: np.ndarray) -> DenseBlock:

@@ -105,6 +105,13 @@ class Expression:
     #: the symbol when the expression is that symbol alone (every element's own design variable)
     bare: str | None = None
 
+    def _bare_value(self, env: Mapping[str, Number]) -> Number | None:
+        """The value of the one symbol the expression is, when that is a finite real; else None."""
+        if self.bare is None:
+            return None
+        value = env[self.bare]
+        return value if type(value) in _REAL and math.isfinite(value) else None
+
     def evaluate(self, env: Mapping[str, Number]) -> Number:
         """Value of the expression with the symbol values in ``env`` (units as the symbols).
 
@@ -112,10 +119,9 @@ class Expression:
         zero, an overflow, a value outside a function's domain (e.g. ``log(-1)``), a complex
         result from real values, or any other non-finite result.
         """
-        if self.bare is not None:
-            value = env[self.bare]
-            if type(value) in _REAL and math.isfinite(value):
-                return value        # the symbol's own value, which the checks below would pass
+        value = self._bare_value(env)
+        if value is not None:
+            return value            # the symbol's own value, which the checks below would pass
         try:
             with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
                 value = self._fn(env)
@@ -138,7 +144,7 @@ class Expression:
         The complex-step derivative of a smooth expression does not depend on the step; at a
         singular point (``sqrt(c)`` at c = 0) it grows like a power of 1/step.  Two steps,
         1e-30 and 1e-20, tell the two apart."""
-        if self.bare is not None and type(env[self.bare]) in _REAL and math.isfinite(env[self.bare]):
+        if self._bare_value(env) is not None:
             return None             # a symbol alone: its derivative is 1
         for name in sorted(self.symbols):
             d = []
