@@ -116,7 +116,6 @@ def instrument() -> None:
     PARTS.wrap(P, "residual_partials_transposed_steps", "design term")
     PARTS.wrap(adjoint_step, "run_block", "compiled adjoint block")
     PARTS.wrap(adjoint.AdjointMode, "_solve", "transposed solves")
-    PARTS.wrap(adjoint.AdjointMode, "_state_transpose", "transposed products")
     back = adjoint_step.PythonAdjointStep
     PARTS.wrap(back, "state_transpose", "transposed products")
     for name in ("predict_transpose", "correct_transpose", "advance_transpose"):

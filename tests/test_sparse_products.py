@@ -15,7 +15,7 @@ import scipy.sparse as sp
 import dynsens
 import scripts_path  # noqa: F401  (puts scripts/ on the path)
 from bench_peers import chain_case
-from dynsens.derivatives import adjoint, partials
+from dynsens.derivatives import adjoint_step, partials
 from dynsens.solver import sparse_products
 from dynsens.solver._jit import enabled, jit
 
@@ -99,12 +99,12 @@ def _per_element_chain(n: int, steps: int) -> dynsens.case.load.Case:
 def test_the_adjoint_with_compiled_products_equals_scipys_bit_for_bit(monkeypatch):
     case = _per_element_chain(150, 60)
     sparse_operands: list[bool] = []
-    original = adjoint.transpose_times
-    monkeypatch.setattr(adjoint, "transpose_times", lambda A, x: sparse_operands.append(sp.isspmatrix_csc(A))
+    original = adjoint_step.transpose_times       # (the Python steps' and the initial solve's)
+    monkeypatch.setattr(adjoint_step, "transpose_times", lambda A, x: sparse_operands.append(sp.isspmatrix_csc(A))
                         or original(A, x))
     compiled = dynsens.run_case(case, sensitivities=True, history=())
     assert sparse_operands and all(sparse_operands)        # the compiled product ran
-    monkeypatch.setattr(adjoint, "transpose_times", lambda A, x: A.T @ x)
+    monkeypatch.setattr(adjoint_step, "transpose_times", lambda A, x: A.T @ x)
     python = dynsens.run_case(case, sensitivities=True, history=())
     for name, r in compiled.responses.items():
         assert r.value == python.responses[name].value
